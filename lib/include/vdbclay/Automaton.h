@@ -1,0 +1,128 @@
+/// @file Automaton.h
+/// @brief The virtual-clay cellular automaton on a sparse OpenVDB grid.
+///
+/// An Automaton owns a reference to a MassGrid (openvdb::Int32Grid, background 0) and, optionally,
+/// an ObstacleGrid (openvdb::MaskGrid; active voxels are obstacles). Each step() applies the rule to
+/// every Margolus block of the current phase that can change: even steps use blocks whose minimum
+/// corner has even coordinates, odd steps blocks shifted by one voxel along every axis. 3D blocks
+/// are 2x2x2; in 2D the clay lives in the z = 0 layer and blocks are 2x2 in xy.
+///
+/// Guarantees:
+/// - Mass is conserved exactly (integers throughout; sums in 64 bits).
+/// - The result is bit-identical for every thread count and for the serial path (threads = 1):
+///   blocks of one phase are disjoint and each block's update depends only on its own cells and on
+///   a counter-based hash of (block origin, step, seed).
+/// - The cost of a step follows the blocks that can change: a block is examined only if one of its
+///   cells changed during the previous two steps. A settled region costs nothing.
+/// - The tree grows leaves only where clay flows; the automaton never creates an empty leaf.
+/// - A state whose masses could overflow a cell is refused (Error) before anything is written.
+///
+/// Thread-safety: one Automaton must not be used from several threads at once, and nothing else
+/// may modify its grids while a step runs. Between steps, change the grid only through edit() or
+/// follow the change with resync().
+#pragma once
+
+#include "vdbclay/Fwd.h"
+#include "vdbclay/Types.h"
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+namespace vdbclay {
+
+/// How an Automaton is set up. Plain definition struct: the defaults make a working automaton.
+struct AutomatonOptions {
+    /// 3 for 2x2x2 blocks; 2 for 2x2 blocks in the z = 0 layer (clay elsewhere is refused).
+    int dimensions = 3;
+    RuleParams rule;
+    /// Seeds the remainder hash. Same seed, same state, same steps: same result.
+    uint64_t seed = 0;
+    /// Worker threads: 0 lets TBB choose (all cores), 1 runs the serial path, n > 1 caps at n.
+    int threads = 0;
+};
+
+/// Seconds spent in each named stage of the step, summed over the steps reported.
+struct StageSeconds {
+    double gather = 0;      ///< build the list of candidate blocks from the last two steps' changes
+    double repartition = 0; ///< the parallel pass over candidate blocks (TBB, horizontal layers)
+    double grow = 0;        ///< blocks that flow into new leaves: create the leaves, then update
+    double bookkeeping = 0; ///< collect changed blocks for the next steps, overflow checks
+    double total() const { return gather + repartition + grow + bookkeeping; }
+};
+
+/// Why settle() stopped.
+enum class StopReason {
+    Settled,    ///< a full even+odd pair of steps changed nothing
+    Tolerance,  ///< residual overload fell to the requested tolerance
+    StepBudget  ///< the step budget ran out first
+};
+const char* stopReasonName(StopReason reason);
+
+/// What a call to step(), run() or settle() did.
+struct StepReport {
+    uint64_t steps = 0;          ///< steps run by this call
+    uint64_t blocksVisited = 0;  ///< candidate blocks examined
+    uint64_t blocksUpdated = 0;  ///< blocks whose cells changed
+    uint64_t blocksGrown = 0;    ///< updated blocks that needed new leaves (run after the pass)
+    uint64_t leavesCreated = 0;  ///< leaves added to the tree
+    int64_t residualOverload = 0; ///< after the call: sum over non-obstacle cells of max(0, m - Tc)
+    bool settled = false;        ///< after the call: no block can change any more
+    StopReason reason = StopReason::StepBudget; ///< settle() only
+    StageSeconds seconds;
+
+    StepReport& operator+=(const StepReport& other);
+};
+
+class Automaton {
+public:
+    /// Validates the state and prepares the automaton. Active tiles of @a mass are voxelized.
+    /// @throw Error if @a mass is null, its background is not 0, a voxel holds negative mass, a
+    ///        tile holds nonzero mass (after voxelizing active tiles), 2D clay lies outside z = 0,
+    ///        or the options are invalid. Nothing is modified when it throws, except voxelization.
+    explicit Automaton(MassGridPtr mass, const AutomatonOptions& options = AutomatonOptions(),
+                       ObstacleGridPtr obstacles = nullptr);
+    ~Automaton();
+    Automaton(const Automaton&) = delete;
+    Automaton& operator=(const Automaton&) = delete;
+    Automaton(Automaton&&) noexcept;
+    Automaton& operator=(Automaton&&) noexcept;
+
+    /// One step of the current phase (even, then odd, alternating).
+    /// @throw Error if a block's result would overflow int32; the grid is then left unchanged.
+    StepReport step();
+    /// @a n steps (fewer if a step throws).
+    StepReport run(uint64_t n);
+    /// Steps until the automaton settles, residual overload <= @a tolerance (when tolerance > 0), or
+    /// @a maxSteps steps have run, whichever comes first.
+    StepReport settle(uint64_t maxSteps, int64_t tolerance = 0);
+
+    /// Lets @a fn change voxels of the mass grid inside @a region (inclusive), e.g. a tool pushing
+    /// clay. The automaton rescans the region: it re-derives the overload there and wakes every
+    /// block that touches it. Changes outside @a region are not seen (use resync()).
+    /// @throw Error (and restore nothing: validate before editing) if the region then holds
+    ///        negative mass or, in 2D, clay outside z = 0.
+    void edit(const Box& region, const std::function<void(MassGrid&)>& fn);
+    /// Rescans the whole grid after arbitrary outside changes, as the constructor does.
+    void resync();
+
+    /// Changes the rule or its parameters; every block is reconsidered.
+    void setRule(const RuleParams& rule);
+    void setSeed(uint64_t seed);
+    /// 0 = TBB's choice, 1 = serial, n = at most n workers.
+    void setThreads(int threads);
+
+    const AutomatonOptions& options() const;
+    uint64_t stepCount() const;      ///< steps run since construction; step parity gives the phase
+    int64_t totalMass() const;       ///< tracked exactly; equals sum of the grid at every step
+    int64_t residualOverload() const;
+    bool settled() const;
+    const MassGridPtr& mass() const;
+    const ObstacleGridPtr& obstacles() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+} // namespace vdbclay

@@ -1,0 +1,37 @@
+#include "vdbclay/Types.h"
+
+#include <cmath>
+
+namespace vdbclay {
+
+const char* ruleName(Rule rule)
+{
+    switch (rule) {
+    case Rule::Arata: return "arata";
+    case Rule::Bingham: return "bingham";
+    case Rule::Sorted: return "sorted";
+    case Rule::Prorata: return "prorata";
+    }
+    return "unknown";
+}
+
+Rule parseRule(const std::string& name)
+{
+    if (name == "arata") return Rule::Arata;
+    if (name == "bingham" || name == "rule1") return Rule::Bingham;
+    if (name == "sorted" || name == "rule2") return Rule::Sorted;
+    if (name == "prorata" || name == "rule3") return Rule::Prorata;
+    throw Error("unknown rule \"" + name + "\": expected one of arata, bingham, sorted, prorata");
+}
+
+void validate(const RuleParams& p)
+{
+    if (p.threshold <= 0) {
+        throw Error("threshold Tc must be > 0, got " + std::to_string(p.threshold));
+    }
+    if (!std::isfinite(p.alpha) || !(p.alpha > 0.0) || !(p.alpha < 1.0)) {
+        throw Error("alpha must lie in the open interval (0, 1), got " + std::to_string(p.alpha));
+    }
+}
+
+} // namespace vdbclay

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs what vdbclay needs to build and test, from Debian packages.
+# Idempotent: quiet and quick when everything is already there.
+#   libboost-iostreams-dev: Debian's FindOpenVDB.cmake requires its CMake config.
+#   nlohmann-json3-dev:     header-only JSON for scene files (saves a hand-written parser).
+#   libpng-dev:             PNG output for `vdbclay render`.
+set -euo pipefail
+
+PKGS=(
+  cmake g++ ninja-build pkg-config
+  libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
+  libgtest-dev googletest
+  nlohmann-json3-dev libpng-dev
+)
+
+missing=()
+for p in "${PKGS[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+
+echo "install-deps: installing ${missing[*]}" >&2
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null

@@ -1,0 +1,581 @@
+// The automaton on sparse OpenVDB grids: a dense oracle, conservation, leaf boundaries, threads.
+#include <vdbclay/Automaton.h>
+#include <vdbclay/Metrics.h>
+#include <vdbclay/Rules.h>
+
+#include <openvdb/openvdb.h>
+
+#include <gtest/gtest.h>
+
+#include <climits>
+#include <string>
+#include <vector>
+
+using namespace vdbclay;
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+namespace {
+
+const Rule kAll[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
+
+class AutomatonTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() { openvdb::initialize(); }
+};
+
+struct Rng {
+    uint64_t s;
+    explicit Rng(uint64_t seed) : s(seed * 0x9E3779B97F4A7C15ull + 1) {}
+    uint64_t next()
+    {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        return s;
+    }
+    int range(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }
+};
+
+openvdb::Int32Grid::Ptr newMass()
+{
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    return g;
+}
+
+AutomatonOptions options(Rule r, int dims = 3, int32_t tc = 100, int threads = 0, uint64_t seed = 1)
+{
+    AutomatonOptions o;
+    o.dimensions = dims;
+    o.rule.rule = r;
+    o.rule.threshold = tc;
+    o.rule.alpha = 0.3;
+    o.seed = seed;
+    o.threads = threads;
+    return o;
+}
+
+/// The plain implementation: a dense box, every block of the phase visited every step, same rule
+/// functions and the same block hash. Cells outside the box are 0 and must never receive clay.
+struct Dense {
+    CoordBBox box;
+    int dims;
+    std::vector<int32_t> m;
+    std::vector<uint8_t> obs;
+    bool leaked = false;
+
+    Dense(const CoordBBox& b, int d) : box(b), dims(d)
+    {
+        m.assign(box.volume(), 0);
+        obs.assign(box.volume(), 0);
+    }
+    bool inside(const Coord& c) const { return box.isInside(c); }
+    size_t idx(const Coord& c) const
+    {
+        const Coord d = c - box.min();
+        const Coord e = box.extents();
+        return (size_t(d.x()) * e.y() + d.y()) * e.z() + d.z();
+    }
+    int32_t get(const Coord& c) const { return inside(c) ? m[idx(c)] : 0; }
+    bool isObs(const Coord& c) const { return inside(c) && obs[idx(c)]; }
+
+    static int floorStart(int lo, int phase)
+    {
+        // the largest s <= lo with s = phase (mod 2)
+        int s = lo - 1;
+        if (((s - phase) % 2 + 2) % 2) --s;
+        return s;
+    }
+
+    void step(const CompiledRule& rule, uint64_t step, uint64_t seed)
+    {
+        const int p = int(step & 1);
+        const int n = dims == 3 ? 8 : 4;
+        const int z0 = dims == 3 ? floorStart(box.min().z(), p) : 0;
+        const int z1 = dims == 3 ? box.max().z() : 0;
+        for (int x = floorStart(box.min().x(), p); x <= box.max().x(); x += 2)
+            for (int y = floorStart(box.min().y(), p); y <= box.max().y(); y += 2)
+                for (int z = z0; z <= z1; z += 2) {
+                    int32_t mm[8];
+                    uint32_t valid = 0;
+                    Coord cc[8];
+                    for (int c = 0; c < n; ++c) {
+                        cc[c] = Coord(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2));
+                        mm[c] = get(cc[c]);
+                        if (!isObs(cc[c])) valid |= 1u << c;
+                    }
+                    BlockKey k;
+                    k.x = x;
+                    k.y = y;
+                    k.z = z;
+                    k.step = step;
+                    k.seed = seed;
+                    int64_t out[8];
+                    const uint32_t ch = repartitionBlock(rule, n, mm, valid, k, out);
+                    for (int c = 0; c < n; ++c) {
+                        if (!((ch >> c) & 1u)) continue;
+                        if (!inside(cc[c])) {
+                            leaked = true;
+                            continue;
+                        }
+                        m[idx(cc[c])] = int32_t(out[c]);
+                    }
+                }
+    }
+};
+
+/// Fills @a grid (and the oracle) with random clay in @a region, obstacles with probability pObs.
+void randomScene(Rng& rng, const CoordBBox& region, int dims, int maxMass, int pObsPercent,
+                 openvdb::Int32Grid& grid, openvdb::MaskGrid* obstacles, Dense* dense)
+{
+    auto acc = grid.getAccessor();
+    for (auto it = region.begin(); it; ++it) {
+        const Coord c = *it;
+        if (dims == 2 && c.z() != 0) continue;
+        if (obstacles && rng.range(0, 99) < pObsPercent) {
+            obstacles->tree().setValueOn(c);
+            if (dense) dense->obs[dense->idx(c)] = 1;
+            if (rng.range(0, 3) == 0) continue; // some obstacles hold frozen clay
+        }
+        const int v = rng.range(0, 2) == 0 ? 0 : rng.range(0, maxMass);
+        if (v) {
+            acc.setValue(c, v);
+            if (dense) dense->m[dense->idx(c)] = v;
+        }
+    }
+}
+
+::testing::AssertionResult sameAsDense(const openvdb::Int32Grid& grid, const Dense& d)
+{
+    if (d.leaked) return ::testing::AssertionFailure() << "oracle box too small: clay left it";
+    auto acc = grid.getConstAccessor();
+    for (auto it = d.box.begin(); it; ++it) {
+        const Coord c = *it;
+        if (d.dims == 2 && c.z() != 0) continue;
+        const int32_t a = acc.getValue(c), b = d.get(c);
+        if (a != b) {
+            return ::testing::AssertionFailure() << "voxel (" << c.x() << "," << c.y() << "," << c.z()
+                                                 << "): sparse " << a << ", dense " << b;
+        }
+    }
+    for (auto it = grid.tree().cbeginValueOn(); it; ++it) {
+        if (!d.box.isInside(it.getCoord()))
+            return ::testing::AssertionFailure() << "sparse clay outside the oracle's box";
+    }
+    return ::testing::AssertionSuccess();
+}
+
+openvdb::Int32Grid::Ptr lump(const CoordBBox& box, int32_t value)
+{
+    auto g = newMass();
+    g->tree().fill(box, value, true);
+    g->tree().voxelizeActiveTiles();
+    return g;
+}
+
+} // namespace
+
+// ---- the dense oracle ----------------------------------------------------------------------------
+
+class OracleTest : public AutomatonTest, public ::testing::WithParamInterface<std::tuple<Rule, int>> {};
+
+TEST_P(OracleTest, SparseEqualsDenseCellForCellEveryStep)
+{
+    const Rule rule = std::get<0>(GetParam());
+    const int dims = std::get<1>(GetParam());
+    for (int trial = 0; trial < 3; ++trial) {
+        Rng rng(100 * trial + int(rule) + 10 * dims);
+        // Clay spans negative coordinates and leaf boundaries at -8, 0 and 8.
+        const CoordBBox region(Coord(-9, -7, dims == 3 ? -10 : 0), Coord(9, 10, dims == 3 ? 8 : 0));
+        const CoordBBox box(Coord(-40, -40, dims == 3 ? -40 : 0), Coord(40, 40, dims == 3 ? 40 : 0));
+        Dense dense(box, dims);
+        auto mass = newMass();
+        auto obs = openvdb::MaskGrid::create(false);
+        randomScene(rng, region, dims, 300, 8, *mass, obs.get(), &dense);
+        const AutomatonOptions opt = options(rule, dims, 100, 0, 42 + trial);
+        Automaton a(mass, opt, obs);
+        const CompiledRule cr = compileRule(opt.rule);
+        const int64_t m0 = a.totalMass();
+        for (uint64_t s = 0; s < 80; ++s) {
+            a.step();
+            dense.step(cr, s, opt.seed);
+            ASSERT_TRUE(sameAsDense(*mass, dense)) << ruleName(rule) << " " << dims << "D trial " << trial
+                                                   << " after step " << s;
+            ASSERT_EQ(totalMass(*mass), m0);
+        }
+        ASSERT_EQ(a.residualOverload(), residualOverload(*mass, 100, obs.get()));
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(AllRules, OracleTest,
+                         ::testing::Combine(::testing::ValuesIn(kAll), ::testing::Values(2, 3)),
+                         [](const auto& info) {
+                             return std::string(ruleName(std::get<0>(info.param))) + "_" +
+                                    std::to_string(std::get<1>(info.param)) + "D";
+                         });
+
+TEST_F(AutomatonTest, BlocksStraddlingLeavesAndNegativeCoordinates)
+{
+    // A single overloaded cell at or next to every kind of leaf boundary, each rule, against the
+    // oracle, for enough steps that the clay crosses into the neighbouring leaves.
+    const Coord spots[] = {Coord(7, 7, 7),   Coord(8, 8, 8),    Coord(0, 0, 0),  Coord(-1, -1, -1),
+                           Coord(-8, -8, -8), Coord(-9, 7, 8), Coord(15, -9, 7), Coord(7, 0, -1)};
+    for (Rule rule : kAll) {
+        for (const Coord& spot : spots) {
+            for (int dims : {2, 3}) {
+                const Coord s(spot.x(), spot.y(), dims == 3 ? spot.z() : 0);
+                const CoordBBox box(s.offsetBy(-14), s.offsetBy(14));
+                const CoordBBox b2 = dims == 3 ? box : CoordBBox(Coord(box.min().x(), box.min().y(), 0),
+                                                                 Coord(box.max().x(), box.max().y(), 0));
+                Dense dense(b2, dims);
+                auto mass = newMass();
+                mass->tree().setValue(s, 2500);
+                dense.m[dense.idx(s)] = 2500;
+                const AutomatonOptions opt = options(rule, dims, 100);
+                Automaton a(mass, opt);
+                const CompiledRule cr = compileRule(opt.rule);
+                for (uint64_t st = 0; st < 24; ++st) {
+                    a.step();
+                    dense.step(cr, st, opt.seed);
+                    ASSERT_TRUE(sameAsDense(*mass, dense))
+                        << ruleName(rule) << " spot " << s << " " << dims << "D step " << st;
+                }
+                // clay did reach the neighbouring leaves
+                EXPECT_GT(mass->tree().leafCount(), 1u) << ruleName(rule) << " " << s;
+                EXPECT_EQ(totalMass(*mass), 2500);
+            }
+        }
+    }
+}
+
+// ---- conservation --------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, MassIsExactOverHundredThousandStepsWithObstacles)
+{
+    // Random clay in a box of obstacles that straddles leaf boundaries. Every 50 steps a random
+    // "tool" gathers clay from a few cells into one through edit(), so the automaton never goes quiet.
+    const uint64_t kSteps = 100000;
+    for (Rule rule : kAll) {
+        Rng rng(777 + int(rule));
+        auto mass = newMass();
+        auto obs = openvdb::MaskGrid::create(false);
+        const CoordBBox inner(Coord(-5, -5, -5), Coord(4, 4, 4));
+        const CoordBBox wall(inner.min().offsetBy(-1), inner.max().offsetBy(1));
+        for (auto it = wall.begin(); it; ++it)
+            if (!inner.isInside(*it)) obs->tree().setValueOn(*it);
+        randomScene(rng, inner, 3, 150, 5, *mass, obs.get(), nullptr);
+        Automaton a(mass, options(rule, 3, 100, 0, 9), obs);
+        const int64_t m0 = totalMass(*mass);
+        ASSERT_GT(m0, 0);
+        ASSERT_EQ(a.totalMass(), m0);
+        uint64_t updated = 0;
+        uint64_t activeSteps = 0;
+        for (uint64_t done = 0; done < kSteps; done += 50) {
+            for (int i = 0; i < 50; ++i) {
+                const StepReport r = a.step();
+                updated += r.blocksUpdated;
+                activeSteps += r.blocksUpdated ? 1 : 0;
+            }
+            if (done % 1000 == 0) {
+                ASSERT_EQ(totalMass(*mass), m0) << ruleName(rule) << " after " << done + 50 << " steps";
+            }
+            // gather the clay of 8 random cells into one random cell, inside the box
+            const Coord to(rng.range(-5, 4), rng.range(-5, 4), rng.range(-5, 4));
+            a.edit(Box{{{-5, -5, -5}}, {{4, 4, 4}}}, [&](MassGrid& g) {
+                auto acc = g.getAccessor();
+                for (int k = 0; k < 8; ++k) {
+                    const Coord from(rng.range(-5, 4), rng.range(-5, 4), rng.range(-5, 4));
+                    const int32_t v = acc.getValue(from);
+                    acc.setValue(from, 0);
+                    acc.setValue(to, acc.getValue(to) + v);
+                }
+            });
+            ASSERT_EQ(a.totalMass(), m0);
+        }
+        ASSERT_EQ(totalMass(*mass), m0);
+        EXPECT_EQ(a.stepCount(), kSteps);
+        EXPECT_GT(activeSteps, kSteps / 2) << ruleName(rule) << ": the scene should stay active";
+        EXPECT_EQ(a.residualOverload(), residualOverload(*mass, 100, obs.get()));
+    }
+}
+
+// ---- determinism ---------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
+{
+    for (Rule rule : kAll) {
+        std::vector<uint64_t> hashes;
+        std::vector<uint64_t> updated;
+        for (int threads : {1, 2, 3, 8}) {
+            Rng rng(5);
+            auto mass = newMass();
+            auto obs = openvdb::MaskGrid::create(false);
+            randomScene(rng, CoordBBox(Coord(-20, -12, -20), Coord(20, 12, 20)), 3, 260, 3, *mass,
+                        obs.get(), nullptr);
+            Automaton a(mass, options(rule, 3, 100, threads, 3), obs);
+            const int64_t m0 = a.totalMass();
+            const StepReport r = a.run(60);
+            ASSERT_EQ(totalMass(*mass), m0);
+            hashes.push_back(contentHash(*mass));
+            updated.push_back(r.blocksUpdated);
+        }
+        for (size_t i = 1; i < hashes.size(); ++i) {
+            EXPECT_EQ(hashes[i], hashes[0]) << ruleName(rule) << " thread config " << i;
+            EXPECT_EQ(updated[i], updated[0]) << ruleName(rule);
+        }
+        EXPECT_GT(updated[0], 1000u);
+    }
+}
+
+TEST_F(AutomatonTest, SeedChangesTheResultButNotTheMass)
+{
+    auto run = [](uint64_t seed) {
+        auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(5, 5, 5)), 100);
+        mass->tree().setValue(Coord(2, 2, 2), 5000);
+        Automaton a(mass, options(Rule::Bingham, 3, 100, 0, seed));
+        a.run(40);
+        EXPECT_EQ(totalMass(*mass), 216 * 100 - 100 + 5000);
+        return contentHash(*mass);
+    };
+    EXPECT_EQ(run(1), run(1));
+    EXPECT_NE(run(1), run(2));
+}
+
+// ---- settling ------------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, CompactLumpWithOneOverloadedCellSettles)
+{
+    // Every cell exactly at Tc (nearly incompressible clay), one cell overloaded by 40 Tc. The
+    // excess must travel through the lump to its free surface and the automaton must settle.
+    const int32_t tc = 100;
+    const CoordBBox cube(Coord(-4, -4, -4), Coord(3, 3, 3)); // straddles leaves on every axis
+    for (Rule rule : kAll) {
+        for (int dims : {2, 3}) {
+            const CoordBBox c = dims == 3 ? cube : CoordBBox(Coord(-4, -4, 0), Coord(3, 3, 0));
+            auto mass = lump(c, tc);
+            const int64_t excess = 40 * tc;
+            mass->tree().setValue(Coord(0, 0, 0), int32_t(tc + excess));
+            Automaton a(mass, options(rule, dims, tc));
+            const int64_t m0 = a.totalMass();
+            const StepReport r = a.settle(200000);
+            ASSERT_TRUE(r.settled) << ruleName(rule) << " " << dims << "D";
+            EXPECT_EQ(r.reason, StopReason::Settled);
+            EXPECT_EQ(r.residualOverload, 0);
+            EXPECT_EQ(totalMass(*mass), m0);
+            EXPECT_EQ(residualOverload(*mass, tc, nullptr), 0);
+            int64_t outside = 0;
+            for (auto it = mass->tree().cbeginValueOn(); it; ++it) {
+                EXPECT_LE(*it, tc);
+                if (!c.isInside(it.getCoord())) outside += *it;
+            }
+            if (rule == Rule::Arata) {
+                EXPECT_GT(outside, 0);
+            } else {
+                // Over cells drop to exactly Tc and under cells only gain, so the lump stays full
+                // and the whole excess sits outside it.
+                EXPECT_EQ(outside, excess) << ruleName(rule) << " " << dims << "D";
+                for (auto it = c.begin(); it; ++it) EXPECT_EQ(mass->tree().getValue(*it), tc);
+            }
+            // Settled means settled: further steps examine nothing and change nothing.
+            const uint64_t h = contentHash(*mass);
+            const StepReport more = a.run(10);
+            EXPECT_EQ(more.blocksVisited, 0u);
+            EXPECT_EQ(contentHash(*mass), h);
+        }
+    }
+}
+
+TEST_F(AutomatonTest, SettleStopsOnBudgetOrTolerance)
+{
+    auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(7, 7, 7)), 100);
+    mass->tree().setValue(Coord(3, 3, 3), 100 + 10000);
+    Automaton a(mass, options(Rule::Prorata, 3, 100));
+    StepReport r = a.settle(5);
+    EXPECT_EQ(r.steps, 5u);
+    EXPECT_EQ(r.reason, StopReason::StepBudget);
+    EXPECT_FALSE(r.settled);
+    r = a.settle(100000, /*tolerance=*/5000);
+    EXPECT_EQ(r.reason, StopReason::Tolerance);
+    EXPECT_LE(r.residualOverload, 5000);
+    EXPECT_GT(r.residualOverload, 0);
+    r = a.settle(100000);
+    EXPECT_EQ(r.reason, StopReason::Settled);
+    EXPECT_EQ(a.totalMass(), totalMass(*mass));
+    EXPECT_EQ(a.stepCount(), 5u + 0u + r.steps + (a.stepCount() - 5u - r.steps));
+}
+
+// ---- sparsity --------------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, CostFollowsTheMovingClayNotTheVolume)
+{
+    // A wide settled slab (64 x 8 x 64 at Tc) and one small overload on its top. After the two
+    // full-scan steps, each step examines only blocks near the moving clay.
+    auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(63, 7, 63)), 100);
+    mass->tree().setValue(Coord(30, 7, 30), 100 + 300);
+    Automaton a(mass, options(Rule::Prorata, 3, 100));
+    const uint64_t slabBlocks = 64 * 8 * 64 / 8;
+    a.run(2);
+    uint64_t maxVisited = 0;
+    StepReport total;
+    for (int i = 0; i < 5000 && !a.settled(); ++i) {
+        const StepReport r = a.step();
+        maxVisited = std::max(maxVisited, r.blocksVisited);
+        total += r;
+    }
+    EXPECT_TRUE(a.settled());
+    EXPECT_GT(total.blocksUpdated, 0u);
+    // A dense sweep visits every block of the slab every step; here no step comes near that.
+    EXPECT_LT(maxVisited * 10, slabBlocks) << maxVisited << " of " << slabBlocks << " blocks";
+    EXPECT_LT(total.blocksVisited, total.steps * slabBlocks / 20);
+    // The tree grew only where clay flowed: no leaf is without clay.
+    for (auto it = mass->tree().cbeginLeaf(); it; ++it) EXPECT_FALSE(it->isEmpty()) << it->origin();
+}
+
+TEST_F(AutomatonTest, SettledRegionCostsNothing)
+{
+    auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(31, 31, 31)), 100);
+    Automaton a(mass, options(Rule::Sorted, 3, 100));
+    EXPECT_TRUE(a.settled()); // nothing is over Tc
+    const StepReport r = a.run(1000);
+    EXPECT_EQ(r.blocksVisited, 0u);
+    EXPECT_EQ(a.stepCount(), 1000u);
+}
+
+// ---- edits ------------------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, EditWakesTheRegionAndTracksMass)
+{
+    auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(15, 15, 15)), 100);
+    Automaton a(mass, options(Rule::Prorata, 3, 100));
+    a.settle(10);
+    ASSERT_TRUE(a.settled());
+    const int64_t m0 = a.totalMass();
+    // A tool adds 5000 units at one voxel (not mass-neutral: the automaton must follow).
+    a.edit(Box{{{8, 15, 8}}, {{8, 15, 8}}},
+           [](MassGrid& g) { g.tree().setValue(Coord(8, 15, 8), 5100); });
+    EXPECT_EQ(a.totalMass(), m0 + 5000);
+    EXPECT_EQ(a.residualOverload(), 5000);
+    EXPECT_FALSE(a.settled());
+    const StepReport r = a.settle(100000);
+    EXPECT_TRUE(r.settled);
+    EXPECT_EQ(totalMass(*mass), m0 + 5000);
+    EXPECT_EQ(r.residualOverload, 0);
+    // An edit that empties a whole leaf prunes it.
+    const auto leaves = mass->tree().leafCount();
+    a.edit(Box{{{0, 0, 0}}, {{7, 7, 7}}},
+           [](MassGrid& g) { g.tree().fill(CoordBBox(Coord(0, 0, 0), Coord(7, 7, 7)), 0, false); });
+    EXPECT_EQ(mass->tree().leafCount(), leaves - 1);
+    EXPECT_EQ(a.totalMass(), totalMass(*mass));
+}
+
+// ---- refusals ---------------------------------------------------------------------------------------
+
+TEST_F(AutomatonTest, OverflowIsRefusedBeforeAnythingIsWritten)
+{
+    // Seven cells of 2^30 and one empty cell, walled in by obstacles. Bingham with Tc = 1 would put
+    // 7 (2^30 - 1) into the empty cell: more than INT32_MAX. The step must throw, grid untouched.
+    auto mass = newMass();
+    auto obs = openvdb::MaskGrid::create(false);
+    const CoordBBox cell(Coord(0, 0, 0), Coord(1, 1, 1));
+    const CoordBBox wall(Coord(-1, -1, -1), Coord(2, 2, 2));
+    for (auto it = wall.begin(); it; ++it)
+        if (!cell.isInside(*it)) obs->tree().setValueOn(*it);
+    for (auto it = cell.begin(); it; ++it) mass->tree().setValue(*it, 1 << 30);
+    mass->tree().setValue(Coord(1, 1, 1), 0);
+    // A second, harmless overload far away, in a block processed in the same pass.
+    mass->tree().setValue(Coord(100, 100, 100), 50);
+    Automaton a(mass, options(Rule::Bingham, 3, 1), obs);
+    const uint64_t h = contentHash(*mass);
+    try {
+        a.step();
+        FAIL() << "expected an overflow error";
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find("INT32_MAX"), std::string::npos) << msg;
+        EXPECT_NE(msg.find("(0, 0, 0)"), std::string::npos) << msg;
+    }
+    EXPECT_EQ(contentHash(*mass), h);
+    EXPECT_EQ(a.stepCount(), 0u);
+}
+
+TEST_F(AutomatonTest, LargeButSafeMassesAreExact)
+{
+    // One cell of 2^30 in empty space with Tc = 2^20: spreads without any overflow.
+    auto mass = newMass();
+    mass->tree().setValue(Coord(-3, 5, 9), 1 << 30);
+    for (Rule rule : kAll) {
+        auto m = mass->deepCopy();
+        Automaton a(m, options(rule, 3, 1 << 20));
+        a.run(30);
+        EXPECT_EQ(totalMass(*m), int64_t(1) << 30) << ruleName(rule);
+        EXPECT_GT(m->tree().activeVoxelCount(), 27u) << ruleName(rule);
+    }
+}
+
+TEST_F(AutomatonTest, BadStatesAreRefusedWithClearErrors)
+{
+    auto expectError = [](auto&& f, const std::string& needle) {
+        try {
+            f();
+            ADD_FAILURE() << "expected an error containing \"" << needle << "\"";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+        }
+    };
+    expectError([] { Automaton a(nullptr); }, "null");
+    expectError(
+        [] {
+            auto m = newMass();
+            m->tree().setValue(Coord(1, -2, 3), -7);
+            Automaton a(m);
+        },
+        "(1, -2, 3)");
+    expectError(
+        [] {
+            auto m = newMass();
+            m->tree().setValue(Coord(0, 0, 4), 7);
+            Automaton a(m, options(Rule::Prorata, 2));
+        },
+        "z = 0");
+    expectError(
+        [] {
+            auto m = openvdb::Int32Grid::create(5);
+            Automaton a(m);
+        },
+        "background");
+    expectError([] { Automaton a(newMass(), options(Rule::Prorata, 4)); }, "dimensions");
+    expectError(
+        [] {
+            AutomatonOptions o;
+            o.rule.threshold = 0;
+            Automaton a(newMass(), o);
+        },
+        "threshold");
+    expectError(
+        [] {
+            AutomatonOptions o;
+            o.rule.alpha = 1.0;
+            Automaton a(newMass(), o);
+        },
+        "alpha");
+    expectError(
+        [] {
+            auto m = newMass();
+            m->tree().addTile(1, Coord(0, 0, 0), 9, /*active=*/false);
+            Automaton a(m);
+        },
+        "tile");
+}
+
+TEST_F(AutomatonTest, ActiveTilesAreVoxelizedAndSettle)
+{
+    auto m = newMass();
+    m->tree().addTile(2, Coord(0, 0, 0), 100, /*active=*/true); // a 128^3 tile at Tc
+    m->tree().setValue(Coord(64, 127, 64), 900);
+    Automaton a(m, options(Rule::Prorata, 3, 100));
+    EXPECT_EQ(a.totalMass(), int64_t(128) * 128 * 128 * 100 + 800);
+    const StepReport r = a.settle(10000);
+    EXPECT_TRUE(r.settled);
+    EXPECT_EQ(totalMass(*m), a.totalMass());
+}
