@@ -253,7 +253,7 @@ TEST_F(AutomatonTest, BlocksStraddlingLeavesAndNegativeCoordinates)
 
 TEST_F(AutomatonTest, MassIsExactOverHundredThousandStepsWithObstacles)
 {
-    // Random clay in a box of obstacles that straddles leaf boundaries. Every 50 steps a random
+    // Random clay in a box of obstacles that straddles leaf boundaries. Every 10 steps a random
     // "tool" gathers clay from a few cells into one through edit(), so the automaton never goes quiet.
     const uint64_t kSteps = 100000;
     for (Rule rule : kAll) {
@@ -264,21 +264,21 @@ TEST_F(AutomatonTest, MassIsExactOverHundredThousandStepsWithObstacles)
         const CoordBBox wall(inner.min().offsetBy(-1), inner.max().offsetBy(1));
         for (auto it = wall.begin(); it; ++it)
             if (!inner.isInside(*it)) obs->tree().setValueOn(*it);
-        randomScene(rng, inner, 3, 150, 5, *mass, obs.get(), nullptr);
+        randomScene(rng, inner, 3, 190, 5, *mass, obs.get(), nullptr);
         Automaton a(mass, options(rule, 3, 100, 0, 9), obs);
         const int64_t m0 = totalMass(*mass);
         ASSERT_GT(m0, 0);
         ASSERT_EQ(a.totalMass(), m0);
         uint64_t updated = 0;
         uint64_t activeSteps = 0;
-        for (uint64_t done = 0; done < kSteps; done += 50) {
-            for (int i = 0; i < 50; ++i) {
+        for (uint64_t done = 0; done < kSteps; done += 10) {
+            for (int i = 0; i < 10; ++i) {
                 const StepReport r = a.step();
                 updated += r.blocksUpdated;
                 activeSteps += r.blocksUpdated ? 1 : 0;
             }
             if (done % 1000 == 0) {
-                ASSERT_EQ(totalMass(*mass), m0) << ruleName(rule) << " after " << done + 50 << " steps";
+                ASSERT_EQ(totalMass(*mass), m0) << ruleName(rule) << " after " << done + 10 << " steps";
             }
             // gather the clay of 8 random cells into one random cell, inside the box
             const Coord to(rng.range(-5, 4), rng.range(-5, 4), rng.range(-5, 4));
@@ -295,7 +295,7 @@ TEST_F(AutomatonTest, MassIsExactOverHundredThousandStepsWithObstacles)
         }
         ASSERT_EQ(totalMass(*mass), m0);
         EXPECT_EQ(a.stepCount(), kSteps);
-        EXPECT_GT(activeSteps, kSteps / 2) << ruleName(rule) << ": the scene should stay active";
+        EXPECT_GT(activeSteps, kSteps / 4) << ruleName(rule) << ": the scene should stay active";
         EXPECT_EQ(a.residualOverload(), residualOverload(*mass, 100, obs.get()));
     }
 }

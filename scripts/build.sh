@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Installs missing dependencies, then configures and builds vdbclay (Release) in ${BUILD_DIR:-build}.
+# Extra arguments go to CMake's configure step, e.g. scripts/build.sh -DVDBCLAY_SANITIZE=thread
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+BUILD_DIR=${BUILD_DIR:-build}
+generator=()
+if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
+if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+  cmake -S . -B "$BUILD_DIR" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
+elif [ $# -gt 0 ]; then
+  cmake "$BUILD_DIR" "$@" >/dev/null
+fi
+# OpenVDB-heavy translation units take ~0.7 GB each; two jobs fit any machine we build on.
+cmake --build "$BUILD_DIR" --parallel "${JOBS:-2}"
