@@ -1,0 +1,59 @@
+/// @file IO.h
+/// @brief Clay files (.vdb): writing atomically, reading with checks, describing; meshes; import.
+#pragma once
+
+#include "vdbclay/Fwd.h"
+#include "vdbclay/Shapes.h"
+#include "vdbclay/Types.h"
+
+#include <cstdint>
+#include <string>
+
+namespace vdbclay {
+
+/// What a clay file records beside the voxels (as grid metadata, names prefixed "vdbclay_").
+struct ClayMeta {
+    int dimensions = 3;
+    RuleParams rule;
+    uint64_t seed = 0;
+    uint64_t steps = 0;   ///< automaton steps run so far
+    uint64_t frames = 0;  ///< scene frames run so far
+    double voxelSize = 1.0;
+    std::string version;  ///< vdbclay version that wrote it (filled by writeClayFile)
+};
+
+/// Writes @a path holding an Int32Grid "mass" (exact clay), a FloatGrid "density" (mass / Tc, a
+/// fog volume) and a FloatGrid level set "surface" (the clay surface at density 0.5), with @a meta
+/// as metadata on "mass". Atomic: writes PATH.tmp-XXXX beside it, then renames, so an interrupted
+/// write never leaves a half-written file; @a path may be the file the clay was read from.
+/// @throw Error naming the path on any failure (unwritable directory, full disk); then nothing is
+///        left behind and an existing @a path is untouched.
+void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta);
+
+/// A clay file read back.
+struct ClayFile {
+    MassGridPtr mass;
+    ClayMeta meta;
+    bool hasMeta = false; ///< false when the file carries no vdbclay metadata (meta then defaults)
+};
+/// Reads the Int32Grid @a gridName of @a path.
+/// @throw Error naming the file if it is missing, unreadable, truncated, not a .vdb, lacks a grid
+///        of that name, or the grid is not an Int32Grid, or holds negative mass.
+ClayFile readClayFile(const std::string& path, const std::string& gridName = "mass");
+
+/// A human-readable description of any .vdb: each grid's name, type, class, active voxel count,
+/// index bounding box, voxel size, metadata, and for Int32 grids the total mass.
+/// @throw Error as readClayFile.
+std::string describeVdb(const std::string& path);
+
+/// Writes the clay surface (openvdb::tools::volumeToMesh of the density at isovalue 0.5, i.e. where
+/// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension. Atomic like
+/// writeClayFile. @throw Error on an unknown extension or a write failure.
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
+                      double isovalue = 0.5);
+
+/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0).
+/// @throw Error if massPerVoxel <= 0 or the shape is empty.
+MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);
+
+} // namespace vdbclay
