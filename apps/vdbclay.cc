@@ -1,10 +1,19 @@
-// vdbclay command-line tool. Until scene files land, `vdbclay demo` (also what `vdbclay` with no
-// arguments runs) settles a built-in scene: an overloaded lump of clay resting on a floor.
+// vdbclay: the command-line tool. Subcommands: run (scenes), info, mesh, render, import, demo.
+// Thin: parsing and printing here, all work in the library. Every error ends in one line on stderr
+// and a non-zero exit code.
 
 #include "vdbclay/Automaton.h"
+#include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
+#include "vdbclay/Render.h"
+#include "vdbclay/Scene.h"
+#include "vdbclay/Sculpt.h"
 
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
+
+#include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
@@ -12,27 +21,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <string>
 
 namespace {
-
-const char* kUsage =
-    "usage: vdbclay demo [options]\n"
-    "  Settles the built-in demo: a cube of clay at the threshold Tc with an overloaded core,\n"
-    "  resting on a floor obstacle. Prints what happened.\n"
-    "options:\n"
-    "  --size N        cube edge in voxels (default 32)\n"
-    "  --overload K    the core (edge N/4) holds K x Tc per voxel (default 3)\n"
-    "  --rule R        arata | bingham | sorted | prorata (default prorata)\n"
-    "  --threshold T   Tc (default 1000)\n"
-    "  --alpha A       arata's rate in (0,1) (default 0.5)\n"
-    "  --dims D        2 or 3 (default 3)\n"
-    "  --threads N     worker threads, 0 = all (default 0)\n"
-    "  --seed S        remainder hash seed (default 0)\n"
-    "  --max-steps N   step budget (default 200000)\n"
-    "  -o FILE.vdb     write the settled grid (\"mass\", Int32) to FILE.vdb\n"
-    "  -h, --help      this text\n";
 
 struct DemoArgs {
     int size = 32;
@@ -42,52 +35,46 @@ struct DemoArgs {
     std::string out;
 };
 
-long long parseInt(const std::string& flag, const char* v, long long lo, long long hi)
+/// Writes @a text to @a path through a temporary file and a rename.
+void writeTextAtomically(const std::string& path, const std::string& text)
 {
-    char* end = nullptr;
-    errno = 0;
-    const long long x = std::strtoll(v, &end, 10);
-    if (errno || !end || *end || end == v || x < lo || x > hi) {
-        throw vdbclay::Error(flag + ": expected an integer in [" + std::to_string(lo) + ", " +
-                             std::to_string(hi) + "], got \"" + v + "\"");
+    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+        out << text;
+        out.flush();
+        if (!out) {
+            std::remove(tmp.c_str());
+            throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+        }
     }
-    return x;
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+        const int err = errno;
+        std::remove(tmp.c_str());
+        throw vdbclay::Error("cannot write " + path + ": " + std::strerror(err));
+    }
 }
 
-DemoArgs parseDemo(int argc, char** argv, int first)
+/// Refuses, before any work, an output whose directory does not exist or cannot be written.
+void checkWritable(const std::string& path)
 {
-    DemoArgs a;
-    for (int i = first; i < argc; ++i) {
-        const std::string f = argv[i];
-        auto next = [&]() -> const char* {
-            if (i + 1 >= argc) throw vdbclay::Error(f + ": missing value");
-            return argv[++i];
-        };
-        if (f == "-h" || f == "--help") {
-            std::cout << kUsage;
-            std::exit(0);
-        } else if (f == "--size") a.size = int(parseInt(f, next(), 2, 4096));
-        else if (f == "--overload") a.overload = int(parseInt(f, next(), 1, 1000));
-        else if (f == "--rule") a.opts.rule.rule = vdbclay::parseRule(next());
-        else if (f == "--threshold") a.opts.rule.threshold = int32_t(parseInt(f, next(), 1, INT32_MAX));
-        else if (f == "--alpha") {
-            const char* v = next();
-            char* end = nullptr;
-            a.opts.rule.alpha = std::strtod(v, &end);
-            if (!end || *end) throw vdbclay::Error(f + ": expected a number, got \"" + v + "\"");
-        } else if (f == "--dims") a.opts.dimensions = int(parseInt(f, next(), 2, 3));
-        else if (f == "--threads") a.opts.threads = int(parseInt(f, next(), 0, 4096));
-        else if (f == "--seed") a.opts.seed = uint64_t(parseInt(f, next(), 0, INT64_MAX));
-        else if (f == "--max-steps") a.maxSteps = uint64_t(parseInt(f, next(), 0, INT64_MAX));
-        else if (f == "-o") a.out = next();
-        else throw vdbclay::Error("unknown option \"" + f + "\" (see vdbclay demo --help)");
+    if (path.empty()) return;
+    const auto slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
+    if (::access(dir.c_str(), W_OK) != 0) {
+        throw vdbclay::Error("cannot write " + path + ": directory " + dir + ": " + std::strerror(errno));
     }
-    vdbclay::validate(a.opts.rule);
-    if (int64_t(a.overload) * a.opts.rule.threshold > INT32_MAX) {
-        throw vdbclay::Error("--overload x --threshold exceeds the int32 range of a cell");
-    }
-    return a;
 }
+
+std::string fmtSeconds(double s)
+{
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3f s", s);
+    return buf;
+}
+
+
 
 int runDemo(const DemoArgs& a)
 {
@@ -134,38 +121,262 @@ int runDemo(const DemoArgs& a)
                 (unsigned long long)mass->tree().leafCount(),
                 (unsigned long long)vdbclay::contentHash(*mass));
     if (!a.out.empty()) {
-        const std::string tmp = a.out + ".tmp";
-        GridPtrVec grids{mass};
-        mass->insertMeta("vdbclay_threshold", Int32Metadata(tc));
-        mass->insertMeta("vdbclay_rule", StringMetadata(vdbclay::ruleName(a.opts.rule.rule)));
-        mass->insertMeta("vdbclay_steps", Int64Metadata(int64_t(r.steps)));
-        io::File(tmp).write(grids);
-        if (std::rename(tmp.c_str(), a.out.c_str()) != 0) {
-            std::remove(tmp.c_str());
-            throw vdbclay::Error("cannot write " + a.out + ": " + std::strerror(errno));
-        }
+        vdbclay::ClayMeta meta;
+        meta.dimensions = a.opts.dimensions;
+        meta.rule = a.opts.rule;
+        meta.seed = a.opts.seed;
+        meta.steps = automaton.stepCount();
+        vdbclay::writeClayFile(a.out, *mass, meta);
         std::cout << "  wrote " << a.out << "\n";
     }
     return m1 == m0 ? 0 : 3;
+}
+
+
+struct RunArgs {
+    std::string scene, out, stats, png, mesh, rule;
+    int threads = 0;
+    int64_t seed = -1;
+    uint64_t frames = 0;
+    bool quiet = false;
+};
+
+int runScene(const RunArgs& a)
+{
+    vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene);
+    if (!a.rule.empty()) scene.rule.rule = vdbclay::parseRule(a.rule);
+    if (a.seed >= 0) scene.seed = uint64_t(a.seed);
+    const std::string outVdb = a.out.empty() ? scene.outputs.vdb : a.out;
+    const std::string outStats = a.stats.empty() ? scene.outputs.stats : a.stats;
+    const std::string outPng = a.png.empty() ? scene.outputs.png : a.png;
+    const std::string outMesh = a.mesh.empty() ? scene.outputs.mesh : a.mesh;
+
+    vdbclay::Sculptor sculptor(scene, a.threads);
+    const bool tty = ::isatty(2) && !a.quiet;
+    for (const std::string* o : {&outVdb, &outStats, &outPng, &outMesh}) checkWritable(*o);
+    if (!a.quiet) std::cout << "vdbclay: " << scene.source << ": " << scene.dimensions << "D, Tc " << scene.rule.threshold
+              << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
+              << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
+              << sculptor.frame() + 1 << ".." << sculptor.totalFrames() << "\n";
+    const uint64_t total = sculptor.totalFrames();
+    auto onFrame = [&](const vdbclay::FrameReport& r) {
+        if (a.quiet) return;
+        if (tty) {
+            const int width = 30;
+            const int done = int(double(width) * double(r.frame) / double(std::max<uint64_t>(total, 1)));
+            std::fprintf(stderr, "\r[%s%s] frame %llu/%llu  steps %llu  overload %lld   ",
+                         std::string(done, '#').c_str(), std::string(width - done, '.').c_str(),
+                         (unsigned long long)r.frame, (unsigned long long)total,
+                         (unsigned long long)r.settle.steps, (long long)r.settle.residualOverload);
+            if (r.frame == total) std::fprintf(stderr, "\n");
+        } else {
+            std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
+                         "residual overload %lld\n",
+                         (unsigned long long)r.frame, (unsigned long long)total,
+                         (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
+                         (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
+                         vdbclay::stopReasonName(r.settle.reason), (long long)r.settle.residualOverload);
+        }
+    };
+    const vdbclay::RunSummary s = sculptor.run(a.frames, onFrame);
+    const bool exact = s.massFinal == s.massInitial;
+    std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
+                (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
+                fmtSeconds(s.stages.total()).c_str());
+    std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s", (long long)s.massInitial,
+                (long long)s.massFinal, exact ? "exact" : "DRIFT", (long long)s.residualOverload,
+                s.settled ? "yes" : "no");
+    if (s.framesUnsettled) std::printf(" (%llu frames hit the step budget)", (unsigned long long)s.framesUnsettled);
+    if (s.massTrapped) std::printf("; %lld clay trapped in tools", (long long)s.massTrapped);
+    std::printf("\n");
+
+    if (!outVdb.empty()) {
+        vdbclay::ClayMeta meta;
+        meta.dimensions = scene.dimensions;
+        meta.rule = scene.rule;
+        meta.seed = scene.seed;
+        meta.steps = sculptor.automaton().stepCount();
+        meta.frames = sculptor.frame();
+        meta.voxelSize = scene.voxelSize;
+        vdbclay::writeClayFile(outVdb, *sculptor.mass(), meta);
+        std::printf("wrote %s\n", outVdb.c_str());
+    }
+    if (!outPng.empty()) {
+        vdbclay::renderPng(outPng, *sculptor.mass(), scene.rule.threshold, scene.dimensions);
+        std::printf("wrote %s\n", outPng.c_str());
+    }
+    if (!outMesh.empty()) {
+        vdbclay::writeSurfaceMesh(outMesh, *sculptor.mass(), scene.rule.threshold);
+        std::printf("wrote %s\n", outMesh.c_str());
+    }
+    if (!outStats.empty()) {
+        nlohmann::json j;
+        j["scene"] = scene.source;
+        j["rule"] = vdbclay::ruleName(scene.rule.rule);
+        j["threshold"] = scene.rule.threshold;
+        j["threads"] = a.threads;
+        j["frames"] = s.frames;
+        j["steps"] = s.steps;
+        j["seconds"] = s.seconds;
+        j["push_seconds"] = s.pushSeconds;
+        j["stage_seconds"] = {{"gather", s.stages.gather}, {"repartition", s.stages.repartition},
+                              {"grow", s.stages.grow}, {"bookkeeping", s.stages.bookkeeping}};
+        j["mass_initial"] = s.massInitial;
+        j["mass_final"] = s.massFinal;
+        j["residual_overload"] = s.residualOverload;
+        j["settled"] = s.settled;
+        j["frames_unsettled"] = s.framesUnsettled;
+        j["mass_trapped"] = s.massTrapped;
+        j["blocks_visited"] = s.blocksVisited;
+        j["blocks_updated"] = s.blocksUpdated;
+        j["clay_voxels"] = vdbclay::clayVoxelCount(*sculptor.mass());
+        writeTextAtomically(outStats, j.dump(2) + "\n");
+        std::printf("wrote %s\n", outStats.c_str());
+    }
+    if (!exact) {
+        std::fprintf(stderr, "vdbclay: error: mass changed from %lld to %lld\n", (long long)s.massInitial,
+                     (long long)s.massFinal);
+        return 3;
+    }
+    return 0;
+}
+
+int info(const std::string& path)
+{
+    std::cout << vdbclay::describeVdb(path);
+    return 0;
+}
+
+int32_t thresholdOf(const vdbclay::ClayFile& f, int32_t override)
+{
+    if (override > 0) return override;
+    return f.meta.rule.threshold;
 }
 
 } // namespace
 
 int main(int argc, char** argv)
 {
+    CLI::App app{"vdbclay: virtual clay in sparse OpenVDB volumes (Druon, Crosnier, Brigandat 2003)"};
+    app.require_subcommand(1);
+    app.failure_message(CLI::FailureMessage::simple);
+
+    RunArgs ra;
+    CLI::App* run = app.add_subcommand("run", "Run a scene file (or, with none, the built-in default scene)");
+    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene");
+    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)");
+    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")->check(CLI::NonNegativeNumber);
+    run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata");
+    run->add_option("--seed", ra.seed, "override the scene's seed")->check(CLI::NonNegativeNumber);
+    run->add_option("--stats", ra.stats, "write run statistics as JSON to this file");
+    run->add_option("--png", ra.png, "also render the result to this PNG");
+    run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply");
+    run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")");
+    run->add_flag("-q,--quiet", ra.quiet, "no progress output");
+
+    std::string infoPath;
+    CLI::App* inf = app.add_subcommand("info", "Describe a .vdb file: grids, voxels, bounds, total mass, metadata");
+    inf->add_option("file", infoPath, "a .vdb file")->required();
+
+    std::string meshIn, meshOut;
+    double iso = 0.5;
+    int32_t meshTc = 0;
+    CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ or PLY");
+    mesh->add_option("file", meshIn, "a clay .vdb (grid \"mass\")")->required();
+    mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required();
+    mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)");
+    mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it");
+
+    std::string renIn, renOut;
+    vdbclay::RenderOptions ro;
+    int renDims = 0;
+    int32_t renTc = 0;
+    CLI::App* ren = app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
+    ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required();
+    ren->add_option("-o,--output", renOut, "OUT.png")->required();
+    ren->add_option("--width", ro.width, "image width")->check(CLI::PositiveNumber);
+    ren->add_option("--height", ro.height, "image height")->check(CLI::PositiveNumber);
+    ren->add_option("--azimuth", ro.azimuthDeg, "3D camera azimuth, degrees");
+    ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees");
+    ren->add_option("--dims", renDims, "2 or 3, if the file does not record it")->check(CLI::Range(2, 3));
+    ren->add_option("--threshold", renTc, "Tc, if the file does not record it");
+
+    std::string impIn, impOut;
+    int64_t impMass = 0;
+    double impVoxel = 1.0;
+    int impDims = 3;
+    CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
+    imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required();
+    imp->add_option("-o,--output", impOut, "CLAY.vdb")->required();
+    imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required();
+    imp->add_option("--voxel-size", impVoxel, "world units per voxel (default 1)");
+    imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
+
+    DemoArgs da;
+    std::string demoRule;
+    CLI::App* demo = app.add_subcommand("demo", "Settle a built-in overloaded lump of clay (the automaton alone)");
+    demo->add_option("--size", da.size, "cube edge in voxels")->check(CLI::Range(2, 4096));
+    demo->add_option("--overload", da.overload, "the core holds this many times Tc per voxel")->check(CLI::Range(1, 1000));
+    demo->add_option("--rule", demoRule, "arata, bingham, sorted, prorata");
+    demo->add_option("--threshold", da.opts.rule.threshold, "Tc")->check(CLI::PositiveNumber);
+    demo->add_option("--alpha", da.opts.rule.alpha, "arata's rate in (0,1)");
+    demo->add_option("--dims", da.opts.dimensions, "2 or 3")->check(CLI::Range(2, 3));
+    demo->add_option("--threads", da.opts.threads, "worker threads, 0 = all")->check(CLI::NonNegativeNumber);
+    demo->add_option("--seed", da.opts.seed, "remainder hash seed");
+    demo->add_option("--max-steps", da.maxSteps, "step budget");
+    demo->add_option("-o,--output", da.out, "write the settled clay to this .vdb");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        return app.exit(e);
+    }
     try {
         openvdb::initialize();
-        std::string cmd = argc > 1 ? argv[1] : "demo";
-        if (cmd == "-h" || cmd == "--help" || cmd == "help") {
-            std::cout << kUsage;
+        if (*run) return runScene(ra);
+        if (*inf) return info(infoPath);
+        if (*mesh) {
+            const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
+            vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
+            std::printf("wrote %s\n", meshOut.c_str());
             return 0;
         }
-        if (cmd == "demo") return runDemo(parseDemo(argc, argv, argc > 1 ? 2 : 1));
-        if (cmd.size() && cmd[0] == '-') return runDemo(parseDemo(argc, argv, 1));
-        std::cerr << "vdbclay: unknown command \"" << cmd << "\" (try: vdbclay demo --help)\n";
-        return 2;
+        if (*ren) {
+            const vdbclay::ClayFile f = vdbclay::readClayFile(renIn);
+            const int dims = renDims ? renDims : f.meta.dimensions;
+            vdbclay::renderPng(renOut, *f.mass, thresholdOf(f, renTc), dims, ro);
+            std::printf("wrote %s\n", renOut.c_str());
+            return 0;
+        }
+        if (*imp) {
+            if (impMass <= 0 || impMass > INT32_MAX) {
+                throw vdbclay::Error("--mass must be in [1, " + std::to_string(INT32_MAX) + "], got " +
+                                     std::to_string(impMass));
+            }
+            if (!(impVoxel > 0)) throw vdbclay::Error("--voxel-size must be > 0");
+            const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
+            const vdbclay::ShapePtr shape =
+                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel) : vdbclay::loadMesh(impIn, impVoxel);
+            const vdbclay::MassGridPtr clay = vdbclay::makeClay(*shape, int32_t(impMass), impDims);
+            vdbclay::ClayMeta meta;
+            meta.dimensions = impDims;
+            meta.voxelSize = impVoxel;
+            vdbclay::writeClayFile(impOut, *clay, meta);
+            std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
+                        (unsigned long long)vdbclay::clayVoxelCount(*clay), (long long)vdbclay::totalMass(*clay));
+            return 0;
+        }
+        if (*demo) {
+            if (!demoRule.empty()) da.opts.rule.rule = vdbclay::parseRule(demoRule);
+            vdbclay::validate(da.opts.rule);
+            if (int64_t(da.overload) * da.opts.rule.threshold > INT32_MAX) {
+                throw vdbclay::Error("--overload x --threshold exceeds the int32 range of a cell");
+            }
+            return runDemo(da);
+        }
     } catch (const std::exception& e) {
         std::cerr << "vdbclay: error: " << e.what() << "\n";
         return 1;
     }
+    return 0;
 }

@@ -4,13 +4,14 @@
 #   libboost-iostreams-dev: Debian's FindOpenVDB.cmake requires its CMake config.
 #   nlohmann-json3-dev:     header-only JSON for scene files (saves a hand-written parser).
 #   libpng-dev:             PNG output for `vdbclay render`.
+#   libcli11-dev:           header-only command-line parsing for the CLI (subcommands, --help).
 set -euo pipefail
 
 PKGS=(
   cmake g++ ninja-build pkg-config
   libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
   libgtest-dev googletest
-  nlohmann-json3-dev libpng-dev
+  nlohmann-json3-dev libpng-dev libcli11-dev
 )
 
 missing=()

@@ -788,6 +788,15 @@ void Automaton::setRule(const RuleParams& rule)
 }
 
 void Automaton::setSeed(uint64_t seed) { mImpl->opts.seed = seed; }
+void Automaton::setStepCount(uint64_t steps)
+{
+    mImpl->stepCount = steps;
+    mImpl->fullScanSteps = 2;
+    mImpl->pending.clear();
+    mImpl->changedPrev.clear();
+    mImpl->changedPrev2.clear();
+    mImpl->quietSteps = 0;
+}
 void Automaton::setThreads(int threads) { mImpl->setThreads(threads); }
 const AutomatonOptions& Automaton::options() const { return mImpl->opts; }
 uint64_t Automaton::stepCount() const { return mImpl->stepCount; }

@@ -111,6 +111,10 @@ public:
     void setSeed(uint64_t seed);
     /// 0 = TBB's choice, 1 = serial, n = at most n workers.
     void setThreads(int threads);
+    /// Sets the step counter, e.g. to continue a run saved after @a steps steps: the phase and the
+    /// remainder hash follow the counter, so the continuation is identical to an unbroken run.
+    /// Every block is reconsidered on the next two steps.
+    void setStepCount(uint64_t steps);
 
     const AutomatonOptions& options() const;
     uint64_t stepCount() const;      ///< steps run since construction; step parity gives the phase

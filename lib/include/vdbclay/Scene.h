@@ -1,0 +1,83 @@
+/// @file Scene.h
+/// @brief Scene files: a JSON description of clay, tools with paths, obstacles and settling.
+///
+/// Coordinates are voxel indices, y is up, box bounds are inclusive. The format is documented in
+/// docs/SCENES.md; parseScene() refuses anything else with one Error naming the file, the field
+/// (as a path such as tools[0].path[1].frames) and what was expected.
+#pragma once
+
+#include "vdbclay/Shapes.h"
+#include "vdbclay/Types.h"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace vdbclay {
+
+/// A shape as written in a scene, resolved to a ready-to-evaluate Shape.
+struct ShapeSpec {
+    std::string kind; ///< sphere, box, cylinder, capsule, levelset, mesh, vdb
+    std::string field; ///< where it came from, e.g. "clay[0]", for messages
+    ShapePtr shape;   ///< null only for kind "vdb" (clay imported voxel for voxel)
+    std::string file; ///< levelset, mesh, vdb: the resolved path
+    std::string grid; ///< vdb: the Int32 grid to import (default "mass")
+};
+
+struct ClaySpec {
+    ShapeSpec shape;
+    int32_t mass = 0; ///< per voxel; 0 for kind "vdb" (the file's exact masses)
+};
+
+/// One segment of a tool's path: @a frames frames, each moving the tool by @a translate (voxels)
+/// and rotating it by @a rotateDeg (degrees about x, y, z) around its current pivot.
+struct PathSegment {
+    Vec3 translate{{0, 0, 0}};
+    Vec3 rotateDeg{{0, 0, 0}};
+    uint64_t frames = 1;
+};
+
+struct ToolSpec {
+    ShapeSpec shape;
+    std::vector<PathSegment> path; ///< never empty
+    Vec3 pivot{{0, 0, 0}};          ///< rotation centre at frame 0 (default: centre of the bounds)
+    /// The tool's pose after @a frame frames (frame 0 = as written).
+    Pose poseAt(uint64_t frame) const;
+    uint64_t pathFrames() const;
+};
+
+struct SettleSpec {
+    uint64_t maxSteps = 100000; ///< step budget per frame
+    int64_t tolerance = 0;      ///< stop a frame's settling once residual overload <= tolerance
+};
+
+struct OutputSpec {
+    std::string vdb, png, mesh, stats; ///< empty: not written
+};
+
+struct Scene {
+    std::string source;  ///< the file (or "<built-in>") for messages
+    int dimensions = 3;
+    double voxelSize = 1.0;
+    RuleParams rule;
+    uint64_t seed = 0;
+    std::vector<ClaySpec> clay;
+    std::vector<ToolSpec> tools;
+    std::vector<ShapeSpec> obstacles;
+    SettleSpec settle;
+    uint64_t frames = 0; ///< frames to run (default: the longest tool path)
+    std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty
+    OutputSpec outputs;
+};
+
+/// Parses scene JSON. Relative file names inside the scene are resolved against @a baseDir.
+/// @throw Error "SOURCE: FIELD: what was wrong" on any malformed or inconsistent input.
+Scene parseScene(const std::string& json, const std::string& source, const std::string& baseDir);
+/// Reads and parses a scene file. @throw Error as parseScene, or if the file cannot be read.
+Scene loadScene(const std::string& path);
+/// The built-in default scene (the smallest complete example: a cube pressed by a plate).
+Scene defaultScene();
+/// The built-in default scene as JSON text.
+const char* defaultSceneJson();
+
+} // namespace vdbclay

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# End to end through the CLI: run a scene, then check exact mass, settling, the PNG, and that
+# `vdbclay info` reads the output back with the same total mass.
+# usage: scene_e2e.sh VDBCLAY SCENE.json WORKDIR
+set -euo pipefail
+bin=$1; scene=$2; work=$3
+name=$(basename "$scene" .json)
+mkdir -p "$work"; out="$work/$name"
+"$bin" run "$scene" -o "$out.vdb" --stats "$out.json" --png "$out.png" --mesh "$out.obj" --quiet --threads 2 > "$out.log"
+num() { sed -n "s/^  \"$1\": \\([-0-9]*\\).*/\\1/p" "$out.json"; }
+m0=$(num mass_initial); m1=$(num mass_final); unsettled=$(num frames_unsettled)
+[ -n "$m0" ] && [ "$m0" = "$m1" ] || { echo "FAIL $name: mass $m0 -> $m1"; exit 1; }
+grep -q '"settled": true' "$out.json" || { echo "FAIL $name: not settled"; cat "$out.json"; exit 1; }
+[ "$unsettled" = 0 ] || { echo "FAIL $name: $unsettled frames hit the step budget"; exit 1; }
+[ "$(head -c 8 "$out.png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || { echo "FAIL $name: not a PNG"; exit 1; }
+grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
+"$bin" info "$out.vdb" > "$out.info"
+grep -q "total mass $m1" "$out.info" || { echo "FAIL $name: info does not report total mass $m1"; cat "$out.info"; exit 1; }
+for g in mass density surface; do grep -q "\"$g\"" "$out.info" || { echo "FAIL $name: no grid $g"; exit 1; }; done
+echo "PASS $name: mass $m1 exact, settled, png + mesh + info ok"
