@@ -298,7 +298,7 @@ TEST_F(ShapesTest, ParameterErrorsNameTheParameter)
 // A cube 0..10 in world units; faces as quads, in several OBJ index forms.
 const char* kCubeObj = "# cube\n"
                        "o cube\n"
-                       "v 0 0 0\nv 10 0 0\nv 10 10 0\nv 0 10 0\n"
+                       "v 0 0 0 1 0 0\nv 10 0 0\nv 10 10 0 1.0\nv 0 10 0\n" // with colour, with w
                        "v 0 0 10\nv 10 0 10\nv 10 10 10\nv 0 10 10\n"
                        "vn 0 0 1\n"
                        "f 1 4 3 2\n"

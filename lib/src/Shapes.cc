@@ -454,7 +454,9 @@ void readObj(const std::string& path, std::istream& in, Mesh& mesh)
         if (s.empty() || s[0] == '#') continue;
         const std::vector<std::string> t = tokens(s);
         if (t[0] == "v") {
-            if (t.size() > 5) malformed(path, line, "a vertex has 3 coordinates (and an optional w)");
+            if (t.size() != 4 && t.size() != 5 && t.size() != 7) {
+                malformed(path, line, "a vertex has 3 coordinates (then an optional w, or r g b)");
+            }
             vertexIds.push_back(weld.add(toPoint(path, line, t, 1)));
         } else if (t[0] == "f") {
             if (t.size() < 4) malformed(path, line, "a face needs at least 3 vertices");
@@ -717,7 +719,8 @@ ShapePtr loadMesh(const std::string& path, double voxelSize)
     std::istringstream text(data);
     if (ext == ".obj") {
         readObj(path, text, mesh);
-    } else if (binaryStl && (ext == ".stl" || !asciiStl)) {
+    } else if (binaryStl && (!asciiStl || data.find('\0') != std::string::npos)) {
+        // A binary header may start with "solid" too; text never holds NUL bytes.
         readStlBinary(path, data, mesh);
     } else if (asciiStl) {
         readStlAscii(path, text, mesh);
