@@ -50,8 +50,7 @@ protected:
 };
 
 /// Runs @a f and expects an Error whose message contains every one of @a parts.
-template<typename F>
-::testing::AssertionResult throwsWith(F&& f, std::vector<std::string> parts)
+template <typename F>::testing::AssertionResult throwsWith(F&& f, std::vector<std::string> parts)
 {
     try {
         f();
@@ -75,10 +74,14 @@ bool inBox(const Box& b, const Coord& c)
            c.z() >= b.min[2] && c.z() <= b.max[2];
 }
 
-Vec3 v3(const Coord& c) { return {{double(c.x()), double(c.y()), double(c.z())}}; }
+Vec3 v3(const Coord& c)
+{
+    return {{double(c.x()), double(c.y()), double(c.z())}};
+}
 
 /// Every voxel of @a search whose centre is inside @a s lies in s->bounds(); returns how many.
-::testing::AssertionResult boundsHoldInside(const ShapePtr& s, const CoordBBox& search, int64_t* count = nullptr)
+::testing::AssertionResult boundsHoldInside(const ShapePtr& s, const CoordBBox& search,
+                                            int64_t* count = nullptr)
 {
     const Box b = s->bounds();
     int64_t n = 0;
@@ -86,8 +89,8 @@ Vec3 v3(const Coord& c) { return {{double(c.x()), double(c.y()), double(c.z())}}
         if (s->distance(v3(*it)) < 0) {
             ++n;
             if (!inBox(b, *it)) {
-                return ::testing::AssertionFailure() << s->describe() << ": inside voxel " << *it
-                                                     << " outside bounds";
+                return ::testing::AssertionFailure()
+                       << s->describe() << ": inside voxel " << *it << " outside bounds";
             }
         }
     }
@@ -151,7 +154,7 @@ TEST_F(ShapesTest, CylinderExactDistances)
         EXPECT_EQ(at(0, 2.5), -0.5) << axis; // near a cap
         EXPECT_EQ(at(0, 5), 2.0) << axis;
         EXPECT_EQ(at(5, 0), 3.0) << axis;
-        EXPECT_EQ(at(3, 0, 4), 3.0) << axis; // radial distance 5
+        EXPECT_EQ(at(3, 0, 4), 3.0) << axis;                       // radial distance 5
         EXPECT_DOUBLE_EQ(at(4, 7), std::sqrt(4.0 + 16.0)) << axis; // beyond the rim
         const Box b = s->bounds();
         EXPECT_EQ(b.min[axis], -3);
@@ -176,10 +179,8 @@ TEST_F(ShapesTest, CapsuleExactDistances)
 TEST_F(ShapesTest, BoundsContainEveryInsideVoxel)
 {
     std::vector<ShapePtr> shapes = {
-        makeSphere({{0.3, -1.7, 2.5}}, 5.2),
-        makeBox({{-3, 0, 1}}, {{4, 2, 6}}),
-        makeCylinder({{1, 1, 1}}, 3.5, 7, 0),
-        makeCylinder({{0.5, 0.5, 0.5}}, 2, 9.5, 2),
+        makeSphere({{0.3, -1.7, 2.5}}, 5.2),          makeBox({{-3, 0, 1}}, {{4, 2, 6}}),
+        makeCylinder({{1, 1, 1}}, 3.5, 7, 0),         makeCylinder({{0.5, 0.5, 0.5}}, 2, 9.5, 2),
         makeCapsule({{-4, -2, 0}}, {{5, 3, 2}}, 2.5),
     };
     const size_t analytic = shapes.size();
@@ -290,7 +291,11 @@ TEST_F(ShapesTest, ParameterErrorsNameTheParameter)
     EXPECT_TRUE(throwsWith([&] { makeTransformed(nullptr, Pose()); }, {"shape"}));
     Pose bad;
     bad.rotationDeg = {{0, nan, 0}};
-    EXPECT_TRUE(throwsWith([&] { makeTransformed(makeSphere({{0, 0, 0}}, 1), bad); }, {"pose.rotationDeg[1]"}));
+    EXPECT_TRUE(throwsWith(
+        [&] {
+            makeTransformed(makeSphere({{0, 0, 0}}, 1), bad);
+        },
+        {"pose.rotationDeg[1]"}));
 }
 
 // ---- meshes -------------------------------------------------------------------------------------------
@@ -311,10 +316,14 @@ const char* kCubeObj = "# cube\n"
 std::string tetraAsciiStl()
 {
     return "solid tetra\n"
-           "facet normal 0 0 -1\n outer loop\n  vertex 0 0 0\n  vertex 0 10 0\n  vertex 10 0 0\n endloop\nendfacet\n"
-           "facet normal 0 -1 0\n outer loop\n  vertex 0 0 0\n  vertex 10 0 0\n  vertex 0 0 10\n endloop\nendfacet\n"
-           "facet normal -1 0 0\n outer loop\n  vertex 0 0 0\n  vertex 0 0 10\n  vertex 0 10 0\n endloop\nendfacet\n"
-           "facet normal 1 1 1\n outer loop\n  vertex 10 0 0\n  vertex 0 10 0\n  vertex 0 0 10\n endloop\nendfacet\n"
+           "facet normal 0 0 -1\n outer loop\n  vertex 0 0 0\n  vertex 0 10 0\n  vertex 10 0 0\n "
+           "endloop\nendfacet\n"
+           "facet normal 0 -1 0\n outer loop\n  vertex 0 0 0\n  vertex 10 0 0\n  vertex 0 0 10\n "
+           "endloop\nendfacet\n"
+           "facet normal -1 0 0\n outer loop\n  vertex 0 0 0\n  vertex 0 0 10\n  vertex 0 10 0\n "
+           "endloop\nendfacet\n"
+           "facet normal 1 1 1\n outer loop\n  vertex 10 0 0\n  vertex 0 10 0\n  vertex 0 0 10\n "
+           "endloop\nendfacet\n"
            "endsolid tetra\n";
 }
 
@@ -329,7 +338,8 @@ std::string tetraBinaryStl()
     for (const auto& t : tri) {
         const float normal[3] = {0, 0, 0};
         s.append(reinterpret_cast<const char*>(normal), 12);
-        for (int k = 0; k < 3; ++k) s.append(reinterpret_cast<const char*>(v[t[k]]), 12);
+        for (int k = 0; k < 3; ++k)
+            s.append(reinterpret_cast<const char*>(v[t[k]]), 12);
         s.append(2, '\0');
     }
     return s;
@@ -359,7 +369,8 @@ TEST_F(ShapesTest, MeshObjCubeInsideOutside)
 
 TEST_F(ShapesTest, MeshStlTetrahedronAsciiAndBinary)
 {
-    for (const std::string& p : {file("tetra.stl", tetraAsciiStl()), file("tetra_bin.stl", tetraBinaryStl())}) {
+    for (const std::string& p :
+         {file("tetra.stl", tetraAsciiStl()), file("tetra_bin.stl", tetraBinaryStl())}) {
         const ShapePtr s = loadMesh(p, 0.5);
         // Clay voxel p is world p / 2.
         EXPECT_LT(s->distance({{2, 2, 2}}), 0) << p;
@@ -391,7 +402,8 @@ TEST_F(ShapesTest, MeshErrors)
     // Empty, missing, truncated, unknown.
     const std::string pe = file("empty.obj", "# nothing\nv 1 2 3\n");
     EXPECT_TRUE(throwsWith([&] { loadMesh(pe); }, {pe, "no faces"}));
-    EXPECT_TRUE(throwsWith([&] { loadMesh(path("missing.obj")); }, {"cannot open", "missing.obj", "no such file"}));
+    EXPECT_TRUE(
+        throwsWith([&] { loadMesh(path("missing.obj")); }, {"cannot open", "missing.obj", "no such file"}));
     const std::string bin = tetraBinaryStl();
     const std::string pt = file("trunc.stl", bin.substr(0, bin.size() - 7));
     EXPECT_TRUE(throwsWith([&] { loadMesh(pt); }, {pt}));
@@ -405,7 +417,8 @@ TEST_F(ShapesTest, MeshErrors)
 TEST_F(ShapesTest, LevelSetRoundTrip)
 {
     // World radius 5 at (1, 2, 3), level-set voxels of 0.5.
-    auto ls = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(5.0f, openvdb::Vec3f(1, 2, 3), 0.5f, 3.0f);
+    auto ls =
+        openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(5.0f, openvdb::Vec3f(1, 2, 3), 0.5f, 3.0f);
     ls->setName("ball");
     auto fog = openvdb::FloatGrid::create(0.0f);
     fog->setName("density");
@@ -432,14 +445,16 @@ TEST_F(ShapesTest, LevelSetRoundTrip)
     }
     const ShapePtr named = loadLevelSet(p, 1.0, "ball");
     EXPECT_NE(named->describe().find("ball"), std::string::npos);
-    EXPECT_TRUE(throwsWith([&] { loadLevelSet(p, 1.0, "density"); }, {p, "density", "not a FloatGrid level set"}));
+    EXPECT_TRUE(
+        throwsWith([&] { loadLevelSet(p, 1.0, "density"); }, {p, "density", "not a FloatGrid level set"}));
     EXPECT_TRUE(throwsWith([&] { loadLevelSet(p, 1.0, "nope"); }, {p, "no grid named \"nope\""}));
     EXPECT_TRUE(throwsWith([&] { loadLevelSet(p, -1.0); }, {"voxelSize"}));
 }
 
 TEST_F(ShapesTest, LevelSetErrors)
 {
-    EXPECT_TRUE(throwsWith([&] { loadLevelSet(path("nothing.vdb")); }, {"cannot open", "nothing.vdb", "no such file"}));
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(path("nothing.vdb")); },
+                           {"cannot open", "nothing.vdb", "no such file"}));
     const std::string txt = file("text.vdb", "this is not a vdb file\n");
     EXPECT_TRUE(throwsWith([&] { loadLevelSet(txt); }, {txt}));
     auto ints = openvdb::Int32Grid::create(0);
@@ -566,7 +581,8 @@ TEST_F(ShapesTest, PushSqueezedClayIsTrappedAndConserved)
     EXPECT_EQ(clayInside(*mass, small), 0);
     EXPECT_EQ(a.totalMass(), m0);
     EXPECT_EQ(totalMass(*mass), m0);
-    for (auto it = mass->tree().cbeginValueOn(); it; ++it) EXPECT_FALSE(obs->tree().isValueOn(it.getCoord()));
+    for (auto it = mass->tree().cbeginValueOn(); it; ++it)
+        EXPECT_FALSE(obs->tree().isValueOn(it.getCoord()));
 }
 
 TEST_F(ShapesTest, PushNeverOverflowsATarget)
@@ -578,7 +594,8 @@ TEST_F(ShapesTest, PushNeverOverflowsATarget)
     auto obs = openvdb::MaskGrid::create(false);
     obs->tree().fill(CoordBBox(Coord(-3), Coord(3)), true, true);
     obs->tree().voxelizeActiveTiles();
-    for (int x = 0; x <= 2; ++x) obs->tree().setValueOff(Coord(x, 0, 0));
+    for (int x = 0; x <= 2; ++x)
+        obs->tree().setValueOff(Coord(x, 0, 0));
     Automaton a(mass, opts(), obs);
     const PushReport r = push(a, {makeBox({{0, 0, 0}}, {{0, 0, 0}})}, 2);
     EXPECT_EQ(r.voxelsPushed, 1u);
@@ -609,7 +626,8 @@ TEST_F(ShapesTest, Push2DKeepsZeroLayer)
     EXPECT_EQ(r.region.min[2], 0);
     EXPECT_EQ(r.region.max[2], 0);
     EXPECT_EQ(clayInside(*mass, tools), 0);
-    for (auto it = mass->tree().cbeginValueOn(); it; ++it) EXPECT_EQ(it.getCoord().z(), 0);
+    for (auto it = mass->tree().cbeginValueOn(); it; ++it)
+        EXPECT_EQ(it.getCoord().z(), 0);
     EXPECT_EQ(a.totalMass(), m0);
     const StepReport s = a.settle(100000);
     EXPECT_TRUE(s.settled);

@@ -87,13 +87,15 @@ public:
         : mTools(tools), mMaxSearch(maxSearch), mIs2D(a.options().dimensions == 2),
           mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr)
     {
-        for (const ShapePtr& t : tools) mBounds.push_back(t->bounds());
+        for (const ShapePtr& t : tools)
+            mBounds.push_back(t->bounds());
     }
 
     Box toolBounds() const
     {
         Box u;
-        for (const Box& b : mBounds) u = unite(u, b);
+        for (const Box& b : mBounds)
+            u = unite(u, b);
         if (mIs2D) u = intersect(u, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
         return u;
     }
@@ -149,8 +151,10 @@ public:
         Vec3 n = mTools[s.tool]->normal(centre(s.c));
         if (mIs2D) n[2] = 0;
         const double l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (!(l > 0) || !std::isfinite(l)) n = {{0, 1, 0}};
-        else n = {{n[0] / l, n[1] / l, n[2] / l}};
+        if (!(l > 0) || !std::isfinite(l))
+            n = {{0, 1, 0}};
+        else
+            n = {{n[0] / l, n[1] / l, n[2] / l}};
 
         const Vec3 p = centre(s.c);
         const double start = -s.distance + 0.5;
@@ -271,7 +275,8 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int ma
     report.region = region;
     automaton.edit(region, [&](MassGrid& grid) {
         auto acc = grid.getAccessor();
-        for (const Move& m : moves) acc.setValueOff(m.from, 0);
+        for (const Move& m : moves)
+            acc.setValueOff(m.from, 0);
         for (const auto& a : pusher.added()) {
             acc.setValueOn(a.first, int32_t(int64_t(acc.getValue(a.first)) + a.second));
         }

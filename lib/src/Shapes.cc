@@ -75,9 +75,18 @@ Box boxOf(const Vec3& lo, const Vec3& hi, const std::string& what)
     return b;
 }
 
-double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-Vec3 sub(const Vec3& a, const Vec3& b) { return {{a[0] - b[0], a[1] - b[1], a[2] - b[2]}}; }
-double length(const Vec3& a) { return std::sqrt(dot(a, a)); }
+double dot(const Vec3& a, const Vec3& b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+Vec3 sub(const Vec3& a, const Vec3& b)
+{
+    return {{a[0] - b[0], a[1] - b[1], a[2] - b[2]}};
+}
+double length(const Vec3& a)
+{
+    return std::sqrt(dot(a, a));
+}
 
 /// sin and cos of an angle in degrees; exact for multiples of 90.
 void sinCosDeg(double deg, double& s, double& c)
@@ -119,7 +128,8 @@ Vec3 mul(const Mat3& m, const Vec3& v)
 
 Vec3 mulT(const Mat3& m, const Vec3& v)
 {
-    return {{m[0][0] * v[0] + m[1][0] * v[1] + m[2][0] * v[2], m[0][1] * v[0] + m[1][1] * v[1] + m[2][1] * v[2],
+    return {{m[0][0] * v[0] + m[1][0] * v[1] + m[2][0] * v[2],
+             m[0][1] * v[0] + m[1][1] * v[1] + m[2][1] * v[2],
              m[0][2] * v[0] + m[1][2] * v[1] + m[2][2] * v[2]}};
 }
 
@@ -252,10 +262,12 @@ public:
             mBounds = Box();
             return;
         }
-        Vec3 lo{{kMaxCoord * 4, kMaxCoord * 4, kMaxCoord * 4}}, hi{{-kMaxCoord * 4, -kMaxCoord * 4, -kMaxCoord * 4}};
+        Vec3 lo{{kMaxCoord * 4, kMaxCoord * 4, kMaxCoord * 4}},
+            hi{{-kMaxCoord * 4, -kMaxCoord * 4, -kMaxCoord * 4}};
         for (int corner = 0; corner < 8; ++corner) {
             Vec3 c;
-            for (int i = 0; i < 3; ++i) c[i] = ((corner >> i) & 1) ? ib.max[i] + 0.5 : ib.min[i] - 0.5;
+            for (int i = 0; i < 3; ++i)
+                c[i] = ((corner >> i) & 1) ? ib.max[i] + 0.5 : ib.min[i] - 0.5;
             const Vec3 w = mPose.apply(c);
             for (int i = 0; i < 3; ++i) {
                 lo[i] = std::min(lo[i], w[i]);
@@ -314,7 +326,8 @@ public:
         Vec3 lo{{1e300, 1e300, 1e300}}, hi{{-1e300, -1e300, -1e300}};
         for (int corner = 0; corner < 8; ++corner) {
             openvdb::Vec3d c;
-            for (int i = 0; i < 3; ++i) c[i] = ((corner >> i) & 1) ? bb.max()[i] + 0.5 : bb.min()[i] - 0.5;
+            for (int i = 0; i < 3; ++i)
+                c[i] = ((corner >> i) & 1) ? bb.max()[i] + 0.5 : bb.min()[i] - 0.5;
             const openvdb::Vec3d w = mGrid->indexToWorld(c) / mVoxelSize;
             for (int i = 0; i < 3; ++i) {
                 lo[i] = std::min(lo[i], w[i]);
@@ -388,8 +401,10 @@ private:
 std::string trim(const std::string& s)
 {
     size_t a = 0, b = s.size();
-    while (a < b && std::isspace((unsigned char)s[a])) ++a;
-    while (b > a && std::isspace((unsigned char)s[b - 1])) --b;
+    while (a < b && std::isspace((unsigned char)s[a]))
+        ++a;
+    while (b > a && std::isspace((unsigned char)s[b - 1]))
+        --b;
     return s.substr(a, b - a);
 }
 
@@ -398,7 +413,8 @@ std::vector<std::string> tokens(const std::string& line)
     std::istringstream is(line);
     std::vector<std::string> t;
     std::string w;
-    while (is >> w) t.push_back(w);
+    while (is >> w)
+        t.push_back(w);
     return t;
 }
 
@@ -468,12 +484,14 @@ void readObj(const std::string& path, std::istream& in, Mesh& mesh)
                 const long n = long(vertexIds.size());
                 const long zeroBased = k > 0 ? k - 1 : n + k;
                 if (zeroBased < 0 || zeroBased >= n) {
-                    malformed(path, line, "vertex index " + std::to_string(k) + " out of range (" +
-                                              std::to_string(n) + " vertices so far)");
+                    malformed(path, line,
+                              "vertex index " + std::to_string(k) + " out of range (" + std::to_string(n) +
+                                  " vertices so far)");
                 }
                 f.push_back(vertexIds[size_t(zeroBased)]);
             }
-            for (size_t i = 1; i + 1 < f.size(); ++i) addTriangle(mesh, f[0], f[i], f[i + 1]);
+            for (size_t i = 1; i + 1 < f.size(); ++i)
+                addTriangle(mesh, f[0], f[i], f[i + 1]);
         }
         // vn, vt, o, g, s, usemtl, mtllib, l, ...: not geometry we need.
     }
@@ -567,7 +585,8 @@ size_t openEdges(const Mesh& m)
 Vec3 Pose::apply(const Vec3& p) const
 {
     const Vec3 r = mul(rotation(rotationDeg), sub(p, pivot));
-    return {{r[0] + pivot[0] + translation[0], r[1] + pivot[1] + translation[1], r[2] + pivot[2] + translation[2]}};
+    return {{r[0] + pivot[0] + translation[0], r[1] + pivot[1] + translation[1],
+             r[2] + pivot[2] + translation[2]}};
 }
 
 Vec3 Pose::applyInverse(const Vec3& p) const
@@ -670,8 +689,8 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
             base = file.readGrid(gridName);
             if (!isFloatLevelSet(*base)) {
                 throw Error(path + ": grid \"" + gridName + "\" is not a FloatGrid level set (type " +
-                            base->type() + ", class " + openvdb::GridBase::gridClassToString(base->getGridClass()) +
-                            ")");
+                            base->type() + ", class " +
+                            openvdb::GridBase::gridClassToString(base->getGridClass()) + ")");
             }
         } else {
             openvdb::GridPtrVecPtr meta = file.readAllGridMetadata();
@@ -725,7 +744,8 @@ ShapePtr loadMesh(const std::string& path, double voxelSize)
     } else if (asciiStl) {
         readStlAscii(path, text, mesh);
     } else if (ext == ".stl") {
-        if (data.size() < 84) throw Error(path + ": too short for an STL file (" + std::to_string(data.size()) + " bytes)");
+        if (data.size() < 84)
+            throw Error(path + ": too short for an STL file (" + std::to_string(data.size()) + " bytes)");
         throw Error(path + ": neither ASCII STL (\"solid ... facet\") nor binary STL of consistent size "
                            "(truncated?)");
     } else {
