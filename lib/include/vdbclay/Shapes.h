@@ -40,7 +40,9 @@ public:
     /// The outward normal at @a p (unit length); by default the normalised central-difference
     /// gradient of distance() with step 0.5.
     virtual Vec3 normal(const Vec3& p) const;
-    /// A voxel box containing every voxel whose centre is inside the shape.
+    /// A voxel box containing every voxel whose centre is inside the shape. (The built-in shapes
+    /// return a box that contains the whole shape as a continuous solid, which transformed shapes
+    /// rely on; other shapes are given half a voxel of margin when transformed.)
     virtual Box bounds() const = 0;
     /// A short description for messages, e.g. "sphere (center [1,2,3], radius 4)".
     virtual std::string describe() const = 0;

@@ -1,0 +1,287 @@
+// The push operation: clay inside a tool moves to the nearest free voxel outside every tool.
+//
+// 1. U = union of the tools' bounds (2D: clipped to z = 0). Only leaves of the mass grid that meet
+//    U are visited; the clay voxels there whose centre is inside a tool are the sources, sorted in
+//    coordinate order (x, then y, then z). Obstacle voxels are never sources (clay never leaves them).
+// 2. Each source is given the tool that holds it most deeply (smallest distance; ties: the first
+//    tool) and that tool's normal at its centre (2D: z dropped).
+// 3. Target: march from the centre along the normal to (-distance + 0.5) past the surface, then on
+//    in half-voxel steps for up to maxSearch voxels, until the voxel at the rounded point is free:
+//    outside every tool, not an obstacle, inside the region and able to take the clay without
+//    exceeding INT32_MAX. Failing that, the free voxel nearest the source (Euclidean, ties by
+//    coordinate order) within Chebyshev distance maxSearch. Failing that, the clay is trapped.
+// 4. The plan (sources emptied, targets increased) is computed read-only first, then written in one
+//    Automaton::edit() over the region U grown by maxSearch + 2, so nothing is written if a tool
+//    throws, and the automaton rescans and wakes exactly that region.
+// Sources are inside a tool and targets outside all tools, so no voxel is both; the plan depends only
+// on the grid, the tools and the source order: deterministic.
+
+#include "vdbclay/Push.h"
+#include "vdbclay/Automaton.h"
+
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <map>
+
+namespace vdbclay {
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+constexpr int kMaxSearchLimit = 1024;
+
+bool inside(const Box& b, const Coord& c)
+{
+    return c.x() >= b.min[0] && c.x() <= b.max[0] && c.y() >= b.min[1] && c.y() <= b.max[1] &&
+           c.z() >= b.min[2] && c.z() <= b.max[2];
+}
+
+Box unite(const Box& a, const Box& b)
+{
+    if (a.empty()) return b;
+    if (b.empty()) return a;
+    Box r;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = std::min(a.min[i], b.min[i]);
+        r.max[i] = std::max(a.max[i], b.max[i]);
+    }
+    return r;
+}
+
+Box intersect(const Box& a, const Box& b)
+{
+    Box r;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = std::max(a.min[i], b.min[i]);
+        r.max[i] = std::min(a.max[i], b.max[i]);
+    }
+    return r;
+}
+
+Box grow(const Box& a, int64_t by, bool is2D)
+{
+    Box r = a;
+    for (int i = 0; i < 3; ++i) {
+        if (is2D && i == 2) continue;
+        r.min[i] = int32_t(std::max<int64_t>(int64_t(a.min[i]) - by, INT32_MIN / 2));
+        r.max[i] = int32_t(std::min<int64_t>(int64_t(a.max[i]) + by, INT32_MAX / 2));
+    }
+    return r;
+}
+
+struct Source {
+    Coord c;
+    int32_t mass;
+    size_t tool;
+    double distance;
+};
+
+class Pusher {
+public:
+    Pusher(Automaton& a, const std::vector<ShapePtr>& tools, int maxSearch)
+        : mTools(tools), mMaxSearch(maxSearch), mIs2D(a.options().dimensions == 2),
+          mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr)
+    {
+        for (const ShapePtr& t : tools)
+            mBounds.push_back(t->bounds());
+    }
+
+    Box toolBounds() const
+    {
+        Box u;
+        for (const Box& b : mBounds)
+            u = unite(u, b);
+        if (mIs2D) u = intersect(u, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
+        return u;
+    }
+
+    void setRegion(const Box& r) { mRegion = r; }
+
+    /// Clay voxels inside a tool, in coordinate order.
+    std::vector<Source> sources(const Box& u) const
+    {
+        std::vector<const openvdb::Int32Tree::LeafNodeType*> leaves;
+        const int64_t slots = ((int64_t(u.max[0]) >> 3) - (int64_t(u.min[0]) >> 3) + 1) *
+                              ((int64_t(u.max[1]) >> 3) - (int64_t(u.min[1]) >> 3) + 1) *
+                              ((int64_t(u.max[2]) >> 3) - (int64_t(u.min[2]) >> 3) + 1);
+        const CoordBBox ub(Coord(u.min[0], u.min[1], u.min[2]), Coord(u.max[0], u.max[1], u.max[2]));
+        if (slots <= int64_t(mMass.leafCount())) {
+            for (int x = u.min[0] & ~7; x <= u.max[0]; x += 8)
+                for (int y = u.min[1] & ~7; y <= u.max[1]; y += 8)
+                    for (int z = u.min[2] & ~7; z <= u.max[2]; z += 8)
+                        if (const auto* l = mMass.probeConstLeaf(Coord(x, y, z))) leaves.push_back(l);
+        } else {
+            for (auto it = mMass.cbeginLeaf(); it; ++it)
+                if (it->getNodeBoundingBox().hasOverlap(ub)) leaves.push_back(&*it);
+        }
+        std::vector<Source> out;
+        for (const auto* leaf : leaves) {
+            CoordBBox b = leaf->getNodeBoundingBox();
+            b.intersect(ub);
+            for (auto it = b.begin(); it; ++it) {
+                const Coord c = *it;
+                const int32_t m = leaf->getValue(c);
+                if (m == 0) continue;
+                if (mObs && mObs->isValueOn(c)) continue;
+                size_t best = SIZE_MAX;
+                double bestD = 0;
+                for (size_t t = 0; t < mTools.size(); ++t) {
+                    if (!inside(mBounds[t], c)) continue;
+                    const double d = mTools[t]->distance(centre(c));
+                    if (d < 0 && (best == SIZE_MAX || d < bestD)) {
+                        best = t;
+                        bestD = d;
+                    }
+                }
+                if (best != SIZE_MAX) out.push_back(Source{c, m, best, bestD});
+            }
+        }
+        std::sort(out.begin(), out.end(), [](const Source& a, const Source& b) { return a.c < b.c; });
+        return out;
+    }
+
+    /// Where the clay of @a s goes; false if nowhere (trapped).
+    bool target(const Source& s, Coord& out) const
+    {
+        Vec3 n = mTools[s.tool]->normal(centre(s.c));
+        if (mIs2D) n[2] = 0;
+        const double l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (!(l > 0) || !std::isfinite(l))
+            n = {{0, 1, 0}};
+        else
+            n = {{n[0] / l, n[1] / l, n[2] / l}};
+
+        const Vec3 p = centre(s.c);
+        const double start = -s.distance + 0.5;
+        const int steps = 2 * mMaxSearch;
+        for (int k = 0; k <= steps; ++k) {
+            const double t = start + 0.5 * k;
+            const Coord c = rounded({{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}});
+            if (c != s.c && isFree(c, s.mass)) {
+                out = c;
+                return true;
+            }
+        }
+        // Nearest free voxel by Euclidean distance within Chebyshev distance maxSearch.
+        bool found = false;
+        int64_t bestD2 = 0;
+        for (int r = 1; r <= mMaxSearch; ++r) {
+            if (found && int64_t(r) * r > bestD2) break; // every voxel of this shell is farther
+            const int zr = mIs2D ? 0 : r;
+            for (int dx = -r; dx <= r; ++dx)
+                for (int dy = -r; dy <= r; ++dy)
+                    for (int dz = -zr; dz <= zr; ++dz) {
+                        const bool onShell = std::abs(dx) == r || std::abs(dy) == r || std::abs(dz) == r;
+                        if (!onShell) continue;
+                        const int64_t d2 = int64_t(dx) * dx + int64_t(dy) * dy + int64_t(dz) * dz;
+                        if (found && d2 > bestD2) continue;
+                        const Coord c = s.c.offsetBy(dx, dy, dz);
+                        if (found && d2 == bestD2 && !(c < out)) continue;
+                        if (!isFree(c, s.mass)) continue;
+                        found = true;
+                        bestD2 = d2;
+                        out = c;
+                    }
+        }
+        return found;
+    }
+
+    void add(const Coord& c, int32_t m) { mAdded[c] += m; }
+    const std::map<Coord, int64_t>& added() const { return mAdded; }
+
+private:
+    static Vec3 centre(const Coord& c) { return {{double(c.x()), double(c.y()), double(c.z())}}; }
+
+    Coord rounded(const Vec3& p) const
+    {
+        int32_t v[3];
+        for (int i = 0; i < 3; ++i) {
+            const double r = std::floor(p[i] + 0.5);
+            v[i] = int32_t(std::clamp(r, double(INT32_MIN / 2), double(INT32_MAX / 2)));
+        }
+        if (mIs2D) v[2] = 0;
+        return Coord(v[0], v[1], v[2]);
+    }
+
+    bool isFree(const Coord& c, int32_t m) const
+    {
+        if (!inside(mRegion, c)) return false;
+        if (mIs2D && c.z() != 0) return false;
+        if (mObs && mObs->isValueOn(c)) return false;
+        for (size_t t = 0; t < mTools.size(); ++t) {
+            if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return false;
+        }
+        int64_t now = mMass.getValue(c);
+        const auto it = mAdded.find(c);
+        if (it != mAdded.end()) now += it->second;
+        return now + m <= INT32_MAX;
+    }
+
+    const std::vector<ShapePtr>& mTools;
+    std::vector<Box> mBounds;
+    int mMaxSearch;
+    bool mIs2D;
+    const openvdb::Int32Tree& mMass;
+    const openvdb::MaskTree* mObs;
+    Box mRegion;
+    std::map<Coord, int64_t> mAdded;
+};
+
+} // namespace
+
+PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch)
+{
+    if (maxSearch < 0 || maxSearch > kMaxSearchLimit) {
+        throw Error("push: maxSearch must lie in [0, " + std::to_string(kMaxSearchLimit) + "], got " +
+                    std::to_string(maxSearch));
+    }
+    for (size_t i = 0; i < tools.size(); ++i) {
+        if (!tools[i]) throw Error("push: tools[" + std::to_string(i) + "] is null");
+    }
+    PushReport report;
+    if (tools.empty()) return report;
+
+    Pusher pusher(automaton, tools, maxSearch);
+    const Box u = pusher.toolBounds();
+    if (u.empty()) return report;
+    const bool is2D = automaton.options().dimensions == 2;
+    const Box region = grow(u, int64_t(maxSearch) + 2, is2D);
+    pusher.setRegion(region);
+
+    struct Move {
+        Coord from, to;
+        int32_t mass;
+    };
+    std::vector<Move> moves;
+    for (const Source& s : pusher.sources(u)) {
+        Coord to;
+        if (pusher.target(s, to)) {
+            pusher.add(to, s.mass);
+            moves.push_back(Move{s.c, to, s.mass});
+            ++report.voxelsPushed;
+            report.massMoved += s.mass;
+        } else {
+            ++report.voxelsTrapped;
+            report.massTrapped += s.mass;
+        }
+    }
+    if (moves.empty()) return report;
+
+    report.region = region;
+    automaton.edit(region, [&](MassGrid& grid) {
+        auto acc = grid.getAccessor();
+        for (const Move& m : moves)
+            acc.setValueOff(m.from, 0);
+        for (const auto& a : pusher.added()) {
+            acc.setValueOn(a.first, int32_t(int64_t(acc.getValue(a.first)) + a.second));
+        }
+    });
+    return report;
+}
+
+} // namespace vdbclay

@@ -1,0 +1,703 @@
+// Shapes (analytic SDFs, poses, level sets, meshes) and the push operation.
+#include <vdbclay/Automaton.h>
+#include <vdbclay/Metrics.h>
+#include <vdbclay/Push.h>
+#include <vdbclay/Shapes.h>
+
+#include <openvdb/openvdb.h>
+#include <openvdb/io/File.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <gtest/gtest.h>
+
+#include <climits>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+using namespace vdbclay;
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+namespace {
+
+class ShapesTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() { openvdb::initialize(); }
+
+    void SetUp() override
+    {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        mDir = std::filesystem::temp_directory_path() /
+               ("vdbclay_shapes_" + std::to_string(::getpid()) + "_" + info->name());
+        std::filesystem::remove_all(mDir);
+        std::filesystem::create_directories(mDir);
+    }
+    void TearDown() override { std::filesystem::remove_all(mDir); }
+
+    std::string file(const std::string& name, const std::string& content) const
+    {
+        const std::string p = (mDir / name).string();
+        std::ofstream(p, std::ios::binary) << content;
+        return p;
+    }
+    std::string path(const std::string& name) const { return (mDir / name).string(); }
+
+    std::filesystem::path mDir;
+};
+
+/// Runs @a f and expects an Error whose message contains every one of @a parts.
+template <typename F>::testing::AssertionResult throwsWith(F&& f, std::vector<std::string> parts)
+{
+    try {
+        f();
+    } catch (const Error& e) {
+        const std::string m = e.what();
+        for (const std::string& p : parts) {
+            if (m.find(p) == std::string::npos) {
+                return ::testing::AssertionFailure() << "message \"" << m << "\" lacks \"" << p << "\"";
+            }
+        }
+        return ::testing::AssertionSuccess();
+    } catch (const std::exception& e) {
+        return ::testing::AssertionFailure() << "threw a non-vdbclay exception: " << e.what();
+    }
+    return ::testing::AssertionFailure() << "did not throw";
+}
+
+bool inBox(const Box& b, const Coord& c)
+{
+    return c.x() >= b.min[0] && c.x() <= b.max[0] && c.y() >= b.min[1] && c.y() <= b.max[1] &&
+           c.z() >= b.min[2] && c.z() <= b.max[2];
+}
+
+Vec3 v3(const Coord& c)
+{
+    return {{double(c.x()), double(c.y()), double(c.z())}};
+}
+
+/// Every voxel of @a search whose centre is inside @a s lies in s->bounds(); returns how many.
+::testing::AssertionResult boundsHoldInside(const ShapePtr& s, const CoordBBox& search,
+                                            int64_t* count = nullptr)
+{
+    const Box b = s->bounds();
+    int64_t n = 0;
+    for (auto it = search.begin(); it; ++it) {
+        if (s->distance(v3(*it)) < 0) {
+            ++n;
+            if (!inBox(b, *it)) {
+                return ::testing::AssertionFailure()
+                       << s->describe() << ": inside voxel " << *it << " outside bounds";
+            }
+        }
+    }
+    if (count) *count = n;
+    return ::testing::AssertionSuccess();
+}
+
+// ---- analytic shapes --------------------------------------------------------------------------------
+
+TEST_F(ShapesTest, SphereExactDistances)
+{
+    const ShapePtr s = makeSphere({{1, 2, 3}}, 4);
+    EXPECT_EQ(s->distance({{1, 2, 3}}), -4.0);
+    EXPECT_EQ(s->distance({{5, 2, 3}}), 0.0);
+    EXPECT_EQ(s->distance({{1, 2, 10}}), 3.0);
+    EXPECT_EQ(s->distance({{4, 6, 3}}), 1.0); // 3-4-5
+    EXPECT_EQ(s->distance({{1, 2, 1}}), -2.0);
+    const Box b = s->bounds();
+    EXPECT_EQ(b.min, (std::array<int32_t, 3>{{-3, -2, -1}}));
+    EXPECT_EQ(b.max, (std::array<int32_t, 3>{{5, 6, 7}}));
+    EXPECT_NE(s->describe().find("sphere"), std::string::npos);
+}
+
+TEST_F(ShapesTest, BoxExactDistances)
+{
+    // Voxels 0..3 x 0..1 x 0..1: faces at -0.5, 3.5 / -0.5, 1.5.
+    const ShapePtr s = makeBox({{0, 0, 0}}, {{3, 1, 1}});
+    EXPECT_EQ(s->distance({{1.5, 0.5, 0.5}}), -1.0);
+    EXPECT_EQ(s->distance({{0, 0, 0}}), -0.5);
+    EXPECT_EQ(s->distance({{5.5, 0.5, 0.5}}), 2.0);
+    EXPECT_EQ(s->distance({{-0.5, 0.5, 0.5}}), 0.0);
+    EXPECT_DOUBLE_EQ(s->distance({{4.5, 2.5, 0.5}}), std::sqrt(2.0));
+    EXPECT_DOUBLE_EQ(s->distance({{4.5, 2.5, 3.5}}), std::sqrt(1.0 + 1.0 + 4.0));
+    const Box b = s->bounds();
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_LE(b.min[i], 0);
+        EXPECT_GE(b.max[i], i == 0 ? 3 : 1);
+    }
+    // One voxel box: its centre is inside, its neighbours are not.
+    const ShapePtr one = makeBox({{2, 2, 2}}, {{2, 2, 2}});
+    EXPECT_EQ(one->distance({{2, 2, 2}}), -0.5);
+    EXPECT_EQ(one->distance({{3, 2, 2}}), 0.5);
+    int64_t n = 0;
+    EXPECT_TRUE(boundsHoldInside(one, CoordBBox(Coord(-2), Coord(6)), &n));
+    EXPECT_EQ(n, 1);
+}
+
+TEST_F(ShapesTest, CylinderExactDistances)
+{
+    for (int axis = 0; axis < 3; ++axis) {
+        const ShapePtr s = makeCylinder({{0, 0, 0}}, 2, 6, axis);
+        auto at = [&](double radial, double along, double other = 0) {
+            Vec3 p{{0, 0, 0}};
+            p[axis] = along;
+            p[(axis + 1) % 3] = radial;
+            p[(axis + 2) % 3] = other;
+            return s->distance(p);
+        };
+        EXPECT_EQ(at(0, 0), -2.0) << axis;
+        EXPECT_EQ(at(1, 0), -1.0) << axis;
+        EXPECT_EQ(at(0, 2.5), -0.5) << axis; // near a cap
+        EXPECT_EQ(at(0, 5), 2.0) << axis;
+        EXPECT_EQ(at(5, 0), 3.0) << axis;
+        EXPECT_EQ(at(3, 0, 4), 3.0) << axis;                       // radial distance 5
+        EXPECT_DOUBLE_EQ(at(4, 7), std::sqrt(4.0 + 16.0)) << axis; // beyond the rim
+        const Box b = s->bounds();
+        EXPECT_EQ(b.min[axis], -3);
+        EXPECT_EQ(b.max[axis], 3);
+        EXPECT_EQ(b.max[(axis + 1) % 3], 2);
+    }
+}
+
+TEST_F(ShapesTest, CapsuleExactDistances)
+{
+    const ShapePtr s = makeCapsule({{0, 0, 0}}, {{10, 0, 0}}, 2);
+    EXPECT_EQ(s->distance({{5, 3, 0}}), 1.0);
+    EXPECT_EQ(s->distance({{5, 0, 0}}), -2.0);
+    EXPECT_EQ(s->distance({{-3, 0, 0}}), 1.0);
+    EXPECT_EQ(s->distance({{13, 4, 0}}), 3.0);
+    EXPECT_EQ(s->distance({{0, 0, 1}}), -1.0);
+    // a == b: a sphere.
+    const ShapePtr p = makeCapsule({{1, 1, 1}}, {{1, 1, 1}}, 3);
+    EXPECT_EQ(p->distance({{1, 1, 5}}), 1.0);
+}
+
+TEST_F(ShapesTest, BoundsContainEveryInsideVoxel)
+{
+    std::vector<ShapePtr> shapes = {
+        makeSphere({{0.3, -1.7, 2.5}}, 5.2),          makeBox({{-3, 0, 1}}, {{4, 2, 6}}),
+        makeCylinder({{1, 1, 1}}, 3.5, 7, 0),         makeCylinder({{0.5, 0.5, 0.5}}, 2, 9.5, 2),
+        makeCapsule({{-4, -2, 0}}, {{5, 3, 2}}, 2.5),
+    };
+    const size_t analytic = shapes.size();
+    for (size_t i = 0; i < analytic; ++i) {
+        Pose pose;
+        pose.translation = {{1.5, -2.25, 0.75}};
+        pose.rotationDeg = {{30.0 + 7 * double(i), 45, -60}};
+        pose.pivot = {{1, 2, 3}};
+        shapes.push_back(makeTransformed(shapes[i], pose));
+        Pose quarter;
+        quarter.rotationDeg = {{0, 0, 90}};
+        shapes.push_back(makeTransformed(shapes[i], quarter));
+    }
+    for (const ShapePtr& s : shapes) {
+        int64_t n = 0;
+        EXPECT_TRUE(boundsHoldInside(s, CoordBBox(Coord(-20), Coord(20)), &n));
+        EXPECT_GT(n, 0) << s->describe();
+        // Not absurdly loose: the box of a shape whose voxels all lie in [-20, 20].
+        const Box b = s->bounds();
+        for (int a = 0; a < 3; ++a) {
+            EXPECT_GE(b.min[a], -21) << s->describe();
+            EXPECT_LE(b.max[a], 21) << s->describe();
+        }
+    }
+}
+
+TEST_F(ShapesTest, PoseRoundTripAndQuarterTurns)
+{
+    Pose pose;
+    pose.translation = {{3, -4, 5.5}};
+    pose.rotationDeg = {{17, -123, 271}};
+    pose.pivot = {{-2, 1, 7}};
+    EXPECT_FALSE(pose.isIdentity());
+    for (const Vec3& p : {Vec3{{0, 0, 0}}, Vec3{{1.5, -2, 9}}, Vec3{{-100, 30, 0.25}}}) {
+        const Vec3 q = pose.applyInverse(pose.apply(p));
+        const Vec3 r = pose.apply(pose.applyInverse(p));
+        for (int i = 0; i < 3; ++i) {
+            EXPECT_NEAR(q[i], p[i], 1e-9);
+            EXPECT_NEAR(r[i], p[i], 1e-9);
+        }
+    }
+    // Quarter turns are exact. x first, then y, then z: (1,0,0) -90 about x stays, +90 about z -> y.
+    Pose q;
+    q.rotationDeg = {{0, 0, 90}};
+    EXPECT_EQ(q.apply({{1, 0, 0}}), (Vec3{{0, 1, 0}}));
+    q.rotationDeg = {{90, 0, 0}};
+    EXPECT_EQ(q.apply({{0, 1, 0}}), (Vec3{{0, 0, 1}}));
+    q.rotationDeg = {{90, 90, 0}}; // y -> z (about x) -> x (about y)
+    EXPECT_EQ(q.apply({{0, 1, 0}}), (Vec3{{1, 0, 0}}));
+    q.rotationDeg = {{0, 0, 90}};
+    q.pivot = {{1, 1, 0}};
+    q.translation = {{0, 0, 2}};
+    EXPECT_EQ(q.apply({{2, 1, 0}}), (Vec3{{1, 2, 2}}));
+    EXPECT_EQ(q.applyInverse({{1, 2, 2}}), (Vec3{{2, 1, 0}}));
+
+    Pose id;
+    EXPECT_TRUE(id.isIdentity());
+    id.rotationDeg = {{360, 0, 0}};
+    EXPECT_TRUE(id.isIdentity());
+    id.pivot = {{4, 5, 6}}; // a pivot alone moves nothing
+    EXPECT_TRUE(id.isIdentity());
+    const ShapePtr s = makeSphere({{0, 0, 0}}, 1);
+    EXPECT_EQ(makeTransformed(s, id), s);
+}
+
+TEST_F(ShapesTest, TransformedDistancesAndNormals)
+{
+    // A 10 x 2 x 2 box turned a quarter about z, then moved: it lies along y.
+    const ShapePtr box = makeBox({{0, 0, 0}}, {{9, 1, 1}});
+    Pose pose;
+    pose.rotationDeg = {{0, 0, 90}};
+    pose.translation = {{20, 0, 0}};
+    const ShapePtr t = makeTransformed(box, pose);
+    // Box point (4.5, 0.5, 0.5) (its centre) goes to (-0.5, 4.5, 0.5) + (20, 0, 0).
+    EXPECT_EQ(t->distance({{19.5, 4.5, 0.5}}), -1.0);
+    EXPECT_EQ(t->distance({{19.5, 12.5, 0.5}}), 3.0);
+    const Vec3 n = t->normal({{19.5, 12.5, 0.5}});
+    EXPECT_NEAR(n[0], 0, 1e-12);
+    EXPECT_NEAR(n[1], 1, 1e-12);
+    EXPECT_NEAR(n[2], 0, 1e-12);
+
+    const ShapePtr s = makeSphere({{1, 1, 1}}, 10);
+    const Vec3 m = s->normal({{4, 5, 1}});
+    EXPECT_NEAR(m[0], 0.6, 1e-3); // central differences of step 0.5 on a curved surface
+    EXPECT_NEAR(m[1], 0.8, 1e-3);
+    EXPECT_NEAR(m[2], 0.0, 1e-12);
+    EXPECT_EQ(s->normal({{1, 1, 1}}), (Vec3{{0, 1, 0}})); // zero gradient: +y
+}
+
+TEST_F(ShapesTest, ParameterErrorsNameTheParameter)
+{
+    const double nan = std::nan(""), inf = INFINITY;
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{0, nan, 0}}, 1); }, {"makeSphere", "center[1]"}));
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{0, 0, 0}}, 0); }, {"radius"}));
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{0, 0, 0}}, -2); }, {"radius", "-2"}));
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{0, 0, 0}}, inf); }, {"radius"}));
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{0, 0, 0}}, nan); }, {"radius"}));
+    EXPECT_TRUE(throwsWith([&] { makeSphere({{3e9, 0, 0}}, 1); }, {"bounds"}));
+    EXPECT_TRUE(throwsWith([&] { makeBox({{0, 5, 0}}, {{1, 4, 1}}); }, {"makeBox", "min[1]", "max[1]"}));
+    EXPECT_TRUE(throwsWith([&] { makeBox({{0, 0, 0}}, {{1, 1, inf}}); }, {"max[2]"}));
+    EXPECT_TRUE(throwsWith([&] { makeCylinder({{0, 0, 0}}, 1, 0, 1); }, {"makeCylinder", "height"}));
+    EXPECT_TRUE(throwsWith([&] { makeCylinder({{0, 0, 0}}, -1, 2, 1); }, {"radius"}));
+    EXPECT_TRUE(throwsWith([&] { makeCylinder({{0, 0, 0}}, 1, 2, 3); }, {"axis", "3"}));
+    EXPECT_TRUE(throwsWith([&] { makeCylinder({{0, 0, 0}}, 1, 2, -1); }, {"axis"}));
+    EXPECT_TRUE(throwsWith([&] { makeCapsule({{nan, 0, 0}}, {{1, 0, 0}}, 1); }, {"makeCapsule", "a[0]"}));
+    EXPECT_TRUE(throwsWith([&] { makeCapsule({{0, 0, 0}}, {{1, 0, inf}}, 1); }, {"b[2]"}));
+    EXPECT_TRUE(throwsWith([&] { makeCapsule({{0, 0, 0}}, {{1, 0, 0}}, 0); }, {"radius"}));
+    EXPECT_TRUE(throwsWith([&] { makeTransformed(nullptr, Pose()); }, {"shape"}));
+    Pose bad;
+    bad.rotationDeg = {{0, nan, 0}};
+    EXPECT_TRUE(throwsWith(
+        [&] {
+            makeTransformed(makeSphere({{0, 0, 0}}, 1), bad);
+        },
+        {"pose.rotationDeg[1]"}));
+}
+
+// ---- meshes -------------------------------------------------------------------------------------------
+
+// A cube 0..10 in world units; faces as quads, in several OBJ index forms.
+const char* kCubeObj = "# cube\n"
+                       "o cube\n"
+                       "v 0 0 0 1 0 0\nv 10 0 0\nv 10 10 0 1.0\nv 0 10 0\n" // with colour, with w
+                       "v 0 0 10\nv 10 0 10\nv 10 10 10\nv 0 10 10\n"
+                       "vn 0 0 1\n"
+                       "f 1 4 3 2\n"
+                       "f 5/1 6/1 7/1 8/1\n"
+                       "f 1//1 2//1 6//1 5//1\n"
+                       "f 2/1/1 3/1/1 7/1/1 6/1/1\n"
+                       "f -5 -1 -2 -6\n" // 3 7 8 4
+                       "f 4 8 5 1\n";
+
+std::string tetraAsciiStl()
+{
+    return "solid tetra\n"
+           "facet normal 0 0 -1\n outer loop\n  vertex 0 0 0\n  vertex 0 10 0\n  vertex 10 0 0\n "
+           "endloop\nendfacet\n"
+           "facet normal 0 -1 0\n outer loop\n  vertex 0 0 0\n  vertex 10 0 0\n  vertex 0 0 10\n "
+           "endloop\nendfacet\n"
+           "facet normal -1 0 0\n outer loop\n  vertex 0 0 0\n  vertex 0 0 10\n  vertex 0 10 0\n "
+           "endloop\nendfacet\n"
+           "facet normal 1 1 1\n outer loop\n  vertex 10 0 0\n  vertex 0 10 0\n  vertex 0 0 10\n "
+           "endloop\nendfacet\n"
+           "endsolid tetra\n";
+}
+
+std::string tetraBinaryStl()
+{
+    const float v[4][3] = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 10}};
+    const int tri[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    std::string s(80, ' ');
+    s.replace(0, 5, "solid"); // a binary STL header may start with "solid" too
+    const uint32_t n = 4;
+    s.append(reinterpret_cast<const char*>(&n), 4);
+    for (const auto& t : tri) {
+        const float normal[3] = {0, 0, 0};
+        s.append(reinterpret_cast<const char*>(normal), 12);
+        for (int k = 0; k < 3; ++k)
+            s.append(reinterpret_cast<const char*>(v[t[k]]), 12);
+        s.append(2, '\0');
+    }
+    return s;
+}
+
+TEST_F(ShapesTest, MeshObjCubeInsideOutside)
+{
+    const std::string p = file("cube.obj", kCubeObj);
+    const ShapePtr s = loadMesh(p, 1.0);
+    EXPECT_LT(s->distance({{5, 5, 5}}), 0);
+    EXPECT_LT(s->distance({{1, 1, 1}}), 0);
+    EXPECT_NEAR(s->distance({{5, 5, 8}}), -2.0, 0.25);
+    EXPECT_GT(s->distance({{15, 5, 5}}), 0);
+    EXPECT_GT(s->distance({{-3, 5, 5}}), 0);
+    EXPECT_GT(s->distance({{5, 5, 11}}), 0);
+    EXPECT_GT(s->distance({{50, 50, 50}}), 0);
+    int64_t n = 0;
+    EXPECT_TRUE(boundsHoldInside(s, CoordBBox(Coord(-5), Coord(15)), &n));
+    EXPECT_GE(n, 9 * 9 * 9);
+    EXPECT_LE(n, 11 * 11 * 11);
+    // Half-size clay voxels: the cube spans clay voxels 0..20.
+    const ShapePtr h = loadMesh(p, 0.5);
+    EXPECT_LT(h->distance({{18, 10, 10}}), 0);
+    EXPECT_GT(h->distance({{22, 10, 10}}), 0);
+    EXPECT_TRUE(boundsHoldInside(h, CoordBBox(Coord(-5), Coord(25))));
+}
+
+TEST_F(ShapesTest, MeshStlTetrahedronAsciiAndBinary)
+{
+    for (const std::string& p :
+         {file("tetra.stl", tetraAsciiStl()), file("tetra_bin.stl", tetraBinaryStl())}) {
+        const ShapePtr s = loadMesh(p, 0.5);
+        // Clay voxel p is world p / 2.
+        EXPECT_LT(s->distance({{2, 2, 2}}), 0) << p;
+        EXPECT_LT(s->distance({{4, 4, 4}}), 0) << p;
+        EXPECT_GT(s->distance({{16, 16, 16}}), 0) << p; // beyond the slanted face
+        EXPECT_GT(s->distance({{-4, 2, 2}}), 0) << p;
+        EXPECT_TRUE(boundsHoldInside(s, CoordBBox(Coord(-5), Coord(25)))) << p;
+    }
+}
+
+TEST_F(ShapesTest, MeshErrors)
+{
+    // Open: the cube without its top face (4 edges of one quad are shared by one face only).
+    std::string open = kCubeObj;
+    open.erase(open.find("f 5/1 6/1 7/1 8/1\n"), std::strlen("f 5/1 6/1 7/1 8/1\n"));
+    const std::string po = file("open.obj", open);
+    EXPECT_TRUE(throwsWith([&] { loadMesh(po); }, {po, "not closed", "4 open edges"}));
+    // Malformed lines name the line.
+    const std::string pm = file("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 x\nf 1 2 3\n");
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pm); }, {pm + ":3:", "\"x\""}));
+    const std::string pi = file("badindex.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pi); }, {pi + ":4:", "out of range"}));
+    const std::string pf = file("shortface.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pf); }, {pf + ":3:"}));
+    std::string stl = tetraAsciiStl();
+    stl.replace(stl.find("vertex 0 10 0"), std::strlen("vertex 0 10 0"), "vertex 0 10");
+    const std::string ps = file("bad.stl", stl);
+    EXPECT_TRUE(throwsWith([&] { loadMesh(ps); }, {ps + ":5:"})); // solid, facet, outer loop, vertex, vertex
+    // Empty, missing, truncated, unknown.
+    const std::string pe = file("empty.obj", "# nothing\nv 1 2 3\n");
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pe); }, {pe, "no faces"}));
+    EXPECT_TRUE(
+        throwsWith([&] { loadMesh(path("missing.obj")); }, {"cannot open", "missing.obj", "no such file"}));
+    const std::string bin = tetraBinaryStl();
+    const std::string pt = file("trunc.stl", bin.substr(0, bin.size() - 7));
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pt); }, {pt}));
+    const std::string pu = file("mesh.ply", "ply\n");
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pu); }, {pu, "unknown mesh format"}));
+    EXPECT_TRUE(throwsWith([&] { loadMesh(file("c.obj", kCubeObj), 0.0); }, {"voxelSize"}));
+}
+
+// ---- level sets ---------------------------------------------------------------------------------------
+
+TEST_F(ShapesTest, LevelSetRoundTrip)
+{
+    // World radius 5 at (1, 2, 3), level-set voxels of 0.5.
+    auto ls =
+        openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(5.0f, openvdb::Vec3f(1, 2, 3), 0.5f, 3.0f);
+    ls->setName("ball");
+    auto fog = openvdb::FloatGrid::create(0.0f);
+    fog->setName("density");
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->tree().setValue(Coord(0), 1.0f);
+    const std::string p = path("ball.vdb");
+    openvdb::io::File(p).write({fog, ls});
+
+    for (double vs : {0.5, 1.0, 0.25}) {
+        const ShapePtr s = loadLevelSet(p, vs); // the first level set: "ball", not "density"
+        const Vec3 c{{1 / vs, 2 / vs, 3 / vs}};
+        const double r = 5 / vs;
+        EXPECT_LT(s->distance(c), 0) << vs; // deep inside: the background, negative
+        EXPECT_NEAR(s->distance({{c[0] + r - 1, c[1], c[2]}}), -1.0, 0.1) << vs;
+        EXPECT_NEAR(s->distance({{c[0], c[1] - r - 1, c[2]}}), 1.0, 0.1) << vs;
+        EXPECT_GT(s->distance({{c[0] + 3 * r, c[1], c[2]}}), 0) << vs; // far outside
+        EXPECT_GT(s->distance({{-1000, 0, 0}}), 0) << vs;
+        const int R = int(r) + 4;
+        const Coord cc{int(c[0]), int(c[1]), int(c[2])};
+        int64_t n = 0;
+        EXPECT_TRUE(boundsHoldInside(s, CoordBBox(cc.offsetBy(-R), cc.offsetBy(R)), &n)) << vs;
+        const double exact = 4.0 / 3.0 * M_PI * r * r * r;
+        EXPECT_NEAR(double(n), exact, 0.25 * exact) << vs;
+    }
+    const ShapePtr named = loadLevelSet(p, 1.0, "ball");
+    EXPECT_NE(named->describe().find("ball"), std::string::npos);
+    EXPECT_TRUE(
+        throwsWith([&] { loadLevelSet(p, 1.0, "density"); }, {p, "density", "not a FloatGrid level set"}));
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(p, 1.0, "nope"); }, {p, "no grid named \"nope\""}));
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(p, -1.0); }, {"voxelSize"}));
+}
+
+TEST_F(ShapesTest, LevelSetErrors)
+{
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(path("nothing.vdb")); },
+                           {"cannot open", "nothing.vdb", "no such file"}));
+    const std::string txt = file("text.vdb", "this is not a vdb file\n");
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(txt); }, {txt}));
+    auto ints = openvdb::Int32Grid::create(0);
+    ints->setName("mass");
+    ints->tree().setValue(Coord(1, 2, 3), 7);
+    const std::string pv = path("mass.vdb");
+    openvdb::io::File(pv).write({ints});
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(pv); }, {pv, "no FloatGrid level set"}));
+    // Truncated: half of a valid file.
+    auto ls = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(5.0f, openvdb::Vec3f(0), 0.5f);
+    const std::string pg = path("good.vdb");
+    openvdb::io::File(pg).write({ls});
+    std::ifstream in(pg, std::ios::binary);
+    std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string pt = file("trunc.vdb", all.substr(0, all.size() / 2));
+    EXPECT_TRUE(throwsWith([&] { loadLevelSet(pt); }, {pt}));
+}
+
+// ---- push ---------------------------------------------------------------------------------------------
+
+openvdb::Int32Grid::Ptr clayBox(const CoordBBox& box, int32_t value)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    g->tree().fill(box, value, true);
+    g->tree().voxelizeActiveTiles();
+    return g;
+}
+
+AutomatonOptions opts(int dims = 3)
+{
+    AutomatonOptions o;
+    o.dimensions = dims;
+    o.rule.rule = Rule::Prorata;
+    o.rule.threshold = 100;
+    o.threads = 1;
+    return o;
+}
+
+/// Clay voxels whose centre is inside one of @a tools.
+int64_t clayInside(const openvdb::Int32Grid& g, const std::vector<ShapePtr>& tools)
+{
+    int64_t n = 0;
+    for (auto it = g.tree().cbeginValueOn(); it; ++it) {
+        if (*it == 0) continue;
+        for (const ShapePtr& t : tools)
+            if (t->distance(v3(it.getCoord())) < 0) {
+                ++n;
+                break;
+            }
+    }
+    return n;
+}
+
+TEST_F(ShapesTest, PushSphereIntoClayBox)
+{
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(15)), 100);
+    Automaton a(mass, opts());
+    const int64_t m0 = a.totalMass();
+    const std::vector<ShapePtr> tools = {makeSphere({{8, 8, 1}}, 4.5)};
+    const int64_t before = clayInside(*mass, tools);
+    ASSERT_GT(before, 50);
+    const PushReport r = push(a, tools);
+    EXPECT_EQ(r.voxelsPushed, uint64_t(before));
+    EXPECT_EQ(r.massMoved, 100 * before);
+    EXPECT_EQ(r.voxelsTrapped, 0u);
+    EXPECT_EQ(r.massTrapped, 0);
+    EXPECT_FALSE(r.region.empty());
+    EXPECT_EQ(clayInside(*mass, tools), 0);
+    EXPECT_EQ(a.totalMass(), m0);
+    EXPECT_EQ(totalMass(*mass), m0);
+    EXPECT_GT(a.residualOverload(), 0); // the pushed clay piles up around the tool
+    // A second push has nothing to do.
+    const PushReport again = push(a, tools);
+    EXPECT_EQ(again.voxelsPushed, 0u);
+    EXPECT_TRUE(again.region.empty());
+}
+
+TEST_F(ShapesTest, PushToolMovedFiveVoxelsPushesAllOut)
+{
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(19)), 100);
+    Automaton a(mass, opts());
+    const int64_t m0 = a.totalMass();
+    const ShapePtr tool = makeSphere({{10, 10, -4}}, 4); // touches the clay, holds none
+    EXPECT_EQ(push(a, {tool}).voxelsPushed, 0u);
+    Pose pose;
+    pose.translation = {{0, 0, 5}};
+    const std::vector<ShapePtr> moved = {makeTransformed(tool, pose)};
+    const int64_t inside = clayInside(*mass, moved);
+    ASSERT_GT(inside, 30);
+    const PushReport r = push(a, moved);
+    EXPECT_EQ(r.voxelsPushed, uint64_t(inside));
+    EXPECT_EQ(r.voxelsTrapped, 0u);
+    EXPECT_EQ(clayInside(*mass, moved), 0);
+    EXPECT_EQ(a.totalMass(), m0);
+    EXPECT_EQ(totalMass(*mass), m0);
+}
+
+TEST_F(ShapesTest, PushSqueezedClayIsTrappedAndConserved)
+{
+    // Clay 0..9 fills a cavity in a thick obstacle; a tool fills the cavity. Nowhere to go.
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(9)), 50);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().fill(CoordBBox(Coord(-10), Coord(20)), true, true);
+    obs->tree().fill(CoordBBox(Coord(0), Coord(9)), false, false);
+    obs->tree().voxelizeActiveTiles();
+    Automaton a(mass, opts(), obs);
+    const int64_t m0 = a.totalMass();
+    const uint64_t h0 = contentHash(*mass);
+    const std::vector<ShapePtr> tools = {makeBox({{0, 0, 0}}, {{9, 9, 9}})};
+    const PushReport r = push(a, tools, 4);
+    EXPECT_EQ(r.voxelsPushed, 0u);
+    EXPECT_EQ(r.massMoved, 0);
+    EXPECT_EQ(r.voxelsTrapped, 1000u);
+    EXPECT_EQ(r.massTrapped, 50 * 1000);
+    EXPECT_EQ(a.totalMass(), m0);
+    EXPECT_EQ(contentHash(*mass), h0);
+
+    // A smaller tool: the clay it holds goes to the free part of the cavity.
+    const std::vector<ShapePtr> small = {makeBox({{0, 0, 0}}, {{9, 4, 9}})};
+    const PushReport s = push(a, small, 6);
+    EXPECT_EQ(s.voxelsPushed, 500u);
+    EXPECT_EQ(s.voxelsTrapped, 0u);
+    EXPECT_EQ(clayInside(*mass, small), 0);
+    EXPECT_EQ(a.totalMass(), m0);
+    EXPECT_EQ(totalMass(*mass), m0);
+    for (auto it = mass->tree().cbeginValueOn(); it; ++it)
+        EXPECT_FALSE(obs->tree().isValueOn(it.getCoord()));
+}
+
+TEST_F(ShapesTest, PushNeverOverflowsATarget)
+{
+    // Cell (0,0,0) in a one-voxel tool; around it only (1,0,0), nearly full, and (2,0,0), empty.
+    auto mass = openvdb::Int32Grid::create(0);
+    mass->tree().setValue(Coord(0, 0, 0), 10);
+    mass->tree().setValue(Coord(1, 0, 0), INT32_MAX - 5);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().fill(CoordBBox(Coord(-3), Coord(3)), true, true);
+    obs->tree().voxelizeActiveTiles();
+    for (int x = 0; x <= 2; ++x)
+        obs->tree().setValueOff(Coord(x, 0, 0));
+    Automaton a(mass, opts(), obs);
+    const PushReport r = push(a, {makeBox({{0, 0, 0}}, {{0, 0, 0}})}, 2);
+    EXPECT_EQ(r.voxelsPushed, 1u);
+    EXPECT_EQ(mass->tree().getValue(Coord(0, 0, 0)), 0);
+    EXPECT_EQ(mass->tree().getValue(Coord(1, 0, 0)), INT32_MAX - 5);
+    EXPECT_EQ(mass->tree().getValue(Coord(2, 0, 0)), 10);
+    // With no room at all, the clay is trapped.
+    mass->tree().setValue(Coord(2, 0, 0), INT32_MAX);
+    mass->tree().setValue(Coord(0, 0, 0), 10);
+    a.resync();
+    const PushReport t = push(a, {makeBox({{0, 0, 0}}, {{0, 0, 0}})}, 2);
+    EXPECT_EQ(t.voxelsTrapped, 1u);
+    EXPECT_EQ(mass->tree().getValue(Coord(0, 0, 0)), 10);
+}
+
+TEST_F(ShapesTest, Push2DKeepsZeroLayer)
+{
+    auto mass = clayBox(CoordBBox(Coord(0, 0, 0), Coord(23, 23, 0)), 100);
+    Automaton a(mass, opts(2));
+    const int64_t m0 = a.totalMass();
+    // A sphere centred off the plane: its normals have z components, which 2D ignores.
+    const std::vector<ShapePtr> tools = {makeSphere({{11.3, 12.1, 2}}, 5.5)};
+    const int64_t inside = clayInside(*mass, tools);
+    ASSERT_GT(inside, 20);
+    const PushReport r = push(a, tools);
+    EXPECT_EQ(r.voxelsPushed, uint64_t(inside));
+    EXPECT_EQ(r.voxelsTrapped, 0u);
+    EXPECT_EQ(r.region.min[2], 0);
+    EXPECT_EQ(r.region.max[2], 0);
+    EXPECT_EQ(clayInside(*mass, tools), 0);
+    for (auto it = mass->tree().cbeginValueOn(); it; ++it)
+        EXPECT_EQ(it.getCoord().z(), 0);
+    EXPECT_EQ(a.totalMass(), m0);
+    const StepReport s = a.settle(100000);
+    EXPECT_TRUE(s.settled);
+    EXPECT_EQ(totalMass(*mass), m0);
+}
+
+TEST_F(ShapesTest, PushIsDeterministic)
+{
+    auto run = [](PushReport& rep) {
+        auto mass = clayBox(CoordBBox(Coord(-5, 0, -3), Coord(14, 9, 12)), 80);
+        mass->tree().setValue(Coord(3, 4, 5), 0);
+        Automaton a(mass, opts());
+        Pose pose;
+        pose.rotationDeg = {{20, 35, 10}};
+        pose.translation = {{2, 5, 4}};
+        const std::vector<ShapePtr> tools = {
+            makeTransformed(makeCylinder({{0, 0, 0}}, 3, 12, 0), pose),
+            makeCapsule({{-6, 9, 0}}, {{6, 3, 9}}, 2.5),
+        };
+        rep = push(a, tools);
+        return contentHash(*mass);
+    };
+    PushReport r1, r2;
+    const uint64_t h1 = run(r1), h2 = run(r2);
+    EXPECT_EQ(h1, h2);
+    EXPECT_GT(r1.voxelsPushed, 0u);
+    EXPECT_EQ(r1.voxelsPushed, r2.voxelsPushed);
+    EXPECT_EQ(r1.massMoved, r2.massMoved);
+}
+
+TEST_F(ShapesTest, PushThenSettleConservesMass)
+{
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(11)), 100);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().fill(CoordBBox(Coord(-20, -3, -20), Coord(30, -1, 30)), true, true); // a floor
+    Automaton a(mass, opts(), obs);
+    const int64_t m0 = a.totalMass();
+    for (int frame = 0; frame < 3; ++frame) {
+        const std::vector<ShapePtr> tools = {makeSphere({{6, 14.0 - 2 * frame, 6}}, 4)};
+        push(a, tools);
+        EXPECT_EQ(clayInside(*mass, tools), 0) << frame;
+        EXPECT_EQ(a.totalMass(), m0);
+        const StepReport s = a.settle(200000);
+        EXPECT_TRUE(s.settled) << frame;
+        EXPECT_EQ(totalMass(*mass), m0) << frame;
+        EXPECT_EQ(a.totalMass(), m0) << frame;
+    }
+}
+
+TEST_F(ShapesTest, PushArgumentErrors)
+{
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(3)), 10);
+    Automaton a(mass, opts());
+    EXPECT_TRUE(throwsWith([&] { push(a, {makeSphere({{0, 0, 0}}, 2)}, -1); }, {"maxSearch", "-1"}));
+    EXPECT_TRUE(throwsWith([&] { push(a, {makeSphere({{0, 0, 0}}, 2), nullptr}); }, {"tools[1]"}));
+    const PushReport r = push(a, {});
+    EXPECT_EQ(r.voxelsPushed, 0u);
+    EXPECT_TRUE(r.region.empty());
+}
+
+TEST_F(ShapesTest, PushLeavesFarClayAlone)
+{
+    auto mass = clayBox(CoordBBox(Coord(0), Coord(7)), 10);
+    mass->tree().setValue(Coord(1000, 1000, 1000), 33);
+    Automaton a(mass, opts());
+    const PushReport r = push(a, {makeSphere({{3, 3, 3}}, 2)}, 4);
+    EXPECT_GT(r.voxelsPushed, 0u);
+    EXPECT_EQ(mass->tree().getValue(Coord(1000, 1000, 1000)), 33);
+    EXPECT_LT(r.region.max[0], 20);
+    EXPECT_EQ(a.totalMass(), totalMass(*mass));
+}
+
+} // namespace
