@@ -13,11 +13,17 @@
 
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/File.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/io/io.h>
 #include <openvdb/openvdb.h>
 
 #include <sys/stat.h>
 
 #include <cmath>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <algorithm>
 #include <iomanip>
 #include <limits>
 #include <ostream>
@@ -45,6 +51,24 @@ public:
 
 void initOpenVDB() { openvdb::initialize(); }
 
+/// An exception's text fit for a message: OpenVDB's errors on damaged files quote whatever bytes
+/// it read (a "grid type" of garbage and kilobytes of blanks), so keep printable characters,
+/// collapse runs of blanks and cut it short.
+std::string reason(const std::exception& e)
+{
+    std::string out;
+    const char* p = e.what();
+    for (; *p && out.size() < 200; ++p) {
+        const unsigned char c = static_cast<unsigned char>(*p);
+        const char ch = (c >= 32 && c < 127) ? char(c) : ' ';
+        if (ch == ' ' && (out.empty() || out.back() == ' ')) continue;
+        out += ch;
+    }
+    while (!out.empty() && out.back() == ' ') out.pop_back();
+    if (*p) out += "...";
+    return out.empty() ? "unreadable data" : out;
+}
+
 const char* kMetaThreshold = "vdbclay_threshold";
 const char* kMetaRule = "vdbclay_rule";
 const char* kMetaAlpha = "vdbclay_alpha";
@@ -71,6 +95,46 @@ void validateMeta(const ClayMeta& meta, const std::string& path)
     }
 }
 
+/// Walks a .vdb file's structure (header, file metadata, grid descriptors) the way
+/// openvdb::io::File::open does, and checks that every grid the descriptors record ends within
+/// the file. io::File itself does not notice a file cut short inside or after its first grid.
+class StructureCheck : public openvdb::io::Archive {
+public:
+    /// An empty string if the structure is whole, else what is wrong.
+    std::string check(const std::string& path, uint64_t fileSize)
+    {
+        std::ifstream is(path, std::ios::in | std::ios::binary);
+        if (!is) return "cannot open it";
+        const bool hasOffsets = readHeader(is);
+        if (!is) return "the header is cut short";
+        auto streamMeta = std::make_shared<openvdb::io::StreamMetadata>();
+        streamMeta->setSeekable(true);
+        openvdb::io::setStreamMetadataPtr(is, streamMeta, /*transfer=*/false);
+        setFormatVersion(is);
+        setLibraryVersion(is);
+        setDataCompression(is);
+        openvdb::MetaMap meta;
+        meta.readMeta(is);
+        if (!is) return "the file metadata is cut short";
+        if (!hasOffsets) return ""; // a streamed file records no grid ends
+        const int32_t count = readGridCount(is);
+        if (!is || count < 0) return "the grid count is cut short";
+        int64_t end = 0;
+        for (int32_t i = 0; i < count; ++i) {
+            openvdb::io::GridDescriptor gd;
+            gd.read(is);
+            if (!is) return "grid descriptor " + std::to_string(i + 1) + " is cut short";
+            end = std::max(end, gd.getEndPos());
+            gd.seekToEnd(is);
+        }
+        if (uint64_t(end) > fileSize) {
+            return "its grids end at byte " + std::to_string(end) + " but it holds only " +
+                   std::to_string(fileSize) + " bytes";
+        }
+        return "";
+    }
+};
+
 /// Opens @a path for reading with every check readClayFile promises; grids are read in full
 /// (no delayed loading), so the file may be replaced afterwards.
 void openChecked(openvdb::io::File& file, const std::string& path)
@@ -78,11 +142,19 @@ void openChecked(openvdb::io::File& file, const std::string& path)
     struct stat st;
     if (::stat(path.c_str(), &st) != 0) throw Error(path + ": no such file");
     if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
+    const std::string prefix = path + " is not a .vdb file or is truncated: ";
     try {
         file.open(/*delayLoad=*/false);
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated: " + e.what());
+        throw Error(prefix + reason(e));
     }
+    std::string problem;
+    try {
+        problem = StructureCheck().check(path, uint64_t(st.st_size));
+    } catch (const std::exception& e) {
+        problem = reason(e);
+    }
+    if (!problem.empty()) throw Error(prefix + problem);
 }
 
 std::string gridNames(openvdb::io::File& file)
@@ -101,7 +173,7 @@ openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& 
     try {
         return file.getGrids();
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated: " + e.what());
+        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
     }
 }
 
@@ -161,7 +233,7 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
         throw Error("cannot write " + path + ": " + e.what());
     } catch (const std::exception& e) {
         throw Error("cannot write " + path + ": building the density and surface failed: " +
-                    e.what());
+                    reason(e));
     }
 
     openvdb::GridCPtrVec grids{massOut, density, surface};
@@ -180,21 +252,11 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     }
     openvdb::GridBase::Ptr base;
     try {
-        // Reading every grid checks the whole file, so a truncated file is refused even when
-        // its first grid is intact.
-        openvdb::GridPtrVecPtr all = readAllGrids(file, path);
-        for (const auto& g : *all) {
-            if (g && g->getName() == gridName) {
-                base = g;
-                break;
-            }
-        }
-        if (!base) base = file.readGrid(gridName);
-    } catch (const Error&) {
-        throw;
+        base = file.readGrid(gridName);
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated: " + e.what());
+        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
     }
+    if (!base) throw Error(path + ": grid \"" + gridName + "\" could not be read");
     file.close();
 
     ClayFile out;
