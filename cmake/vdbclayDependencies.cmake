@@ -8,3 +8,4 @@ foreach(_dir /usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/cmake/OpenVDB /usr/lib/cmake
 endforeach()
 find_package(OpenVDB REQUIRED)
 find_package(TBB REQUIRED)
+find_package(PNG REQUIRED)

@@ -1,0 +1,487 @@
+// Clay files (.vdb), surface meshes and clay from shapes.
+//
+// A clay file holds three grids: "mass" (the exact Int32 clay, with the vdbclay_* metadata),
+// "density" (m / Tc, a fog volume) and "surface" (the level set where a cell is half full), the
+// last two for other tools (Houdini, Blender, vdb_view) to look at. Every write goes to a temporary
+// file beside the target that is renamed over it (AtomicFile.h).
+#include "vdbclay/IO.h"
+
+#include "vdbclay/Metrics.h"
+
+#include "AtomicFile.h"
+#include "Surface.h"
+
+#include <openvdb/io/Archive.h>
+#include <openvdb/io/File.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/io/io.h>
+#include <openvdb/openvdb.h>
+
+#include <sys/stat.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <algorithm>
+#include <iomanip>
+#include <limits>
+#include <ostream>
+#include <sstream>
+
+#ifndef VDBCLAY_VERSION
+#define VDBCLAY_VERSION "unknown"
+#endif
+
+namespace vdbclay {
+
+using io_internal::writeAtomically;
+
+namespace {
+
+/// An archive that writes a seekable .vdb (like openvdb::io::File) into a caller's stream, so the
+/// caller controls the file: its name, flushing, fsync and errors.
+class StreamArchive : public openvdb::io::Archive {
+public:
+    void writeTo(std::ostream& os, const openvdb::GridCPtrVec& grids) const
+    {
+        openvdb::io::Archive::write(os, grids, /*seekable=*/true);
+    }
+};
+
+void initOpenVDB() { openvdb::initialize(); }
+
+/// An exception's text fit for a message: OpenVDB's errors on damaged files quote whatever bytes
+/// it read (a "grid type" of garbage and kilobytes of blanks), so keep printable characters,
+/// collapse runs of blanks and cut it short.
+std::string reason(const std::exception& e)
+{
+    std::string out;
+    const char* p = e.what();
+    for (; *p && out.size() < 200; ++p) {
+        const unsigned char c = static_cast<unsigned char>(*p);
+        const char ch = (c >= 32 && c < 127) ? char(c) : ' ';
+        if (ch == ' ' && (out.empty() || out.back() == ' ')) continue;
+        out += ch;
+    }
+    while (!out.empty() && out.back() == ' ') out.pop_back();
+    if (*p) out += "...";
+    return out.empty() ? "unreadable data" : out;
+}
+
+const char* kMetaThreshold = "vdbclay_threshold";
+const char* kMetaRule = "vdbclay_rule";
+const char* kMetaAlpha = "vdbclay_alpha";
+const char* kMetaSeed = "vdbclay_seed";
+const char* kMetaSteps = "vdbclay_steps";
+const char* kMetaFrames = "vdbclay_frames";
+const char* kMetaDimensions = "vdbclay_dimensions";
+const char* kMetaVoxelSize = "vdbclay_voxel_size";
+const char* kMetaVersion = "vdbclay_version";
+
+void validateMeta(const ClayMeta& meta, const std::string& path)
+{
+    try {
+        validate(meta.rule);
+    } catch (const Error& e) {
+        throw Error("cannot write " + path + ": " + e.what());
+    }
+    if (meta.dimensions != 2 && meta.dimensions != 3) {
+        throw Error("cannot write " + path + ": dimensions must be 2 or 3, not " +
+                    std::to_string(meta.dimensions));
+    }
+    if (!(meta.voxelSize > 0) || !std::isfinite(meta.voxelSize)) {
+        throw Error("cannot write " + path + ": the voxel size must be positive and finite");
+    }
+}
+
+/// Walks a .vdb file's structure (header, file metadata, grid descriptors) the way
+/// openvdb::io::File::open does, and checks that every grid the descriptors record ends within
+/// the file. io::File itself does not notice a file cut short inside or after its first grid.
+class StructureCheck : public openvdb::io::Archive {
+public:
+    /// An empty string if the structure is whole, else what is wrong.
+    std::string check(const std::string& path, uint64_t fileSize)
+    {
+        std::ifstream is(path, std::ios::in | std::ios::binary);
+        if (!is) return "cannot open it";
+        const bool hasOffsets = readHeader(is);
+        if (!is) return "the header is cut short";
+        auto streamMeta = std::make_shared<openvdb::io::StreamMetadata>();
+        streamMeta->setSeekable(true);
+        openvdb::io::setStreamMetadataPtr(is, streamMeta, /*transfer=*/false);
+        setFormatVersion(is);
+        setLibraryVersion(is);
+        setDataCompression(is);
+        openvdb::MetaMap meta;
+        meta.readMeta(is);
+        if (!is) return "the file metadata is cut short";
+        if (!hasOffsets) return ""; // a streamed file records no grid ends
+        const int32_t count = readGridCount(is);
+        if (!is || count < 0) return "the grid count is cut short";
+        int64_t end = 0;
+        for (int32_t i = 0; i < count; ++i) {
+            openvdb::io::GridDescriptor gd;
+            gd.read(is);
+            if (!is) return "grid descriptor " + std::to_string(i + 1) + " is cut short";
+            end = std::max(end, gd.getEndPos());
+            gd.seekToEnd(is);
+        }
+        if (uint64_t(end) > fileSize) {
+            return "its grids end at byte " + std::to_string(end) + " but it holds only " +
+                   std::to_string(fileSize) + " bytes";
+        }
+        return "";
+    }
+};
+
+/// Opens @a path for reading with every check readClayFile promises; grids are read in full
+/// (no delayed loading), so the file may be replaced afterwards.
+void openChecked(openvdb::io::File& file, const std::string& path)
+{
+    struct stat st;
+    if (::stat(path.c_str(), &st) != 0) throw Error(path + ": no such file");
+    if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
+    const std::string prefix = path + " is not a .vdb file or is truncated: ";
+    try {
+        file.open(/*delayLoad=*/false);
+    } catch (const std::exception& e) {
+        throw Error(prefix + reason(e));
+    }
+    std::string problem;
+    try {
+        problem = StructureCheck().check(path, uint64_t(st.st_size));
+    } catch (const std::exception& e) {
+        problem = reason(e);
+    }
+    if (!problem.empty()) throw Error(prefix + problem);
+}
+
+std::string gridNames(openvdb::io::File& file)
+{
+    std::string names;
+    for (auto it = file.beginName(); it != file.endName(); ++it) {
+        if (!names.empty()) names += ", ";
+        names += "\"" + it.gridName() + "\"";
+    }
+    return names.empty() ? "none" : names;
+}
+
+/// Reads every grid of an open file, turning any failure into an Error naming the file.
+openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& path)
+{
+    try {
+        return file.getGrids();
+    } catch (const std::exception& e) {
+        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
+    }
+}
+
+template<typename T, typename MetaT>
+bool readMeta(const openvdb::GridBase& grid, const char* name, T& out, const std::string& path,
+              const char* typeName)
+{
+    const auto m = grid[name];
+    if (!m) return false;
+    const auto typed = std::dynamic_pointer_cast<const MetaT>(m);
+    if (!typed) {
+        throw Error(path + ": metadata " + name + " is a " + m->typeName() + ", expected " +
+                    typeName);
+    }
+    out = T(typed->value());
+    return true;
+}
+
+std::string coordText(const openvdb::Coord& c)
+{
+    std::ostringstream s;
+    s << "(" << c.x() << ", " << c.y() << ", " << c.z() << ")";
+    return s.str();
+}
+
+} // namespace
+
+void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta)
+{
+    initOpenVDB();
+    validateMeta(meta, path);
+
+    openvdb::MetaMap massMeta;
+    massMeta.insertMeta(openvdb::GridBase::META_GRID_NAME, openvdb::StringMetadata("mass"));
+    massMeta.insertMeta(openvdb::GridBase::META_GRID_CLASS,
+                        openvdb::StringMetadata(openvdb::GridBase::gridClassToString(
+                            openvdb::GRID_UNKNOWN)));
+    massMeta.insertMeta(kMetaThreshold, openvdb::Int32Metadata(meta.rule.threshold));
+    massMeta.insertMeta(kMetaRule, openvdb::StringMetadata(ruleName(meta.rule.rule)));
+    massMeta.insertMeta(kMetaAlpha, openvdb::DoubleMetadata(meta.rule.alpha));
+    massMeta.insertMeta(kMetaSeed, openvdb::Int64Metadata(int64_t(meta.seed)));
+    massMeta.insertMeta(kMetaSteps, openvdb::Int64Metadata(int64_t(meta.steps)));
+    massMeta.insertMeta(kMetaFrames, openvdb::Int64Metadata(int64_t(meta.frames)));
+    massMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
+    massMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
+    massMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));
+
+    const auto xform = openvdb::math::Transform::createLinearTransform(meta.voxelSize);
+    // Shares the caller's tree (read only) with a fresh name, metadata and transform.
+    openvdb::GridBase::ConstPtr massOut = mass.copyGridReplacingMetadataAndTransform(massMeta, xform);
+
+    openvdb::FloatGrid::Ptr density, surface;
+    try {
+        density = io_internal::densityGrid(mass, meta.rule.threshold, meta.voxelSize);
+        surface = io_internal::surfaceLevelSet(*density, 0.5);
+    } catch (const Error& e) {
+        throw Error("cannot write " + path + ": " + e.what());
+    } catch (const std::exception& e) {
+        throw Error("cannot write " + path + ": building the density and surface failed: " +
+                    reason(e));
+    }
+
+    openvdb::GridCPtrVec grids{massOut, density, surface};
+    writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
+}
+
+ClayFile readClayFile(const std::string& path, const std::string& gridName)
+{
+    initOpenVDB();
+    openvdb::io::File file(path);
+    openChecked(file, path);
+
+    if (!file.hasGrid(gridName)) {
+        const std::string names = gridNames(file);
+        throw Error(path + " has no grid named \"" + gridName + "\" (grids: " + names + ")");
+    }
+    openvdb::GridBase::Ptr base;
+    try {
+        base = file.readGrid(gridName);
+    } catch (const std::exception& e) {
+        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
+    }
+    if (!base) throw Error(path + ": grid \"" + gridName + "\" could not be read");
+    file.close();
+
+    ClayFile out;
+    out.mass = openvdb::gridPtrCast<openvdb::Int32Grid>(base);
+    if (!out.mass) {
+        throw Error("grid \"" + gridName + "\" in " + path + " is a " + base->valueType() +
+                    " grid, expected an Int32Grid");
+    }
+    for (auto it = out.mass->tree().cbeginValueAll(); it; ++it) {
+        if (*it < 0) {
+            throw Error(path + ": grid \"" + gridName + "\" holds negative mass " +
+                        std::to_string(*it) + " at voxel " + coordText(it.getCoord()));
+        }
+    }
+
+    const openvdb::GridBase& g = *out.mass;
+    ClayMeta& m = out.meta;
+    m.voxelSize = g.voxelSize()[0];
+    bool any = false;
+    int32_t i32 = 0;
+    int64_t i64 = 0;
+    double dbl = 0;
+    std::string str;
+    if (readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaThreshold, i32, path, "int32")) {
+        m.rule.threshold = i32;
+        any = true;
+    }
+    if (readMeta<std::string, openvdb::StringMetadata>(g, kMetaRule, str, path, "string")) {
+        try {
+            m.rule.rule = parseRule(str);
+        } catch (const Error& e) {
+            throw Error(path + ": metadata " + kMetaRule + ": " + e.what());
+        }
+        any = true;
+    }
+    if (readMeta<double, openvdb::DoubleMetadata>(g, kMetaAlpha, dbl, path, "double")) {
+        m.rule.alpha = dbl;
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaSeed, i64, path, "int64")) {
+        m.seed = uint64_t(i64);
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaSteps, i64, path, "int64")) {
+        m.steps = uint64_t(i64);
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaFrames, i64, path, "int64")) {
+        m.frames = uint64_t(i64);
+        any = true;
+    }
+    if (readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaDimensions, i32, path, "int32")) {
+        m.dimensions = i32;
+        any = true;
+    }
+    if (readMeta<double, openvdb::DoubleMetadata>(g, kMetaVoxelSize, dbl, path, "double")) {
+        m.voxelSize = dbl;
+        any = true;
+    }
+    if (readMeta<std::string, openvdb::StringMetadata>(g, kMetaVersion, str, path, "string")) {
+        m.version = str;
+        any = true;
+    }
+    out.hasMeta = any;
+    if (any) {
+        try {
+            validate(m.rule);
+        } catch (const Error& e) {
+            throw Error(path + ": invalid vdbclay metadata: " + e.what());
+        }
+        if (m.dimensions != 2 && m.dimensions != 3) {
+            throw Error(path + ": invalid vdbclay metadata: " + kMetaDimensions + " is " +
+                        std::to_string(m.dimensions) + ", expected 2 or 3");
+        }
+    }
+    return out;
+}
+
+std::string describeVdb(const std::string& path)
+{
+    initOpenVDB();
+    openvdb::io::File file(path);
+    openChecked(file, path);
+    openvdb::GridPtrVecPtr grids = readAllGrids(file, path);
+    openvdb::MetaMap::Ptr fileMeta = file.getMetadata();
+    const std::string version = file.version();
+    file.close();
+
+    std::ostringstream s;
+    s << path << ": OpenVDB file (format " << version << "), " << grids->size()
+      << (grids->size() == 1 ? " grid" : " grids") << "\n";
+    auto printMeta = [&s](const openvdb::MetaMap& meta, const char* indent) {
+        for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
+            if (it->first == openvdb::GridBase::META_GRID_NAME) continue;
+            s << indent << it->first << " (" << it->second->typeName()
+              << ") = " << it->second->str() << "\n";
+        }
+    };
+    if (fileMeta && fileMeta->metaCount() > 0) {
+        s << "file metadata:\n";
+        printMeta(*fileMeta, "  ");
+    }
+    for (const auto& g : *grids) {
+        if (!g) continue;
+        s << "grid \"" << g->getName() << "\": type " << g->valueType() << ", class "
+          << openvdb::GridBase::gridClassToString(g->getGridClass()) << "\n";
+        s << "  active voxels: " << g->activeVoxelCount() << "\n";
+        const openvdb::CoordBBox box = g->evalActiveVoxelBoundingBox();
+        if (box.empty()) {
+            s << "  index bbox: empty\n";
+        } else {
+            s << "  index bbox: [" << box.min().x() << ", " << box.min().y() << ", "
+              << box.min().z() << "] .. [" << box.max().x() << ", " << box.max().y() << ", "
+              << box.max().z() << "]\n";
+        }
+        const openvdb::Vec3d vs = g->voxelSize();
+        s << "  voxel size: " << vs[0];
+        if (vs[1] != vs[0] || vs[2] != vs[0]) s << " x " << vs[1] << " x " << vs[2];
+        s << "\n";
+        if (auto ig = openvdb::gridConstPtrCast<openvdb::Int32Grid>(g)) {
+            s << "  total mass: " << totalMass(*ig) << "\n";
+        }
+        if (g->metaCount() > 1) {
+            s << "  metadata:\n";
+            printMeta(*g, "    ");
+        }
+    }
+    return s.str();
+}
+
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
+                      double isovalue)
+{
+    initOpenVDB();
+    const std::string ext = io_internal::extensionOf(path);
+    if (ext != ".obj" && ext != ".ply") {
+        throw Error("cannot write " + path + ": unknown mesh format \"" + ext +
+                    "\" (use .obj or .ply)");
+    }
+    if (!(isovalue > 0) || !std::isfinite(isovalue)) {
+        throw Error("cannot write " + path + ": the isovalue must be positive and finite");
+    }
+    if (clayVoxelCount(mass) == 0) throw Error("cannot write " + path + ": the grid holds no clay");
+
+    io_internal::SurfaceMesh mesh;
+    try {
+        auto density = io_internal::densityGrid(mass, threshold, 1.0);
+        mesh = io_internal::surfaceMesh(*density, isovalue);
+    } catch (const Error& e) {
+        throw Error("cannot write " + path + ": " + e.what());
+    }
+    if (mesh.points.empty() || (mesh.triangles.empty() && mesh.quads.empty())) {
+        throw Error("cannot write " + path + ": no surface at density " + std::to_string(isovalue) +
+                    " (no cell is that full)");
+    }
+
+    // Quads are split into two triangles, so both formats hold triangles only.
+    const size_t faces = mesh.triangles.size() + 2 * mesh.quads.size();
+    writeAtomically(path, [&](std::ostream& os) {
+        os << std::setprecision(9);
+        if (ext == ".obj") {
+            os << "# vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue
+               << " (index space)\n";
+            os << "# " << mesh.points.size() << " vertices, " << faces << " triangles\n";
+            for (const auto& p : mesh.points) os << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+            for (const auto& t : mesh.triangles) {
+                os << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+            }
+            for (const auto& q : mesh.quads) {
+                os << "f " << q[0] + 1 << ' ' << q[1] + 1 << ' ' << q[2] + 1 << '\n';
+                os << "f " << q[0] + 1 << ' ' << q[2] + 1 << ' ' << q[3] + 1 << '\n';
+            }
+        } else {
+            os << "ply\nformat ascii 1.0\n";
+            os << "comment vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue
+               << " (index space)\n";
+            os << "element vertex " << mesh.points.size() << "\n";
+            os << "property float x\nproperty float y\nproperty float z\n";
+            os << "element face " << faces << "\n";
+            os << "property list uchar int vertex_indices\nend_header\n";
+            for (const auto& p : mesh.points) os << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+            for (const auto& t : mesh.triangles) {
+                os << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << '\n';
+            }
+            for (const auto& q : mesh.quads) {
+                os << "3 " << q[0] << ' ' << q[1] << ' ' << q[2] << '\n';
+                os << "3 " << q[0] << ' ' << q[2] << ' ' << q[3] << '\n';
+            }
+        }
+    });
+}
+
+MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
+{
+    initOpenVDB();
+    if (massPerVoxel <= 0) {
+        throw Error("makeClay: the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
+    }
+    if (dimensions != 2 && dimensions != 3) {
+        throw Error("makeClay: dimensions must be 2 or 3, not " + std::to_string(dimensions));
+    }
+    Box b = shape.bounds();
+    if (dimensions == 2) {
+        b.min[2] = std::max(b.min[2], 0);
+        b.max[2] = std::min(b.max[2], 0);
+    }
+    auto grid = openvdb::Int32Grid::create(0);
+    grid->setName("mass");
+    if (!b.empty()) {
+        auto acc = grid->getAccessor();
+        for (int32_t x = b.min[0]; x <= b.max[0]; ++x) {
+            for (int32_t y = b.min[1]; y <= b.max[1]; ++y) {
+                for (int32_t z = b.min[2]; z <= b.max[2]; ++z) {
+                    if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) {
+                        acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
+                    }
+                }
+            }
+        }
+    }
+    if (grid->activeVoxelCount() == 0) {
+        throw Error("makeClay: no voxel centre lies inside " + shape.describe() +
+                    (dimensions == 2 ? " in the z = 0 layer" : ""));
+    }
+    return grid;
+}
+
+} // namespace vdbclay

@@ -1,0 +1,37 @@
+/// @file Surface.h
+/// @brief Private: the fields derived from clay that files, meshes and pictures share: the density
+/// m / Tc (a fog volume) and the clay surface where a cell is half full (a level set).
+#pragma once
+
+#include "vdbclay/Fwd.h"
+
+#include <openvdb/openvdb.h>
+
+#include <vector>
+
+namespace vdbclay {
+namespace io_internal {
+
+/// The density m / Tc of every voxel holding nonzero mass (active there, background 0), a
+/// GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize.
+/// @throw Error if threshold <= 0 or voxelSize is not positive and finite.
+openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize);
+
+/// The surface of @a density at @a isovalue as a narrow-band level set (GRID_LEVEL_SET, named
+/// "surface", same transform): negative inside (density > isovalue), positive outside, half band
+/// width 3 voxels each side. Built by meshing the density (volumeToMesh) and converting the mesh
+/// back (meshToVolume), i.e. openvdb::tools::levelSetRebuild. Empty (no active voxels) if no cell
+/// reaches the isovalue.
+openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue);
+
+/// The surface of @a density at @a isovalue as polygons in index space (the density's voxel
+/// centres at integer points), oriented outwards.
+struct SurfaceMesh {
+    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3I> triangles;
+    std::vector<openvdb::Vec4I> quads;
+};
+SurfaceMesh surfaceMesh(const openvdb::FloatGrid& density, double isovalue);
+
+} // namespace io_internal
+} // namespace vdbclay

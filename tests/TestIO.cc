@@ -1,0 +1,734 @@
+// Clay files, meshes, clay from shapes and pictures: round trips, atomic writes, refused input.
+#include <vdbclay/Automaton.h>
+#include <vdbclay/IO.h>
+#include <vdbclay/Metrics.h>
+#include <vdbclay/Render.h>
+#include <vdbclay/Shapes.h>
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <gtest/gtest.h>
+
+#include <png.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using namespace vdbclay;
+using openvdb::Coord;
+namespace fs = std::filesystem;
+
+namespace {
+
+/// A sphere for makeClay, independent of Shapes.cc.
+class TestSphere : public Shape {
+public:
+    TestSphere(const Vec3& c, double r) : c_(c), r_(r) {}
+    double distance(const Vec3& p) const override
+    {
+        const double dx = p[0] - c_[0], dy = p[1] - c_[1], dz = p[2] - c_[2];
+        return std::sqrt(dx * dx + dy * dy + dz * dz) - r_;
+    }
+    Vec3 normal(const Vec3&) const override { return Vec3{{0, 1, 0}}; }
+    Box bounds() const override
+    {
+        Box b;
+        for (int a = 0; a < 3; ++a) {
+            b.min[a] = int32_t(std::floor(c_[a] - r_));
+            b.max[a] = int32_t(std::ceil(c_[a] + r_));
+        }
+        return b;
+    }
+    std::string describe() const override { return "test sphere"; }
+
+private:
+    Vec3 c_;
+    double r_;
+};
+
+class IOTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() { openvdb::initialize(); }
+    void SetUp() override
+    {
+        char tmpl[] = "/tmp/vdbclay-test-io-XXXXXX";
+        ASSERT_NE(mkdtemp(tmpl), nullptr);
+        dir = tmpl;
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(dir, ec);
+    }
+    std::string file(const std::string& name) const { return dir + "/" + name; }
+    /// Names in the test directory, to prove no temporary file is left behind.
+    std::set<std::string> listing() const
+    {
+        std::set<std::string> names;
+        for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+        return names;
+    }
+    std::string dir;
+};
+
+std::string slurp(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+void spit(const std::string& path, const std::string& bytes)
+{
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+/// The message of the Error @a fn throws ("" if it throws nothing, "other" for another exception).
+template<typename Fn>
+std::string errorOf(Fn&& fn)
+{
+    try {
+        fn();
+    } catch (const Error& e) {
+        return e.what();
+    } catch (...) {
+        return "other exception";
+    }
+    return "";
+}
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+/// A lump with varied masses: a ball of full cells, some overloaded, some partial, some tiny.
+MassGridPtr sampleClay(int32_t tc = 1000)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    auto acc = g->getAccessor();
+    for (int x = -6; x <= 6; ++x)
+        for (int y = -6; y <= 6; ++y)
+            for (int z = -6; z <= 6; ++z) {
+                const int r2 = x * x + y * y + z * z;
+                if (r2 > 36) continue;
+                int32_t m = tc;
+                if (r2 > 25) m = 1 + (x * 7 + y * 13 + z * 29 + 300) % tc; // partial rim
+                if (r2 < 4) m = 3 * tc + x;                                 // overloaded core
+                acc.setValueOn(Coord(x, y, z), m);
+            }
+    return g;
+}
+
+ClayMeta sampleMeta()
+{
+    ClayMeta m;
+    m.dimensions = 3;
+    m.rule.rule = Rule::Sorted;
+    m.rule.threshold = 1000;
+    m.rule.alpha = 0.25;
+    m.seed = 0xFEDCBA9876543210ull;
+    m.steps = 12345;
+    m.frames = 67;
+    m.voxelSize = 0.5;
+    return m;
+}
+
+openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& name)
+{
+    openvdb::io::File f(path);
+    f.open(false);
+    auto g = f.readGrid(name);
+    f.close();
+    return g;
+}
+
+/// PNG facts read straight from the bytes (signature, IHDR) and through libpng (the pixels).
+struct PngInfo {
+    bool signature = false;
+    uint32_t width = 0, height = 0;
+    size_t distinctColours = 0;
+    std::vector<uint8_t> rgb;
+};
+
+PngInfo inspectPng(const std::string& path)
+{
+    PngInfo info;
+    const std::string bytes = slurp(path);
+    static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
+    info.signature = bytes.size() > 33 && std::memcmp(bytes.data(), sig, 8) == 0 &&
+                     bytes.compare(12, 4, "IHDR") == 0;
+    if (!info.signature) return info;
+    auto be32 = [&](size_t at) {
+        return uint32_t(uint8_t(bytes[at])) << 24 | uint32_t(uint8_t(bytes[at + 1])) << 16 |
+               uint32_t(uint8_t(bytes[at + 2])) << 8 | uint32_t(uint8_t(bytes[at + 3]));
+    };
+    info.width = be32(16);
+    info.height = be32(20);
+
+    png_image image;
+    std::memset(&image, 0, sizeof(image));
+    image.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&image, path.c_str())) return info;
+    image.format = PNG_FORMAT_RGB;
+    info.rgb.resize(PNG_IMAGE_SIZE(image));
+    if (!png_image_finish_read(&image, nullptr, info.rgb.data(), 0, nullptr)) {
+        info.rgb.clear();
+        return info;
+    }
+    std::set<uint32_t> colours;
+    for (size_t i = 0; i + 2 < info.rgb.size(); i += 3) {
+        colours.insert(uint32_t(info.rgb[i]) << 16 | uint32_t(info.rgb[i + 1]) << 8 | info.rgb[i + 2]);
+    }
+    info.distinctColours = colours.size();
+    return info;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Clay files
+
+TEST_F(IOTest, RoundTripIsExactWithMetadata)
+{
+    auto clay = sampleClay();
+    const ClayMeta meta = sampleMeta();
+    const std::string path = file("clay.vdb");
+    writeClayFile(path, *clay, meta);
+
+    const ClayFile back = readClayFile(path);
+    ASSERT_TRUE(back.mass);
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*clay));
+    EXPECT_EQ(totalMass(*back.mass), totalMass(*clay));
+    EXPECT_EQ(clayVoxelCount(*back.mass), clayVoxelCount(*clay));
+    EXPECT_TRUE(back.hasMeta);
+    EXPECT_EQ(back.meta.dimensions, 3);
+    EXPECT_EQ(back.meta.rule.rule, Rule::Sorted);
+    EXPECT_EQ(back.meta.rule.threshold, 1000);
+    EXPECT_EQ(back.meta.rule.alpha, 0.25);
+    EXPECT_EQ(back.meta.seed, 0xFEDCBA9876543210ull);
+    EXPECT_EQ(back.meta.steps, 12345u);
+    EXPECT_EQ(back.meta.frames, 67u);
+    EXPECT_EQ(back.meta.voxelSize, 0.5);
+    EXPECT_FALSE(back.meta.version.empty());
+    EXPECT_EQ(back.mass->voxelSize()[0], 0.5);
+    EXPECT_EQ(listing(), std::set<std::string>{"clay.vdb"});
+
+    // The caller's grid is not changed by writing (name, metadata, transform).
+    EXPECT_EQ(clay->metaCount(), openvdb::Int32Grid::create(0)->metaCount());
+    EXPECT_EQ(clay->voxelSize()[0], 1.0);
+}
+
+TEST_F(IOTest, FileWithoutMetadataReadsWithDefaults)
+{
+    auto g = sampleClay();
+    g->setName("mass");
+    const std::string path = file("plain.vdb");
+    openvdb::io::File(path).write({g});
+    const ClayFile back = readClayFile(path);
+    EXPECT_FALSE(back.hasMeta);
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*g));
+    EXPECT_EQ(back.meta.rule.threshold, ClayMeta().rule.threshold);
+}
+
+TEST_F(IOTest, DensityIsMassOverThreshold)
+{
+    auto clay = sampleClay(800);
+    ClayMeta meta = sampleMeta();
+    meta.rule.threshold = 800;
+    const std::string path = file("d.vdb");
+    writeClayFile(path, *clay, meta);
+
+    auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "density"));
+    ASSERT_TRUE(density);
+    EXPECT_EQ(density->getGridClass(), openvdb::GRID_FOG_VOLUME);
+    EXPECT_EQ(density->voxelSize()[0], 0.5);
+    EXPECT_EQ(density->activeVoxelCount(), clayVoxelCount(*clay));
+    auto dacc = density->getConstAccessor();
+    size_t checked = 0;
+    for (auto it = clay->cbeginValueOn(); it; ++it) {
+        ASSERT_TRUE(dacc.isValueOn(it.getCoord()));
+        EXPECT_EQ(dacc.getValue(it.getCoord()), float(double(*it) / 800.0)) << it.getCoord();
+        ++checked;
+    }
+    EXPECT_EQ(checked, clayVoxelCount(*clay));
+    EXPECT_EQ(dacc.getValue(Coord(40, 40, 40)), 0.f);
+}
+
+TEST_F(IOTest, SurfaceIsNegativeInsidePositiveOutside)
+{
+    // Full cells in a ball of radius 8 (index space), voxel size 0.5.
+    auto g = openvdb::Int32Grid::create(0);
+    auto acc = g->getAccessor();
+    for (int x = -8; x <= 8; ++x)
+        for (int y = -8; y <= 8; ++y)
+            for (int z = -8; z <= 8; ++z)
+                if (x * x + y * y + z * z <= 64) acc.setValueOn(Coord(x, y, z), 1000);
+    const std::string path = file("s.vdb");
+    writeClayFile(path, *g, sampleMeta());
+
+    auto surface = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "surface"));
+    ASSERT_TRUE(surface);
+    EXPECT_EQ(surface->getGridClass(), openvdb::GRID_LEVEL_SET);
+    EXPECT_EQ(surface->voxelSize()[0], 0.5);
+    auto sacc = surface->getConstAccessor();
+    EXPECT_LT(sacc.getValue(Coord(0, 0, 0)), 0.f);
+    EXPECT_LT(sacc.getValue(Coord(6, 0, 0)), 0.f);
+    EXPECT_LT(sacc.getValue(Coord(0, -7, 0)), 0.f);
+    EXPECT_GT(sacc.getValue(Coord(10, 0, 0)), 0.f);
+    EXPECT_GT(sacc.getValue(Coord(0, 0, -10)), 0.f);
+    EXPECT_GT(sacc.getValue(Coord(30, 30, 30)), 0.f);
+    for (int x = -6; x <= 6; ++x) EXPECT_LT(sacc.getValue(Coord(x, 1, -1)), 0.f) << x;
+}
+
+TEST_F(IOTest, SurfaceLiesWhereCellsAreHalfFull)
+{
+    // A box of full cells -6..6: its faces at density 0.5 lie at +-6.5 voxels. Voxel size 0.5,
+    // so distances (world units) are half the voxel distances.
+    auto g = openvdb::Int32Grid::create(0);
+    g->tree().fill(openvdb::CoordBBox(Coord(-6), Coord(6)), 1000, true);
+    const std::string path = file("box.vdb");
+    writeClayFile(path, *g, sampleMeta());
+    auto surface = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "surface"));
+    ASSERT_TRUE(surface);
+    auto sacc = surface->getConstAccessor();
+    EXPECT_NEAR(sacc.getValue(Coord(6, 0, 0)), -0.25f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(7, 0, 0)), 0.25f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(0, -6, 2)), -0.25f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(0, -8, 2)), 0.75f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(0, 0, 4)), -1.25f, 0.02f);
+
+    // 2D clay is a slab one voxel thick: inside at z = 0, outside above and below.
+    auto flat = openvdb::Int32Grid::create(0);
+    flat->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(19, 19, 0)), 1000, true);
+    ClayMeta meta = sampleMeta();
+    meta.dimensions = 2;
+    meta.voxelSize = 1;
+    writeClayFile(path, *flat, meta);
+    surface = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "surface"));
+    ASSERT_TRUE(surface);
+    sacc = surface->getConstAccessor();
+    EXPECT_NEAR(sacc.getValue(Coord(10, 10, 0)), -0.5f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(10, 10, 1)), 0.5f, 0.02f);
+    EXPECT_NEAR(sacc.getValue(Coord(10, 10, -1)), 0.5f, 0.02f);
+    EXPECT_EQ(readClayFile(path).meta.dimensions, 2);
+}
+
+TEST_F(IOTest, WriteIntoMissingDirectoryThrowsAndLeavesNothing)
+{
+    auto clay = sampleClay();
+    const std::string path = file("no/such/dir/clay.vdb");
+    const std::string msg = errorOf([&] { writeClayFile(path, *clay, sampleMeta()); });
+    EXPECT_TRUE(contains(msg, path)) << msg;
+    EXPECT_TRUE(contains(msg, "No such file or directory")) << msg;
+    EXPECT_TRUE(listing().empty());
+    EXPECT_FALSE(fs::exists(file("no")));
+}
+
+TEST_F(IOTest, WriteOverExistingFileReplacesItWholly)
+{
+    const std::string path = file("clay.vdb");
+    auto big = sampleClay();
+    writeClayFile(path, *big, sampleMeta());
+    const auto bigSize = fs::file_size(path);
+
+    auto small = openvdb::Int32Grid::create(0);
+    small->tree().setValue(Coord(100, 2, 3), 77);
+    ClayMeta meta = sampleMeta();
+    meta.steps = 1;
+    writeClayFile(path, *small, meta);
+    EXPECT_LT(fs::file_size(path), bigSize);
+    const ClayFile back = readClayFile(path);
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*small));
+    EXPECT_EQ(totalMass(*back.mass), 77);
+    EXPECT_EQ(back.meta.steps, 1u);
+    EXPECT_EQ(listing(), std::set<std::string>{"clay.vdb"});
+}
+
+TEST_F(IOTest, WriteOverTheFileTheClayWasReadFrom)
+{
+    const std::string path = file("clay.vdb");
+    writeClayFile(path, *sampleClay(), sampleMeta());
+    ClayFile c = readClayFile(path);
+    c.mass->tree().setValue(Coord(0, 0, 0), 4321);
+    c.meta.frames += 1;
+    writeClayFile(path, *c.mass, c.meta);
+    const ClayFile back = readClayFile(path);
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*c.mass));
+    EXPECT_EQ(back.meta.frames, 68u);
+    EXPECT_EQ(listing(), std::set<std::string>{"clay.vdb"});
+}
+
+TEST_F(IOTest, FailedWriteLeavesExistingFileUntouched)
+{
+    const std::string path = file("clay.vdb");
+    writeClayFile(path, *sampleClay(), sampleMeta());
+    const std::string before = slurp(path);
+    ClayMeta bad = sampleMeta();
+    bad.rule.threshold = 0;
+    EXPECT_TRUE(contains(errorOf([&] { writeClayFile(path, *sampleClay(), bad); }), path));
+    bad = sampleMeta();
+    bad.voxelSize = -1;
+    EXPECT_TRUE(contains(errorOf([&] { writeClayFile(path, *sampleClay(), bad); }), path));
+    EXPECT_EQ(slurp(path), before);
+    EXPECT_EQ(listing(), std::set<std::string>{"clay.vdb"});
+    // A directory in the way is refused, not replaced.
+    fs::create_directory(file("adir"));
+    EXPECT_TRUE(contains(errorOf([&] { writeClayFile(file("adir"), *sampleClay(), sampleMeta()); }),
+                         "directory"));
+    EXPECT_TRUE(fs::is_directory(file("adir")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Refused input
+
+TEST_F(IOTest, ReadMissingFile)
+{
+    const std::string path = file("missing.vdb");
+    const std::string msg = errorOf([&] { readClayFile(path); });
+    EXPECT_TRUE(contains(msg, path) && contains(msg, "no such file")) << msg;
+    EXPECT_TRUE(contains(errorOf([&] { describeVdb(path); }), "no such file"));
+}
+
+TEST_F(IOTest, ReadEmptyAndTextFiles)
+{
+    const std::string empty = file("empty.vdb"), text = file("text.vdb");
+    spit(empty, "");
+    spit(text, "this is not a volume\nat all\n");
+    for (const std::string& p : {empty, text}) {
+        const std::string msg = errorOf([&] { readClayFile(p); });
+        EXPECT_TRUE(contains(msg, p) && contains(msg, "not a .vdb file or is truncated")) << msg;
+        EXPECT_TRUE(contains(errorOf([&] { describeVdb(p); }), "not a .vdb file")) << p;
+    }
+}
+
+TEST_F(IOTest, ReadTruncatedFile)
+{
+    const std::string good = file("good.vdb");
+    writeClayFile(good, *sampleClay(), sampleMeta());
+    const std::string bytes = slurp(good);
+    // Cut in half, and at other places: in the header, in "mass", in the last grid, its last byte.
+    for (size_t keep : {bytes.size() / 2, size_t(20), bytes.size() / 10, bytes.size() * 9 / 10,
+                        bytes.size() - 100, bytes.size() - 1}) {
+        const std::string cut = file("cut.vdb");
+        spit(cut, bytes.substr(0, keep));
+        const std::string msg = errorOf([&] { readClayFile(cut); });
+        EXPECT_TRUE(contains(msg, cut) && contains(msg, "not a .vdb file or is truncated"))
+            << keep << " of " << bytes.size() << ": " << msg;
+        // OpenVDB quotes the garbage it read; the message stays short and printable.
+        EXPECT_LT(msg.size(), 400u) << msg;
+        for (char c : msg) EXPECT_TRUE(c >= 32 && c < 127) << int(c);
+        EXPECT_TRUE(contains(errorOf([&] { describeVdb(cut); }), "truncated"));
+    }
+}
+
+TEST_F(IOTest, ReadWrongGridTypeAndMissingGrid)
+{
+    const std::string floats = file("floats.vdb");
+    auto f = openvdb::FloatGrid::create(0.f);
+    f->setName("mass");
+    f->tree().setValue(Coord(1, 2, 3), 1.5f);
+    openvdb::io::File(floats).write({f});
+    std::string msg = errorOf([&] { readClayFile(floats); });
+    EXPECT_EQ(msg, "grid \"mass\" in " + floats + " is a float grid, expected an Int32Grid");
+
+    const std::string other = file("other.vdb");
+    auto a = openvdb::Int32Grid::create(0);
+    a->setName("clay");
+    auto b = openvdb::FloatGrid::create(0.f);
+    b->setName("density");
+    openvdb::io::File(other).write({a, b});
+    msg = errorOf([&] { readClayFile(other); });
+    EXPECT_EQ(msg, other + " has no grid named \"mass\" (grids: \"clay\", \"density\")");
+    EXPECT_NO_THROW(readClayFile(other, "clay"));
+}
+
+TEST_F(IOTest, NegativeMassIsRefused)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    g->tree().setValue(Coord(1, 2, 3), 10);
+    g->tree().setValue(Coord(-4, 5, 6), -3);
+    const std::string path = file("neg.vdb");
+    openvdb::io::File(path).write({g});
+    const std::string msg = errorOf([&] { readClayFile(path); });
+    EXPECT_TRUE(contains(msg, path) && contains(msg, "negative") && contains(msg, "(-4, 5, 6)"))
+        << msg;
+}
+
+TEST_F(IOTest, DescribeNamesGridsAndTotalMass)
+{
+    auto clay = sampleClay();
+    const std::string path = file("clay.vdb");
+    writeClayFile(path, *clay, sampleMeta());
+    const std::string text = describeVdb(path);
+    for (const char* part : {"\"mass\"", "\"density\"", "\"surface\"", "int32", "float",
+                             "fog volume", "level set", "vdbclay_threshold", "vdbclay_rule",
+                             "sorted", "voxel size: 0.5"}) {
+        EXPECT_TRUE(contains(text, part)) << part << "\n" << text;
+    }
+    EXPECT_TRUE(contains(text, "total mass: " + std::to_string(totalMass(*clay)))) << text;
+    std::ostringstream voxels;
+    voxels << "active voxels: " << clay->activeVoxelCount();
+    EXPECT_TRUE(contains(text, voxels.str())) << text;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Meshes
+
+struct MeshCounts {
+    size_t vertices = 0, faces = 0;
+    double signedVolume = 0;
+    bool indicesValid = true;
+};
+
+double tetVolume(const std::array<double, 3>& a, const std::array<double, 3>& b,
+                 const std::array<double, 3>& c)
+{
+    return (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+            a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+}
+
+MeshCounts parseObj(const std::string& path)
+{
+    MeshCounts m;
+    std::vector<std::array<double, 3>> v;
+    std::ifstream in(path);
+    std::string line;
+    while (std::getline(in, line)) {
+        std::istringstream s(line);
+        std::string tag;
+        s >> tag;
+        if (tag == "v") {
+            std::array<double, 3> p;
+            s >> p[0] >> p[1] >> p[2];
+            v.push_back(p);
+        } else if (tag == "f") {
+            std::vector<long> idx;
+            long i;
+            while (s >> i) idx.push_back(i);
+            for (long j : idx) m.indicesValid &= j >= 1 && size_t(j) <= v.size();
+            if (!m.indicesValid || idx.size() < 3) return m;
+            for (size_t k = 1; k + 1 < idx.size(); ++k) {
+                m.signedVolume += tetVolume(v[size_t(idx[0] - 1)], v[size_t(idx[k] - 1)],
+                                            v[size_t(idx[k + 1] - 1)]);
+            }
+            ++m.faces;
+        }
+    }
+    m.vertices = v.size();
+    return m;
+}
+
+MeshCounts parsePly(const std::string& path)
+{
+    MeshCounts m;
+    std::ifstream in(path);
+    std::string line;
+    std::getline(in, line);
+    if (line != "ply") return MeshCounts{0, 0, 0, false};
+    size_t nv = 0, nf = 0;
+    while (std::getline(in, line) && line != "end_header") {
+        std::istringstream s(line);
+        std::string a, b;
+        s >> a >> b;
+        if (a == "format" && b != "ascii") return MeshCounts{0, 0, 0, false};
+        if (a == "element" && b == "vertex") s >> nv;
+        if (a == "element" && b == "face") s >> nf;
+    }
+    std::vector<std::array<double, 3>> v(nv);
+    for (auto& p : v) in >> p[0] >> p[1] >> p[2];
+    for (size_t f = 0; f < nf; ++f) {
+        size_t n;
+        in >> n;
+        std::vector<long> idx(n);
+        for (auto& i : idx) in >> i;
+        if (!in) return m;
+        for (long j : idx) m.indicesValid &= j >= 0 && size_t(j) < nv;
+        if (!m.indicesValid) return m;
+        for (size_t k = 1; k + 1 < n; ++k) {
+            m.signedVolume += tetVolume(v[size_t(idx[0])], v[size_t(idx[k])], v[size_t(idx[k + 1])]);
+        }
+        ++m.faces;
+    }
+    m.vertices = nv;
+    return m;
+}
+
+TEST_F(IOTest, SurfaceMeshObjAndPly)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    auto acc = g->getAccessor();
+    int n = 0;
+    for (int x = -5; x <= 5; ++x)
+        for (int y = -5; y <= 5; ++y)
+            for (int z = -5; z <= 5; ++z)
+                if (x * x + y * y + z * z <= 25) {
+                    acc.setValueOn(Coord(x, y, z), 500);
+                    ++n;
+                }
+    const std::string obj = file("clay.obj"), ply = file("clay.PLY");
+    writeSurfaceMesh(obj, *g, 500);
+    writeSurfaceMesh(ply, *g, 500);
+    const MeshCounts o = parseObj(obj), p = parsePly(ply);
+    EXPECT_TRUE(o.indicesValid);
+    EXPECT_TRUE(p.indicesValid);
+    EXPECT_GT(o.vertices, 0u);
+    EXPECT_GT(o.faces, 0u);
+    EXPECT_EQ(o.vertices, p.vertices);
+    EXPECT_EQ(o.faces, p.faces);
+    // Outward faces enclose about one unit of volume per full voxel.
+    EXPECT_GT(o.signedVolume, 0.8 * n);
+    EXPECT_LT(o.signedVolume, 1.2 * n);
+    EXPECT_NEAR(p.signedVolume, o.signedVolume, 1e-6 * n);
+    EXPECT_EQ(listing(), (std::set<std::string>{"clay.PLY", "clay.obj"}));
+
+    EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("clay.stl"), *g, 500); }), "clay.stl"));
+    EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("clay"), *g, 500); }), "unknown"));
+    auto none = openvdb::Int32Grid::create(0);
+    EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("e.obj"), *none, 500); }), "no clay"));
+    EXPECT_FALSE(errorOf([&] { writeSurfaceMesh(file("x/e.obj"), *g, 500); }).empty());
+    EXPECT_EQ(listing(), (std::set<std::string>{"clay.PLY", "clay.obj"}));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Clay from a shape
+
+TEST_F(IOTest, MakeClayFillsExactlyTheCentresInside)
+{
+    const Vec3 c{{3.3, -2.1, 4.7}};
+    const double r = 5.2;
+    const TestSphere sphere(c, r);
+    uint64_t expected3 = 0, expected2 = 0;
+    for (int x = -10; x <= 15; ++x)
+        for (int y = -15; y <= 10; ++y)
+            for (int z = -10; z <= 15; ++z) {
+                const double dx = x - c[0], dy = y - c[1], dz = z - c[2];
+                if (dx * dx + dy * dy + dz * dz < r * r) {
+                    ++expected3;
+                    if (z == 0) ++expected2;
+                }
+            }
+    ASSERT_GT(expected2, 0u);
+
+    auto clay = makeClay(sphere, 700);
+    EXPECT_EQ(clayVoxelCount(*clay), expected3);
+    EXPECT_EQ(totalMass(*clay), int64_t(expected3) * 700);
+    for (auto it = clay->cbeginValueOn(); it; ++it) ASSERT_EQ(*it, 700);
+
+    auto flat = makeClay(sphere, 9, 2);
+    EXPECT_EQ(clayVoxelCount(*flat), expected2);
+    EXPECT_EQ(totalMass(*flat), int64_t(expected2) * 9);
+    const openvdb::CoordBBox fb = flat->evalActiveVoxelBoundingBox();
+    EXPECT_EQ(fb.min().z(), 0);
+    EXPECT_EQ(fb.max().z(), 0);
+
+    EXPECT_TRUE(contains(errorOf([&] { makeClay(sphere, 0); }), "mass per voxel"));
+    EXPECT_TRUE(contains(errorOf([&] { makeClay(sphere, -5); }), "mass per voxel"));
+    EXPECT_FALSE(errorOf([&] { makeClay(sphere, 1, 4); }).empty());
+    // A sphere too small to hold a voxel centre, and one away from the z = 0 layer.
+    EXPECT_TRUE(contains(errorOf([&] { makeClay(TestSphere({{0.5, 0.5, 0.5}}, 0.3), 1); }),
+                         "test sphere"));
+    EXPECT_TRUE(contains(errorOf([&] { makeClay(TestSphere({{0, 0, 20}}, 3), 1, 2); }), "z = 0"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pictures
+
+TEST_F(IOTest, Render2dDensityMap)
+{
+    // A 2D pile: an overloaded column spreads for a while; some cells are still over Tc.
+    auto mass = openvdb::Int32Grid::create(0);
+    auto acc = mass->getAccessor();
+    for (int x = 0; x < 40; ++x)
+        for (int y = 0; y < 40; ++y) acc.setValueOn(Coord(x, y, 0), (x >= 15 && x < 25) ? 3000 : 600);
+    AutomatonOptions opt;
+    opt.dimensions = 2;
+    opt.rule.rule = Rule::Prorata;
+    opt.rule.threshold = 1000;
+    Automaton a(mass, opt);
+    a.run(25);
+    ASSERT_GT(residualOverload(*mass, 1000, nullptr), 0);
+
+    RenderOptions ro;
+    ro.width = 640;
+    const std::string path = file("map.png");
+    renderPng(path, *mass, 1000, 2, ro);
+    const PngInfo info = inspectPng(path);
+    EXPECT_TRUE(info.signature);
+    EXPECT_LE(info.width, 640u);
+    EXPECT_GE(info.width, 320u);
+    EXPECT_GT(info.height, 0u);
+    ASSERT_EQ(info.rgb.size(), size_t(info.width) * info.height * 3);
+    EXPECT_GT(info.distinctColours, 10u);
+    bool red = false;
+    for (size_t i = 0; i + 2 < info.rgb.size(); i += 3) {
+        red |= info.rgb[i] == 215 && info.rgb[i + 1] == 25 && info.rgb[i + 2] == 28;
+    }
+    EXPECT_TRUE(red);
+    fs::copy_file(path, "/tmp/vdbclay-render-2d.png", fs::copy_options::overwrite_existing);
+    EXPECT_EQ(listing(), std::set<std::string>{"map.png"});
+}
+
+TEST_F(IOTest, Render3dSurface)
+{
+    // A lump and a column settle a little under gravity-free repartition: a shaded surface.
+    auto mass = openvdb::Int32Grid::create(0);
+    auto acc = mass->getAccessor();
+    for (int x = -10; x <= 10; ++x)
+        for (int y = 0; y <= 6; ++y)
+            for (int z = -10; z <= 10; ++z) acc.setValueOn(Coord(x, y, z), 1000);
+    for (int x = -3; x <= 3; ++x)
+        for (int y = 7; y <= 16; ++y)
+            for (int z = -3; z <= 3; ++z)
+                if (x * x + z * z <= 9) acc.setValueOn(Coord(x, y, z), 2500);
+    AutomatonOptions opt;
+    opt.rule.threshold = 1000;
+    Automaton a(mass, opt);
+    a.run(10);
+
+    RenderOptions ro;
+    ro.width = 320;
+    ro.height = 240;
+    const std::string path = file("clay.png");
+    renderPng(path, *mass, 1000, 3, ro);
+    const PngInfo info = inspectPng(path);
+    EXPECT_TRUE(info.signature);
+    EXPECT_EQ(info.width, 320u);
+    EXPECT_EQ(info.height, 240u);
+    EXPECT_GT(info.distinctColours, 20u);
+    // White background in the corners, clay in the middle.
+    ASSERT_EQ(info.rgb.size(), size_t(320 * 240 * 3));
+    EXPECT_EQ(info.rgb[0], 255);
+    const size_t mid = (size_t(120) * 320 + 160) * 3;
+    EXPECT_NE(info.rgb[mid] + info.rgb[mid + 1] + info.rgb[mid + 2], 3 * 255);
+    fs::copy_file(path, "/tmp/vdbclay-render-3d.png", fs::copy_options::overwrite_existing);
+}
+
+TEST_F(IOTest, RenderRefusesBadInput)
+{
+    auto none = openvdb::Int32Grid::create(0);
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("a.png"), *none, 1000, 3); }), "no clay"));
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("a.png"), *none, 1000, 2); }), "no clay"));
+    auto g = sampleClay();
+    RenderOptions bad;
+    bad.width = 0;
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("a.png"), *g, 1000, 3, bad); }), "size"));
+    bad.width = 100;
+    bad.height = -1;
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("a.png"), *g, 1000, 3, bad); }), "size"));
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("x/a.png"), *g, 1000, 3); }), "x/a.png"));
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("x/a.png"), *g, 1000, 2); }), "x/a.png"));
+    // Clay only away from z = 0 has nothing to show in 2D.
+    auto high = openvdb::Int32Grid::create(0);
+    high->tree().setValue(Coord(0, 0, 5), 10);
+    EXPECT_TRUE(contains(errorOf([&] { renderPng(file("a.png"), *high, 1000, 2); }), "z = 0"));
+    EXPECT_TRUE(listing().empty());
+}
+
+} // namespace
