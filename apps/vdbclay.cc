@@ -259,7 +259,6 @@ int main(int argc, char** argv)
 {
     CLI::App app{"vdbclay: virtual clay in sparse OpenVDB volumes (Druon, Crosnier, Brigandat 2003)"};
     app.require_subcommand(1);
-    app.failure_message(CLI::FailureMessage::simple);
 
     RunArgs ra;
     CLI::App* run = app.add_subcommand("run", "Run a scene file (or, with none, the built-in default scene)");
@@ -329,7 +328,9 @@ int main(int argc, char** argv)
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
-        return app.exit(e);
+        if (e.get_exit_code() == 0) return app.exit(e); // --help
+        std::cerr << "vdbclay: error: " << e.what() << " (see vdbclay --help)\n";
+        return e.get_exit_code();
     }
     try {
         openvdb::initialize();

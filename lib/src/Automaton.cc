@@ -778,6 +778,23 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     im.quietSteps = 0;
 }
 
+void Automaton::editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn)
+{
+    if (region.empty()) return;
+    Impl& im = *mImpl;
+    if (!im.obsGrid) {
+        im.obsGrid = openvdb::MaskGrid::create(false);
+        im.obsGrid->setName("obstacles");
+    }
+    // The overload counts only cells that are not obstacles: re-derive it over the region.
+    const Impl::Scan before = im.scanLeaves(&region, "editObstacles");
+    fn(*im.obsGrid);
+    const Impl::Scan after = im.scanLeaves(&region, "editObstacles");
+    im.overload += after.overload - before.overload;
+    im.pending.push_back(Impl::Pending{region, 2});
+    im.quietSteps = 0;
+}
+
 void Automaton::resync() { mImpl->resync(); }
 
 void Automaton::setRule(const RuleParams& rule)

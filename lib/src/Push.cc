@@ -2,7 +2,8 @@
 //
 // 1. U = union of the tools' bounds (2D: clipped to z = 0). Only leaves of the mass grid that meet
 //    U are visited; the clay voxels there whose centre is inside a tool are the sources, sorted in
-//    coordinate order (x, then y, then z). Obstacle voxels are never sources (clay never leaves them).
+//    coordinate order (x, then y, then z). A voxel inside a tool is a source even if it is an
+//    obstacle: a Sculptor makes the tools' voxels obstacles while clay settles around them.
 // 2. Each source is given the tool that holds it most deeply (smallest distance; ties: the first
 //    tool) and that tool's normal at its centre (2D: z dropped).
 // 3. Target: march from the centre along the normal to (-distance + 0.5) past the surface, then on
@@ -127,7 +128,6 @@ public:
                 const Coord c = *it;
                 const int32_t m = leaf->getValue(c);
                 if (m == 0) continue;
-                if (mObs && mObs->isValueOn(c)) continue;
                 size_t best = SIZE_MAX;
                 double bestD = 0;
                 for (size_t t = 0; t < mTools.size(); ++t) {

@@ -77,7 +77,7 @@ struct Ctx {
         }
         if (v.is_number_unsigned()) {
             const uint64_t u = v.get<uint64_t>();
-            if (u > uint64_t(hi)) fail(field, range(lo, hi, v.dump()));
+            if (u > uint64_t(hi) || (lo > 0 && u < uint64_t(lo))) fail(field, range(lo, hi, v.dump()));
             return int64_t(u);
         }
         const int64_t i = v.get<int64_t>();
@@ -247,10 +247,12 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     json root;
     try {
         root = json::parse(text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) {
+        // e.g. "[json.exception.parse_error.101] parse error at line 2, column 12: ..." or
+        // "[json.exception.out_of_range.406] number overflow parsing '1e999'": keep what follows "] ".
         std::string what = e.what();
-        const auto p = what.find("parse error");
-        throw Error(source + ": invalid JSON: " + (p == std::string::npos ? what : what.substr(p)));
+        const auto p = what.find("] ");
+        throw Error(source + ": invalid JSON: " + (p == std::string::npos ? what : what.substr(p + 2)));
     }
     cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
                        "obstacles", "settle", "frames", "start", "outputs", "description", "comment"});

@@ -6,6 +6,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <sstream>
@@ -56,12 +57,72 @@ void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
 
 } // namespace
 
+static Box unite(const Box& a, const Box& b)
+{
+    if (a.empty()) return b;
+    if (b.empty()) return a;
+    Box r;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = std::min(a.min[i], b.min[i]);
+        r.max[i] = std::max(a.max[i], b.max[i]);
+    }
+    return r;
+}
+
 struct Sculptor::Impl {
     Scene scene;
     MassGridPtr mass;
-    openvdb::MaskGrid::Ptr obstacles;
+    openvdb::MaskGrid::Ptr obstacles; ///< static obstacles only
     std::unique_ptr<Automaton> automaton;
     uint64_t frame = 0;
+    std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
+    Box toolRegion;                        ///< bounds of the tools as placed now
+
+    std::vector<ShapePtr> toolsAt(uint64_t f) const
+    {
+        std::vector<ShapePtr> tools;
+        for (const ToolSpec& t : scene.tools) tools.push_back(makeTransformed(t.shape.shape, t.poseAt(f)));
+        return tools;
+    }
+
+    /// While clay settles, the voxels a tool occupies are obstacles: otherwise clay would flow back
+    /// into the tool that just pushed it out. Moves those obstacle cells to @a tools' placement.
+    void placeTools(const std::vector<ShapePtr>& tools)
+    {
+        Box region;
+        for (const ShapePtr& t : tools) region = unite(region, t->bounds());
+        if (scene.dimensions == 2) {
+            region.min[2] = std::max(region.min[2], 0);
+            region.max[2] = std::min(region.max[2], 0);
+        }
+        const Box both = unite(region, toolRegion);
+        if (both.empty()) return;
+        automaton->editObstacles(both, [&](ObstacleGrid& grid) {
+            auto acc = grid.getAccessor();
+            auto fixed = obstacles->getConstAccessor();
+            for (const openvdb::Coord& c : toolCells) {
+                if (!fixed.isValueOn(c)) acc.setValueOff(c);
+            }
+            toolCells.clear();
+            for (const ShapePtr& t : tools) {
+                const Box b = t->bounds();
+                const int z0 = scene.dimensions == 2 ? 0 : b.min[2], z1 = scene.dimensions == 2 ? 0 : b.max[2];
+                if (b.empty() || (scene.dimensions == 2 && (b.min[2] > 0 || b.max[2] < 0))) continue;
+                for (int x = b.min[0]; x <= b.max[0]; ++x)
+                    for (int y = b.min[1]; y <= b.max[1]; ++y)
+                        for (int z = z0; z <= z1; ++z) {
+                            const openvdb::Coord c(x, y, z);
+                            if (acc.isValueOn(c)) continue;
+                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0) {
+                                acc.setValueOn(c);
+                                toolCells.push_back(c);
+                            }
+                        }
+            }
+            grid.tree().prune();
+        });
+        toolRegion = region;
+    }
 };
 
 Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Impl>())
@@ -126,8 +187,10 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
             }
         }
     }
-    im.automaton = std::make_unique<Automaton>(im.mass, opt, scene.obstacles.empty() ? nullptr : im.obstacles);
+    // The automaton's obstacles: the static ones, plus the tools' voxels (placeTools).
+    im.automaton = std::make_unique<Automaton>(im.mass, opt, im.obstacles->deepCopy());
     if (steps) im.automaton->setStepCount(steps);
+    if (!scene.tools.empty()) im.placeTools(im.toolsAt(im.frame));
 }
 
 Sculptor::~Sculptor() = default;
@@ -145,10 +208,11 @@ FrameReport Sculptor::runFrame()
     if (done()) throw Error("the scene has no frame left to run (" + std::to_string(im.scene.frames) + " run)");
     FrameReport rep;
     rep.frame = ++im.frame;
-    std::vector<ShapePtr> tools;
-    tools.reserve(im.scene.tools.size());
-    for (const ToolSpec& t : im.scene.tools) tools.push_back(makeTransformed(t.shape.shape, t.poseAt(im.frame)));
-    if (!tools.empty()) rep.push = push(*im.automaton, tools);
+    if (!im.scene.tools.empty()) {
+        const std::vector<ShapePtr> tools = im.toolsAt(im.frame);
+        im.placeTools(tools);
+        rep.push = push(*im.automaton, tools);
+    }
     rep.settle = im.automaton->settle(im.scene.settle.maxSteps, im.scene.settle.tolerance);
     return rep;
 }
@@ -168,7 +232,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.steps += r.settle.steps;
         s.blocksVisited += r.settle.blocksVisited;
         s.blocksUpdated += r.settle.blocksUpdated;
-        s.massTrapped += r.push.massTrapped;
+        s.massTrapped = r.push.massTrapped; // clay inside tools now (it is retried every frame)
         if (r.settle.reason == StopReason::StepBudget) ++s.framesUnsettled;
         s.stages.gather += r.settle.seconds.gather;
         s.stages.repartition += r.settle.seconds.repartition;

@@ -103,6 +103,11 @@ public:
     /// @throw Error (and restore nothing: validate before editing) if the region then holds
     ///        negative mass or, in 2D, clay outside z = 0.
     void edit(const Box& region, const std::function<void(MassGrid&)>& fn);
+    /// Lets @a fn change obstacles inside @a region (inclusive), e.g. to make a tool's voxels
+    /// obstacles while clay settles around it. Creates an empty obstacle grid if there was none.
+    /// The region is rescanned as by edit(). Clay left in a cell that becomes an obstacle stays
+    /// there, frozen, until the cell is freed.
+    void editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn);
     /// Rescans the whole grid after arbitrary outside changes, as the constructor does.
     void resync();
 

@@ -29,7 +29,8 @@ struct PushReport {
 /// free voxel stays where it is and is reported as trapped. Mass is conserved exactly. Only the
 /// tools' bounds (plus the reach of the search) are visited. Goes through Automaton::edit(), so the
 /// automaton wakes the touched region. Deterministic: voxels are processed in coordinate order.
-/// Clay in obstacle voxels is never moved. The search is by distance, not by path: with a large
+/// Every clay voxel inside a tool is a source, even one that is an obstacle (a Sculptor marks the
+/// tools' own voxels as obstacles while clay settles); clay in obstacles outside tools never moves. The search is by distance, not by path: with a large
 /// @a maxSearch clay may land beyond an obstacle thinner than the search reach.
 /// @throw Error if @a maxSearch is outside [0, 1024] or a tool is null; nothing is changed then.
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch = 16);

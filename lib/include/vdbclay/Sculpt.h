@@ -28,7 +28,7 @@ struct RunSummary {
     int64_t residualOverload = 0;
     bool settled = false;       ///< the last frame settled
     uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget
-    int64_t massTrapped = 0;    ///< clay a tool could not push anywhere, summed over frames
+    int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
     uint64_t blocksVisited = 0, blocksUpdated = 0;
     double pushSeconds = 0;
     StageSeconds stages;
