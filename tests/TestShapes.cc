@@ -701,3 +701,25 @@ TEST_F(ShapesTest, PushLeavesFarClayAlone)
 }
 
 } // namespace
+
+TEST_F(ShapesTest, PushNeverCrossesAThinWall)
+{
+    // Clay fills x = 0..4 (y, z = -3..3) against a one-voxel wall at x = 5. A sphere reaching the
+    // wall pushes the clay at x = 4 towards +x: the march along the normal meets the wall at once
+    // (and the next point, x = 6, lies beyond it); the clay must find room on the near side.
+    auto mass = clayBox(CoordBBox(Coord(0, -3, -3), Coord(4, 3, 3)), 100);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().fill(CoordBBox(Coord(5, -20, -20), Coord(5, 20, 20)), true, true);
+    Automaton a(mass, opts(), obs);
+    const int64_t m0 = a.totalMass();
+    const std::vector<ShapePtr> tools = {makeSphere({{0, 0, 0}}, 4.6)};
+    ASSERT_GT(clayInside(*mass, tools), 20);
+    const PushReport r = push(a, tools);
+    EXPECT_GT(r.voxelsPushed, 20u);
+    EXPECT_EQ(r.voxelsTrapped, 0u);
+    EXPECT_EQ(clayInside(*mass, tools), 0);
+    EXPECT_EQ(totalMass(*mass), m0);
+    for (auto it = mass->tree().cbeginValueOn(); it; ++it) {
+        EXPECT_LT(it.getCoord().x(), 5) << "clay crossed the wall at " << it.getCoord();
+    }
+}

@@ -9,8 +9,10 @@
 // 3. Target: march from the centre along the normal to (-distance + 0.5) past the surface, then on
 //    in half-voxel steps for up to maxSearch voxels, until the voxel at the rounded point is free:
 //    outside every tool, not an obstacle, inside the region and able to take the clay without
-//    exceeding INT32_MAX. Failing that, the free voxel nearest the source (Euclidean, ties by
-//    coordinate order) within Chebyshev distance maxSearch. Failing that, the clay is trapped.
+//    exceeding INT32_MAX; the march stops at an obstacle that is not part of a tool. Failing that,
+//    a breadth-first flood from the source through passable voxels (inside a tool or not an
+//    obstacle) within Chebyshev distance maxSearch takes the first free voxel it reaches, so clay
+//    never crosses an obstacle, however thin. Failing that, the clay is trapped.
 // 4. The plan (sources emptied, targets increased) is computed read-only first, then written in one
 //    Automaton::edit() over the region U grown by maxSearch + 2, so nothing is written if a tool
 //    throws, and the automaton rescans and wakes exactly that region.
@@ -25,6 +27,7 @@
 #include <algorithm>
 #include <climits>
 #include <cmath>
+#include <deque>
 #include <map>
 
 namespace vdbclay {
@@ -162,33 +165,43 @@ public:
         for (int k = 0; k <= steps; ++k) {
             const double t = start + 0.5 * k;
             const Coord c = rounded({{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}});
-            if (c != s.c && isFree(c, s.mass)) {
+            if (c == s.c) continue;
+            if (isFree(c, s.mass)) {
                 out = c;
                 return true;
             }
+            if (isWall(c)) break; // clay does not pass through obstacles
         }
-        // Nearest free voxel by Euclidean distance within Chebyshev distance maxSearch.
-        bool found = false;
-        int64_t bestD2 = 0;
-        for (int r = 1; r <= mMaxSearch; ++r) {
-            if (found && int64_t(r) * r > bestD2) break; // every voxel of this shell is farther
-            const int zr = mIs2D ? 0 : r;
-            for (int dx = -r; dx <= r; ++dx)
-                for (int dy = -r; dy <= r; ++dy)
-                    for (int dz = -zr; dz <= zr; ++dz) {
-                        const bool onShell = std::abs(dx) == r || std::abs(dy) == r || std::abs(dz) == r;
-                        if (!onShell) continue;
-                        const int64_t d2 = int64_t(dx) * dx + int64_t(dy) * dy + int64_t(dz) * dz;
-                        if (found && d2 > bestD2) continue;
-                        const Coord c = s.c.offsetBy(dx, dy, dz);
-                        if (found && d2 == bestD2 && !(c < out)) continue;
-                        if (!isFree(c, s.mass)) continue;
-                        found = true;
-                        bestD2 = d2;
-                        out = c;
-                    }
+        // Breadth-first flood from the source through passable voxels (inside a tool, or not an
+        // obstacle), 6-connected (4 in 2D), within Chebyshev distance maxSearch: the first free
+        // voxel reached. Neighbours are visited in a fixed order, so the choice is deterministic,
+        // and clay never crosses an obstacle, however thin.
+        openvdb::MaskTree seen(false);
+        openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(seen);
+        std::deque<Coord> queue;
+        queue.push_back(s.c);
+        acc.setValueOn(s.c);
+        static const int kDir[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+        const int dirs = mIs2D ? 4 : 6;
+        while (!queue.empty()) {
+            const Coord c = queue.front();
+            queue.pop_front();
+            for (int d = 0; d < dirs; ++d) {
+                const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                if (std::abs(q.x() - s.c.x()) > mMaxSearch ||
+                    std::abs(q.y() - s.c.y()) > mMaxSearch || std::abs(q.z() - s.c.z()) > mMaxSearch) {
+                    continue;
+                }
+                if (acc.isValueOn(q)) continue;
+                acc.setValueOn(q);
+                if (isFree(q, s.mass)) {
+                    out = q;
+                    return true;
+                }
+                if (!isWall(q) && inside(mRegion, q)) queue.push_back(q);
+            }
         }
-        return found;
+        return false;
     }
 
     void add(const Coord& c, int32_t m) { mAdded[c] += m; }
@@ -206,6 +219,16 @@ private:
         }
         if (mIs2D) v[2] = 0;
         return Coord(v[0], v[1], v[2]);
+    }
+
+    /// An obstacle that is not part of a tool: clay can neither stop in it nor pass through it.
+    bool isWall(const Coord& c) const
+    {
+        if (!mObs || !mObs->isValueOn(c)) return false;
+        for (size_t t = 0; t < mTools.size(); ++t) {
+            if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return false;
+        }
+        return true;
     }
 
     bool isFree(const Coord& c, int32_t m) const

@@ -30,8 +30,9 @@ struct PushReport {
 /// tools' bounds (plus the reach of the search) are visited. Goes through Automaton::edit(), so the
 /// automaton wakes the touched region. Deterministic: voxels are processed in coordinate order.
 /// Every clay voxel inside a tool is a source, even one that is an obstacle (a Sculptor marks the
-/// tools' own voxels as obstacles while clay settles); clay in obstacles outside tools never moves. The search is by distance, not by path: with a large
-/// @a maxSearch clay may land beyond an obstacle thinner than the search reach.
+/// tools' own voxels as obstacles while clay settles); clay in obstacles outside tools never moves.
+/// Clay never passes through an obstacle: both the march and the search stop at obstacle voxels
+/// that are not part of a tool.
 /// @throw Error if @a maxSearch is outside [0, 1024] or a tool is null; nothing is changed then.
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch = 16);
 
