@@ -5,13 +5,14 @@
 #   nlohmann-json3-dev:     header-only JSON for scene files (saves a hand-written parser).
 #   libpng-dev:             PNG output for `vdbclay render`.
 #   libcli11-dev:           header-only command-line parsing for the CLI (subcommands, --help).
+#   libopenvdb-tools:       vdb_print, used by the tests to check our .vdb files open in OpenVDB's tools.
 set -euo pipefail
 
 PKGS=(
   cmake g++ ninja-build pkg-config
   libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
   libgtest-dev googletest
-  nlohmann-json3-dev libpng-dev libcli11-dev
+  nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
 )
 
 missing=()

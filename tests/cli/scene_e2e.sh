@@ -17,4 +17,12 @@ grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
 "$bin" info "$out.vdb" > "$out.info"
 grep -q "total mass:\? $m1" "$out.info" || { echo "FAIL $name: info does not report total mass $m1"; cat "$out.info"; exit 1; }
 for g in mass density surface; do grep -q "\"$g\"" "$out.info" || { echo "FAIL $name: no grid $g"; exit 1; }; done
+# Other tools read it: OpenVDB's own vdb_print (libopenvdb-tools) lists the three grids.
+if command -v vdb_print >/dev/null; then
+  vdb_print "$out.vdb" > "$out.vdbprint"
+  for g in mass density surface; do grep -q "^$g " "$out.vdbprint" || { echo "FAIL $name: vdb_print lacks $g"; cat "$out.vdbprint"; exit 1; }; done
+fi
+# The surface mesh is closed: it imports back as clay.
+"$bin" import "$out.obj" -o "$out-imported.vdb" --mass 500 --dims "$(grep -q '"dimensions": 2' "$scene" && echo 2 || echo 3)" > /dev/null
+"$bin" info "$out-imported.vdb" | grep -q "total mass" || { echo "FAIL $name: import of the surface mesh"; exit 1; }
 echo "PASS $name: mass $m1 exact, settled, png + mesh + info ok"
