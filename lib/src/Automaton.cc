@@ -49,6 +49,7 @@
 #include "vdbclay/Automaton.h"
 #include "vdbclay/Metrics.h"
 
+#include "Format.h"
 #include "RulesImpl.h"
 
 #include <openvdb/openvdb.h>
@@ -83,13 +84,6 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
 {
     return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-std::string coordStr(const Coord& c)
-{
-    std::ostringstream os;
-    os << "(" << c.x() << ", " << c.y() << ", " << c.z() << ")";
-    return os.str();
 }
 
 // ---- Block masks -------------------------------------------------------------------------------

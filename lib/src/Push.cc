@@ -45,28 +45,6 @@ bool inside(const Box& b, const Coord& c)
            c.z() >= b.min[2] && c.z() <= b.max[2];
 }
 
-Box unite(const Box& a, const Box& b)
-{
-    if (a.empty()) return b;
-    if (b.empty()) return a;
-    Box r;
-    for (int i = 0; i < 3; ++i) {
-        r.min[i] = std::min(a.min[i], b.min[i]);
-        r.max[i] = std::max(a.max[i], b.max[i]);
-    }
-    return r;
-}
-
-Box intersect(const Box& a, const Box& b)
-{
-    Box r;
-    for (int i = 0; i < 3; ++i) {
-        r.min[i] = std::max(a.min[i], b.min[i]);
-        r.max[i] = std::min(a.max[i], b.max[i]);
-    }
-    return r;
-}
-
 Box grow(const Box& a, int64_t by, bool is2D)
 {
     Box r = a;

@@ -4,6 +4,8 @@
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 
+#include "Format.h"
+
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -14,13 +16,6 @@
 namespace vdbclay {
 
 namespace {
-
-std::string coordStr(const openvdb::Coord& c)
-{
-    std::ostringstream os;
-    os << "(" << c.x() << ", " << c.y() << ", " << c.z() << ")";
-    return os.str();
-}
 
 /// Adds every voxel of @a src into @a dst, refusing sums that overflow a cell.
 void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::string& field)
@@ -56,18 +51,6 @@ void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
 }
 
 } // namespace
-
-static Box unite(const Box& a, const Box& b)
-{
-    if (a.empty()) return b;
-    if (b.empty()) return a;
-    Box r;
-    for (int i = 0; i < 3; ++i) {
-        r.min[i] = std::min(a.min[i], b.min[i]);
-        r.max[i] = std::max(a.max[i], b.max[i]);
-    }
-    return r;
-}
 
 struct Sculptor::Impl {
     Scene scene;

@@ -1,5 +1,6 @@
 #include "vdbclay/Types.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace vdbclay {
@@ -32,6 +33,28 @@ void validate(const RuleParams& p)
     if (!std::isfinite(p.alpha) || !(p.alpha > 0.0) || !(p.alpha < 1.0)) {
         throw Error("alpha must lie in the open interval (0, 1), got " + std::to_string(p.alpha));
     }
+}
+
+Box unite(const Box& a, const Box& b)
+{
+    if (a.empty()) return b;
+    if (b.empty()) return a;
+    Box r;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = std::min(a.min[i], b.min[i]);
+        r.max[i] = std::max(a.max[i], b.max[i]);
+    }
+    return r;
+}
+
+Box intersect(const Box& a, const Box& b)
+{
+    Box r;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = std::max(a.min[i], b.min[i]);
+        r.max[i] = std::min(a.max[i], b.max[i]);
+    }
+    return r;
 }
 
 } // namespace vdbclay

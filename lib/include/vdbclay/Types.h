@@ -49,4 +49,9 @@ struct Box {
     bool empty() const { return min[0] > max[0] || min[1] > max[1] || min[2] > max[2]; }
 };
 
+/// The smallest box holding both (an empty box adds nothing).
+Box unite(const Box& a, const Box& b);
+/// The voxels in both (empty if none).
+Box intersect(const Box& a, const Box& b);
+
 } // namespace vdbclay
