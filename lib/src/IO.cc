@@ -24,6 +24,7 @@
 #include <fstream>
 #include <memory>
 #include <algorithm>
+#include <cstdio>
 #include <iomanip>
 #include <limits>
 #include <ostream>
@@ -378,6 +379,9 @@ std::string describeVdb(const std::string& path)
         s << "\n";
         if (auto ig = openvdb::gridConstPtrCast<openvdb::Int32Grid>(g)) {
             s << "  total mass: " << totalMass(*ig) << "\n";
+            char hash[32];
+            std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)contentHash(*ig));
+            s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
         }
         if (g->metaCount() > 1) {
             s << "  metadata:\n";
