@@ -447,8 +447,8 @@ struct Automaton::Impl {
         for (size_t wi = begin; wi < end; ++wi) {
             WorkItem& w = work[wi];
             w.changed = 0;
-            if (phase == 0 && !acc.probeLeaf(w.anchor)) continue; // even blocks of a missing leaf: all 0
             fetchLeaves(ls, w.anchor, w.mask, phase, d3, acc, ot);
+            if (phase == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
             const int odd = phase;
             uint64_t bits = w.mask;
             while (bits) {
