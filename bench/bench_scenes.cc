@@ -63,6 +63,7 @@ struct Options {
     double baselineLimit = 60; ///< seconds; projected longer: stop and estimate
     double vdbLimit = 60;      ///< seconds; vdbclay settling longer than this is stopped
     bool baselines = true;
+    uint64_t pressSteps = 0;   ///< 0: settle to rest; K: run K steps only (every implementation)
     std::string csv;
 };
 
@@ -161,7 +162,7 @@ struct Result {
     bool complete = true;
 };
 
-Result runVdbclay(const State& st, int threads, double limit)
+Result runVdbclay(const State& st, int threads, double limit, uint64_t maxSteps)
 {
     Result res;
     res.grid = st.mass->deepCopy();
@@ -172,9 +173,11 @@ Result runVdbclay(const State& st, int threads, double limit)
     StepReport total;
     const auto t0 = Clock::now();
     for (;;) {
-        const StepReport r = a.settle(256);
+        const uint64_t chunk = maxSteps ? std::min<uint64_t>(256, maxSteps - total.steps) : 256;
+        const StepReport r = a.settle(chunk);
         total += r;
         if (r.reason != StopReason::StepBudget) break;
+        if (maxSteps && total.steps >= maxSteps) break;
         if (since(t0) > limit) {
             res.complete = false;
             break;
@@ -256,7 +259,7 @@ inline int64_t over(int64_t m, int64_t tc) { return m > tc ? m - tc : 0; }
 
 /// Runs steps until the overload is 0 or two steps in a row change nothing (vdbclay's "settled"),
 /// or the projected time exceeds @a limit (then the time is extrapolated to @a refSteps steps).
-Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit)
+Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit, uint64_t maxSteps)
 {
     Dense d = toDense(st, bounds);
     const CompiledRule rule = compileRule(st.options.rule);
@@ -268,7 +271,7 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
     for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
     Result res;
     const auto t0 = Clock::now();
-    while (overload > 0 && quiet < 2) {
+    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
         const int p = int(step & 1);
         uint64_t changedBlocks = 0;
         for (int z = p; z + 1 < d.nz; z += 2)
@@ -327,7 +330,7 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
 }
 
 // ---- NAIVE OpenVDB baseline ----------------------------------------------------------------------
-Result runNaive(const State& st, uint64_t refSteps, double limit)
+Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSteps)
 {
     Result res;
     MassGridPtr g = st.mass->deepCopy();
@@ -339,7 +342,7 @@ Result runNaive(const State& st, uint64_t refSteps, double limit)
     int quiet = 0;
     std::vector<Coord> blocks;
     const auto t0 = Clock::now();
-    while (overload > 0 && quiet < 2) {
+    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
         const int p = int(step & 1);
         blocks.clear();
         for (auto leaf = g->tree().cbeginLeaf(); leaf; ++leaf)
@@ -408,7 +411,8 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
 {
     const auto tSetup = Clock::now();
     const State st = makePress(n);
-    std::fprintf(stderr, "\npress N=%d: set-up %.2f s, %llu clay voxels, overload %lld, step %llu\n", n,
+    std::fprintf(stderr, "\npress N=%d%s: set-up %.2f s, %llu clay voxels, overload %lld, step %llu\n", n,
+                 opt.pressSteps ? (" (first " + std::to_string(opt.pressSteps) + " steps)").c_str() : " (settle to rest)",
                  since(tSetup), (unsigned long long)clayVoxelCount(*st.mass),
                  (long long)residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()),
                  (unsigned long long)st.step0);
@@ -420,7 +424,7 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
     for (int t : opt.threads) {
         Row best;
         for (int r = 0; r < opt.repeats; ++r) {
-            Result res = runVdbclay(st, t, opt.vdbLimit);
+            Result res = runVdbclay(st, t, opt.vdbLimit, opt.pressSteps);
             if (!res.complete) vdbComplete = false;
             if (r == 0 || res.row.seconds < best.seconds) best = res.row;
             if (!finalGrid) finalGrid = res.grid;
@@ -442,8 +446,8 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
         for (int which = 0; which < 2; ++which) {
             Row best;
             for (int r = 0; r < opt.repeats; ++r) {
-                Result res = which == 0 ? runDense(st, bb, ref.steps, opt.baselineLimit)
-                                        : runNaive(st, ref.steps, opt.baselineLimit);
+                Result res = which == 0 ? runDense(st, bb, ref.steps, opt.baselineLimit, opt.pressSteps)
+                                        : runNaive(st, ref.steps, opt.baselineLimit, opt.pressSteps);
                 if (r == 0 || res.row.seconds < best.seconds) best = res.row;
                 if (!res.complete || res.row.seconds > 10) break;
             }
@@ -668,6 +672,7 @@ int usage(const char* argv0)
     std::fprintf(stderr,
                  "usage: %s [--press 32,64,128] [--stroke 64,128,256,512] [--threads 1,2] [--repeats 3]\n"
                  "          [--baseline-limit 60] [--vdb-limit 60] [--no-baselines] [--csv FILE]\n"
+                 "          [--press-steps K]  (press: K steps only instead of settling to rest)\n"
                  "  a list may be 'none'\n",
                  argv0);
     return 2;
@@ -691,6 +696,7 @@ int main(int argc, char** argv)
             else if (a == "--repeats") opt.repeats = std::max(1, std::stoi(val()));
             else if (a == "--baseline-limit") opt.baselineLimit = std::stod(val());
             else if (a == "--vdb-limit") opt.vdbLimit = std::stod(val());
+            else if (a == "--press-steps") opt.pressSteps = std::stoull(val());
             else if (a == "--no-baselines") opt.baselines = false;
             else if (a == "--csv") opt.csv = val();
             else if (a == "-h" || a == "--help") return usage(argv[0]);
