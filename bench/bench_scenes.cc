@@ -1,0 +1,729 @@
+// bench_scenes: vdbclay on whole scenes, against two baselines written here for comparison only.
+//
+//   press   A cube N^3 of clay at 950 (Tc 1000, prorata, seed 1) on a floor, pressed N/8 voxels by a
+//           plate wider than the cube over N/8 frames with no settling between frames (settle
+//           max_steps 0): the state right after the last push, all N/8 pushed layers piled on the
+//           top layer. Then that state is settled to rest by
+//             vdbclay   Automaton::settle, for each --threads count (min of --repeats);
+//             DENSE     a dense std::vector<int32_t> box (the final clay's bounds + 4 voxels) that
+//                       visits every block of the phase every step, with the inline rule
+//                       (rules_internal::repartition) and the same block keys;
+//             NAIVE     OpenVDB as a user writes it first: each step, every active voxel's block of
+//                       the phase (collected, sorted, deduplicated), getValue / setValue through a
+//                       ValueAccessor, obstacles through an accessor, the public repartitionBlock,
+//                       single-threaded.
+//           All must end bit-identical (contentHash). A baseline whose projected time (its time per
+//           step so far x vdbclay's step count) exceeds --baseline-limit seconds is stopped and
+//           reported as an estimate.
+//   stroke  A sphere of clay of diameter D (mass 950) and a sphere tool of radius 6 that dips 2
+//           voxels into its top and then slides along the surface (rotating about the sphere's
+//           centre, 2 voxels per frame) for 10 frames in all, each settled fully. Time per frame
+//           (median, p95), grid memory per clay voxel and peak RSS; each (D, threads) in a child
+//           process so ru_maxrss is its own.
+//
+// Output: CSV (one header, one row per measurement) to stdout or --csv FILE; a readable summary
+// with the ratios on stderr. See docs/PERFORMANCE.md.
+#include "RulesImpl.h"
+#include "vdbclay/Automaton.h"
+#include "vdbclay/Metrics.h"
+#include "vdbclay/Rules.h"
+#include "vdbclay/Scene.h"
+#include "vdbclay/Sculpt.h"
+
+#include <openvdb/openvdb.h>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace vdbclay;
+using openvdb::Coord;
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+struct Options {
+    std::vector<int> press{32, 64, 128};
+    std::vector<int> stroke{64, 128, 256, 512};
+    std::vector<int> threads{1, 2};
+    int repeats = 3;
+    double baselineLimit = 60; ///< seconds; projected longer: stop and estimate
+    double vdbLimit = 60;      ///< seconds; vdbclay settling longer than this is stopped
+    bool baselines = true;
+    uint64_t pressSteps = 0;   ///< 0: settle to rest; K: run K steps only (every implementation)
+    std::string csv;
+};
+
+std::vector<int> parseList(const std::string& s)
+{
+    std::vector<int> v;
+    if (s == "none" || s.empty()) return v;
+    std::stringstream ss(s);
+    std::string item;
+    while (std::getline(ss, item, ',')) v.push_back(std::stoi(item));
+    return v;
+}
+
+// ---- CSV rows -----------------------------------------------------------------------------------
+const char* kHeader =
+    "scene,size,impl,threads,seconds,steps,blocks_visited,blocks_updated,ns_per_updated_block,"
+    "gather_s,repartition_s,grow_s,bookkeeping_s,frame_median_ms,frame_p95_ms,frame_max_ms,"
+    "clay_voxels,grid_bytes,bytes_per_clay_voxel,maxrss_mb,hash,identical,note";
+
+struct Row {
+    std::string scene, impl, note, identical;
+    int size = 0, threads = 1;
+    double seconds = 0;
+    uint64_t steps = 0, visited = 0, updated = 0;
+    StageSeconds stages;
+    double medianMs = -1, p95Ms = -1, maxMs = -1;
+    uint64_t clayVoxels = 0, gridBytes = 0;
+    double maxrssMb = -1;
+    uint64_t hash = 0;
+
+    std::string csv() const
+    {
+        char buf[1024];
+        auto opt = [](double v) { return v < 0 ? std::string() : std::to_string(v); };
+        std::snprintf(buf, sizeof buf, "%s,%d,%s,%d,%.6f,%llu,%llu,%llu,%.2f,%.6f,%.6f,%.6f,%.6f,%s,%s,%s,%llu,%llu,%s,%s,%016llx,%s,%s",
+                      scene.c_str(), size, impl.c_str(), threads, seconds, (unsigned long long)steps,
+                      (unsigned long long)visited, (unsigned long long)updated,
+                      updated ? 1e9 * seconds / double(updated) : 0.0, stages.gather, stages.repartition,
+                      stages.grow, stages.bookkeeping, opt(medianMs).c_str(), opt(p95Ms).c_str(),
+                      opt(maxMs).c_str(), (unsigned long long)clayVoxels, (unsigned long long)gridBytes,
+                      clayVoxels ? std::to_string(double(gridBytes) / double(clayVoxels)).c_str() : "",
+                      opt(maxrssMb).c_str(), (unsigned long long)hash, identical.c_str(), note.c_str());
+        return buf;
+    }
+};
+
+double maxrssMb()
+{
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    return double(ru.ru_maxrss) / 1024.0; // Linux: kilobytes
+}
+
+// ---- press: the state to settle ------------------------------------------------------------------
+struct State {
+    MassGridPtr mass;
+    ObstacleGridPtr obstacles;
+    uint64_t step0 = 0;
+    AutomatonOptions options;
+};
+
+std::string pressJson(int n)
+{
+    const int f = std::max(1, n / 8);
+    std::ostringstream js;
+    js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
+  "clay": [{"shape": "box", "min": [0, 0, 0], "max": [)" << n - 1 << "," << n - 1 << "," << n - 1
+       << R"(], "mass": 950}],
+  "tools": [{"shape": "box", "min": [)" << -n / 2 << "," << n << "," << -n / 2 << "], \"max\": ["
+       << n + n / 2 - 1 << "," << n + 3 << "," << n + n / 2 - 1
+       << R"(], "path": [{"translate": [0, -1, 0], "frames": )" << f << R"(}]}],
+  "obstacles": [{"shape": "box", "min": [)" << -2 * n << ", -3, " << -2 * n << "], \"max\": [" << 3 * n
+       << ", -1, " << 3 * n << R"(]}],
+  "settle": {"max_steps": 0}})";
+    return js.str();
+}
+
+State makePress(int n)
+{
+    const Scene scene = parseScene(pressJson(n), "<press " + std::to_string(n) + ">", ".");
+    Sculptor sculptor(scene, 0);
+    sculptor.run();
+    State st;
+    st.mass = sculptor.mass()->deepCopy();
+    st.obstacles = sculptor.automaton().obstacles()->deepCopy();
+    st.step0 = sculptor.automaton().stepCount();
+    st.options.dimensions = 3;
+    st.options.rule = scene.rule;
+    st.options.seed = scene.seed;
+    return st;
+}
+
+struct Result {
+    Row row;
+    MassGridPtr grid; ///< final state
+    bool complete = true;
+};
+
+Result runVdbclay(const State& st, int threads, double limit, uint64_t maxSteps)
+{
+    Result res;
+    res.grid = st.mass->deepCopy();
+    AutomatonOptions o = st.options;
+    o.threads = threads;
+    Automaton a(res.grid, o, st.obstacles->deepCopy());
+    a.setStepCount(st.step0);
+    StepReport total;
+    const auto t0 = Clock::now();
+    for (;;) {
+        const uint64_t chunk = maxSteps ? std::min<uint64_t>(256, maxSteps - total.steps) : 256;
+        const StepReport r = a.settle(chunk);
+        total += r;
+        if (r.reason != StopReason::StepBudget) break;
+        if (maxSteps && total.steps >= maxSteps) break;
+        if (since(t0) > limit) {
+            res.complete = false;
+            break;
+        }
+    }
+    res.row.seconds = since(t0);
+    res.row.impl = "vdbclay";
+    res.row.threads = threads;
+    res.row.steps = total.steps;
+    res.row.visited = total.blocksVisited;
+    res.row.updated = total.blocksUpdated;
+    res.row.stages = total.seconds;
+    res.row.hash = contentHash(*res.grid);
+    if (!res.complete) res.row.note = "stopped after " + std::to_string(limit) + " s, not settled";
+    return res;
+}
+
+// ---- DENSE baseline ------------------------------------------------------------------------------
+struct Dense {
+    int x0, y0, z0, nx, ny, nz;
+    std::vector<int32_t> m;
+    std::vector<uint8_t> obs;
+    size_t idx(int x, int y, int z) const { return size_t(x) + size_t(nx) * (size_t(y) + size_t(ny) * size_t(z)); }
+};
+
+openvdb::CoordBBox clayBounds(const MassGrid& g)
+{
+    openvdb::CoordBBox bb;
+    for (auto leaf = g.tree().cbeginLeaf(); leaf; ++leaf)
+        for (auto v = leaf->cbeginValueAll(); v; ++v)
+            if (*v != 0) bb.expand(v.getCoord());
+    return bb;
+}
+
+Dense toDense(const State& st, openvdb::CoordBBox bb)
+{
+    bb.expand(4);
+    Dense d;
+    d.x0 = bb.min().x() & ~1; // even: local parity = world parity
+    d.y0 = bb.min().y() & ~1;
+    d.z0 = bb.min().z() & ~1;
+    d.nx = bb.max().x() - d.x0 + 1;
+    d.ny = bb.max().y() - d.y0 + 1;
+    d.nz = bb.max().z() - d.z0 + 1;
+    d.m.assign(size_t(d.nx) * d.ny * d.nz, 0);
+    d.obs.assign(d.m.size(), 0);
+    for (auto leaf = st.mass->tree().cbeginLeaf(); leaf; ++leaf)
+        for (auto v = leaf->cbeginValueAll(); v; ++v)
+            if (*v != 0) {
+                const Coord c = v.getCoord();
+                d.m[d.idx(c.x() - d.x0, c.y() - d.y0, c.z() - d.z0)] = *v;
+            }
+    const openvdb::CoordBBox box(Coord(d.x0, d.y0, d.z0), Coord(d.x0 + d.nx - 1, d.y0 + d.ny - 1, d.z0 + d.nz - 1));
+    for (auto it = st.obstacles->tree().cbeginValueOn(); it; ++it) {
+        openvdb::CoordBBox b = it.getBoundingBox();
+        b.intersect(box);
+        if (b.empty()) continue;
+        for (int z = b.min().z(); z <= b.max().z(); ++z)
+            for (int y = b.min().y(); y <= b.max().y(); ++y)
+                for (int x = b.min().x(); x <= b.max().x(); ++x) d.obs[d.idx(x - d.x0, y - d.y0, z - d.z0)] = 1;
+    }
+    return d;
+}
+
+MassGridPtr fromDense(const Dense& d)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    auto acc = g->getAccessor();
+    for (int z = 0; z < d.nz; ++z)
+        for (int y = 0; y < d.ny; ++y)
+            for (int x = 0; x < d.nx; ++x) {
+                const int32_t v = d.m[d.idx(x, y, z)];
+                if (v) acc.setValue(Coord(x + d.x0, y + d.y0, z + d.z0), v);
+            }
+    return g;
+}
+
+inline int64_t over(int64_t m, int64_t tc) { return m > tc ? m - tc : 0; }
+
+/// Runs steps until the overload is 0 or two steps in a row change nothing (vdbclay's "settled"),
+/// or the projected time exceeds @a limit (then the time is extrapolated to @a refSteps steps).
+Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit, uint64_t maxSteps)
+{
+    Dense d = toDense(st, bounds);
+    const CompiledRule rule = compileRule(st.options.rule);
+    const int64_t tc = rule.threshold;
+    int64_t overload = residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get());
+    uint64_t step = st.step0, steps = 0, updated = 0, visited = 0;
+    int quiet = 0;
+    size_t off[8];
+    for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
+    Result res;
+    const auto t0 = Clock::now();
+    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
+        const int p = int(step & 1);
+        uint64_t changedBlocks = 0;
+        for (int z = p; z + 1 < d.nz; z += 2)
+            for (int y = p; y + 1 < d.ny; y += 2) {
+                const size_t row = d.idx(0, y, z);
+                for (int x = p; x + 1 < d.nx; x += 2) {
+                    const size_t base = row + size_t(x);
+                    int32_t m[8];
+                    uint32_t valid = 0;
+                    for (int i = 0; i < 8; ++i) {
+                        m[i] = d.m[base + off[i]];
+                        valid |= uint32_t(!d.obs[base + off[i]]) << i;
+                    }
+                    ++visited;
+                    const BlockKey key{d.x0 + x, d.y0 + y, d.z0 + z, step, st.options.seed};
+                    int64_t out[8];
+                    const uint32_t ch = rules_internal::repartition(rule, 8, m, valid, key, out);
+                    if (!ch) continue;
+                    ++changedBlocks;
+                    for (int i = 0; i < 8; ++i) {
+                        if (!((ch >> i) & 1u)) continue;
+                        if (out[i] > INT32_MAX) throw Error("dense: overflow");
+                        if ((valid >> i) & 1u) overload += over(out[i], tc) - over(m[i], tc);
+                        d.m[base + off[i]] = int32_t(out[i]);
+                    }
+                }
+            }
+        updated += changedBlocks;
+        quiet = changedBlocks ? 0 : quiet + 1;
+        ++step;
+        ++steps;
+        const double el = since(t0);
+        if (el > 1.0 && el / double(steps) * double(std::max(refSteps, steps)) > limit && steps < refSteps) {
+            res.complete = false;
+            break;
+        }
+        if (steps > 4 * refSteps + 100) {
+            res.row.note = "ran past 4x vdbclay's steps";
+            break;
+        }
+    }
+    res.row.seconds = since(t0);
+    res.row.impl = "dense";
+    res.row.steps = steps;
+    res.row.visited = visited;
+    res.row.updated = updated;
+    if (res.complete) {
+        res.grid = fromDense(d);
+        res.row.hash = contentHash(*res.grid);
+    } else {
+        res.row.note = "estimated: " + std::to_string(steps) + " of " + std::to_string(refSteps) +
+                       " steps run, time extrapolated";
+        res.row.seconds = res.row.seconds / double(steps) * double(refSteps);
+    }
+    return res;
+}
+
+// ---- NAIVE OpenVDB baseline ----------------------------------------------------------------------
+Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSteps)
+{
+    Result res;
+    MassGridPtr g = st.mass->deepCopy();
+    const CompiledRule rule = compileRule(st.options.rule);
+    const int64_t tc = rule.threshold;
+    int64_t overload = residualOverload(*g, st.options.rule.threshold, st.obstacles.get());
+    auto obs = st.obstacles->getConstAccessor();
+    uint64_t step = st.step0, steps = 0, updated = 0, visited = 0;
+    int quiet = 0;
+    std::vector<Coord> blocks;
+    const auto t0 = Clock::now();
+    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
+        const int p = int(step & 1);
+        blocks.clear();
+        for (auto leaf = g->tree().cbeginLeaf(); leaf; ++leaf)
+            for (auto v = leaf->cbeginValueOn(); v; ++v) {
+                const Coord c = v.getCoord();
+                blocks.emplace_back(((c.x() - p) & ~1) + p, ((c.y() - p) & ~1) + p, ((c.z() - p) & ~1) + p);
+            }
+        std::sort(blocks.begin(), blocks.end());
+        blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+        auto acc = g->getAccessor();
+        uint64_t changedBlocks = 0;
+        for (const Coord& b : blocks) {
+            int32_t m[8];
+            uint32_t valid = 0;
+            Coord c[8];
+            for (int i = 0; i < 8; ++i) {
+                c[i] = b.offsetBy(i & 1, (i >> 1) & 1, i >> 2);
+                m[i] = acc.getValue(c[i]);
+                if (!obs.isValueOn(c[i])) valid |= 1u << i;
+            }
+            ++visited;
+            const BlockKey key{b.x(), b.y(), b.z(), step, st.options.seed};
+            int64_t out[8];
+            const uint32_t ch = repartitionBlock(rule, 8, m, valid, key, out);
+            if (!ch) continue;
+            ++changedBlocks;
+            for (int i = 0; i < 8; ++i) {
+                if (!((ch >> i) & 1u)) continue;
+                if (out[i] > INT32_MAX) throw Error("naive: overflow");
+                if ((valid >> i) & 1u) overload += over(out[i], tc) - over(m[i], tc);
+                acc.setValue(c[i], int32_t(out[i]));
+            }
+        }
+        updated += changedBlocks;
+        quiet = changedBlocks ? 0 : quiet + 1;
+        ++step;
+        ++steps;
+        const double el = since(t0);
+        if (el > 1.0 && el / double(steps) * double(std::max(refSteps, steps)) > limit && steps < refSteps) {
+            res.complete = false;
+            break;
+        }
+        if (steps > 4 * refSteps + 100) {
+            res.row.note = "ran past 4x vdbclay's steps";
+            break;
+        }
+    }
+    res.row.seconds = since(t0);
+    res.row.impl = "naive";
+    res.row.steps = steps;
+    res.row.visited = visited;
+    res.row.updated = updated;
+    if (res.complete) {
+        res.grid = g;
+        res.row.hash = contentHash(*g);
+    } else {
+        res.row.note = "estimated: " + std::to_string(steps) + " of " + std::to_string(refSteps) +
+                       " steps run, time extrapolated";
+        res.row.seconds = res.row.seconds / double(steps) * double(refSteps);
+    }
+    return res;
+}
+
+// ---- the press scene -----------------------------------------------------------------------------
+void press(const Options& opt, int n, std::vector<Row>& rows)
+{
+    const auto tSetup = Clock::now();
+    const State st = makePress(n);
+    std::fprintf(stderr, "\npress N=%d%s: set-up %.2f s, %llu clay voxels, overload %lld, step %llu\n", n,
+                 opt.pressSteps ? (" (first " + std::to_string(opt.pressSteps) + " steps)").c_str() : " (settle to rest)",
+                 since(tSetup), (unsigned long long)clayVoxelCount(*st.mass),
+                 (long long)residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()),
+                 (unsigned long long)st.step0);
+
+    // vdbclay, min of repeats per thread count.
+    std::vector<Row> vdb;
+    MassGridPtr finalGrid;
+    bool vdbComplete = true;
+    for (int t : opt.threads) {
+        Row best;
+        for (int r = 0; r < opt.repeats; ++r) {
+            Result res = runVdbclay(st, t, opt.vdbLimit, opt.pressSteps);
+            if (!res.complete) vdbComplete = false;
+            if (r == 0 || res.row.seconds < best.seconds) best = res.row;
+            if (!finalGrid) finalGrid = res.grid;
+            if (!res.complete || res.row.seconds > 10) break; // long runs: one is enough
+        }
+        best.scene = "press";
+        best.size = n;
+        vdb.push_back(best);
+    }
+    const uint64_t h = vdb.front().hash;
+    bool threadsAgree = true;
+    for (const Row& r : vdb) threadsAgree = threadsAgree && r.hash == h;
+    for (Row& r : vdb) r.identical = threadsAgree ? "yes" : "no";
+    const Row& ref = vdb.front(); // the first thread count (1 by default)
+
+    std::vector<Row> base;
+    if (opt.baselines && vdbComplete) {
+        const openvdb::CoordBBox bb = clayBounds(*finalGrid);
+        for (int which = 0; which < 2; ++which) {
+            Row best;
+            for (int r = 0; r < opt.repeats; ++r) {
+                Result res = which == 0 ? runDense(st, bb, ref.steps, opt.baselineLimit, opt.pressSteps)
+                                        : runNaive(st, ref.steps, opt.baselineLimit, opt.pressSteps);
+                if (r == 0 || res.row.seconds < best.seconds) best = res.row;
+                if (!res.complete || res.row.seconds > 10) break;
+            }
+            best.scene = "press";
+            best.size = n;
+            best.threads = 1;
+            best.identical = best.note.rfind("estimated", 0) == 0 ? "n/a" : (best.hash == h ? "yes" : "no");
+            base.push_back(best);
+        }
+    }
+
+    std::fprintf(stderr, "  %-8s %3s %8s %12s %12s %10s %9s %10s %s\n", "impl", "thr", "steps", "visited",
+                 "updated", "seconds", "ns/upd", "vs vdb t1", "identical");
+    auto line = [&](const Row& r) {
+        std::fprintf(stderr, "  %-8s %3d %8llu %12llu %12llu %10.3f %9.1f %9.2fx %s %s\n", r.impl.c_str(), r.threads,
+                     (unsigned long long)r.steps, (unsigned long long)r.visited, (unsigned long long)r.updated,
+                     r.seconds, r.updated ? 1e9 * r.seconds / double(r.updated) : 0.0, r.seconds / ref.seconds,
+                     r.identical.c_str(), r.note.c_str());
+    };
+    for (const Row& r : vdb) line(r);
+    for (const Row& r : base) line(r);
+    for (const Row& r : vdb)
+        std::fprintf(stderr, "  vdbclay t%d stages: gather %.3f repartition %.3f grow %.3f bookkeeping %.3f (sum %.3f of %.3f s)\n",
+                     r.threads, r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping,
+                     r.stages.total(), r.seconds);
+    if (vdb.size() > 1)
+        std::fprintf(stderr, "  speedup t%d -> t%d: %.2fx\n", vdb.front().threads, vdb.back().threads,
+                     vdb.front().seconds / vdb.back().seconds);
+    if (opt.baselines && !vdbComplete) std::fprintf(stderr, "  baselines skipped: vdbclay did not settle\n");
+    rows.insert(rows.end(), vdb.begin(), vdb.end());
+    rows.insert(rows.end(), base.begin(), base.end());
+}
+
+// ---- the stroke scene ----------------------------------------------------------------------------
+std::string strokeJson(int dia)
+{
+    const double r = dia / 2.0, c = dia / 2.0;
+    const double deg = 2.0 / (r + 4.0) * 180.0 / 3.14159265358979323846; // 2 voxels of arc per frame at the tool's centre
+    std::ostringstream js;
+    js.precision(10);
+    js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
+  "clay": [{"shape": "sphere", "center": [)" << c << "," << c << "," << c << "], \"radius\": " << r
+       << R"(, "mass": 950}],
+  "tools": [{"shape": "sphere", "center": [)" << c << "," << c + r + 7 << "," << c << R"(], "radius": 6,
+             "pivot": [)" << c << "," << c + 3 << "," << c << R"(],
+             "path": [{"translate": [0, -3, 0], "frames": 1}, {"rotate": [0, 0, )" << deg << R"(], "frames": 9}]}],
+  "settle": {"max_steps": 100000}})";
+    return js.str();
+}
+
+std::vector<Row> strokeChild(int dia, int threads)
+{
+    const auto tSetup = Clock::now();
+    const Scene scene = parseScene(strokeJson(dia), "<stroke " + std::to_string(dia) + ">", ".");
+    Sculptor s(scene, threads);
+    const double setup = since(tSetup);
+    std::vector<double> ms;
+    uint64_t steps = 0, updated = 0, visited = 0;
+    StageSeconds stages;
+    while (!s.done()) {
+        const auto t0 = Clock::now();
+        const FrameReport fr = s.runFrame();
+        ms.push_back(1e3 * since(t0));
+        steps += fr.settle.steps;
+        updated += fr.settle.blocksUpdated;
+        visited += fr.settle.blocksVisited;
+        stages.gather += fr.settle.seconds.gather;
+        stages.repartition += fr.settle.seconds.repartition;
+        stages.grow += fr.settle.seconds.grow;
+        stages.bookkeeping += fr.settle.seconds.bookkeeping;
+    }
+    std::vector<double> sorted = ms;
+    std::sort(sorted.begin(), sorted.end());
+    auto pct = [&](double q) {
+        // nearest-rank percentile
+        const size_t k = size_t(std::ceil(q * double(sorted.size())));
+        return sorted[std::min(sorted.size() - 1, k ? k - 1 : 0)];
+    };
+    Row r;
+    r.scene = "stroke";
+    r.size = dia;
+    r.impl = "vdbclay";
+    r.threads = threads;
+    for (double v : ms) r.seconds += v / 1e3;
+    r.steps = steps;
+    r.visited = visited;
+    r.updated = updated;
+    r.stages = stages;
+    r.medianMs = sorted.size() % 2 ? sorted[sorted.size() / 2]
+                                   : 0.5 * (sorted[sorted.size() / 2 - 1] + sorted[sorted.size() / 2]);
+    r.p95Ms = pct(0.95);
+    r.maxMs = sorted.back();
+    r.clayVoxels = clayVoxelCount(*s.mass());
+    r.gridBytes = s.mass()->memUsage();
+    r.maxrssMb = maxrssMb();
+    r.hash = contentHash(*s.mass());
+    r.note = "setup " + std::to_string(setup) + " s; frames ms:";
+    for (double v : ms) r.note += " " + std::to_string(int(std::lround(v)));
+    return {r};
+}
+
+/// Runs @a fn in a child process (its own ru_maxrss); its rows come back through a pipe.
+template<typename Fn>
+std::vector<Row> inChild(Fn fn, bool& ok)
+{
+    int fds[2];
+    if (pipe(fds) != 0) throw Error("pipe failed");
+    std::fflush(stdout);
+    std::fflush(stderr);
+    const pid_t pid = fork();
+    if (pid == 0) {
+        close(fds[0]);
+        int code = 0;
+        try {
+            std::vector<Row> rows = fn();
+            for (const Row& r : rows) {
+                // fixed binary layout would be fragile; send the fields we need as text
+                std::ostringstream os;
+                os << r.scene << '\t' << r.size << '\t' << r.impl << '\t' << r.threads << '\t' << r.seconds << '\t'
+                   << r.steps << '\t' << r.visited << '\t' << r.updated << '\t' << r.stages.gather << '\t'
+                   << r.stages.repartition << '\t' << r.stages.grow << '\t' << r.stages.bookkeeping << '\t'
+                   << r.medianMs << '\t' << r.p95Ms << '\t' << r.maxMs << '\t' << r.clayVoxels << '\t'
+                   << r.gridBytes << '\t' << r.maxrssMb << '\t' << r.hash << '\t' << r.note << '\n';
+                const std::string s = os.str();
+                if (write(fds[1], s.data(), s.size()) != ssize_t(s.size())) code = 3;
+            }
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "  child failed: %s\n", e.what());
+            code = 2;
+        }
+        close(fds[1]);
+        std::fflush(stderr);
+        _exit(code);
+    }
+    close(fds[1]);
+    std::string text;
+    char buf[4096];
+    ssize_t k;
+    while ((k = read(fds[0], buf, sizeof buf)) > 0) text.append(buf, size_t(k));
+    close(fds[0]);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+    std::vector<Row> rows;
+    std::istringstream is(text);
+    std::string ln;
+    while (std::getline(is, ln)) {
+        std::istringstream f(ln);
+        Row r;
+        std::string tok;
+        auto next = [&]() { std::getline(f, tok, '\t'); return tok; };
+        r.scene = next();
+        r.size = std::stoi(next());
+        r.impl = next();
+        r.threads = std::stoi(next());
+        r.seconds = std::stod(next());
+        r.steps = std::stoull(next());
+        r.visited = std::stoull(next());
+        r.updated = std::stoull(next());
+        r.stages.gather = std::stod(next());
+        r.stages.repartition = std::stod(next());
+        r.stages.grow = std::stod(next());
+        r.stages.bookkeeping = std::stod(next());
+        r.medianMs = std::stod(next());
+        r.p95Ms = std::stod(next());
+        r.maxMs = std::stod(next());
+        r.clayVoxels = std::stoull(next());
+        r.gridBytes = std::stoull(next());
+        r.maxrssMb = std::stod(next());
+        r.hash = std::stoull(next());
+        r.note = next();
+        rows.push_back(r);
+    }
+    return rows;
+}
+
+void stroke(const Options& opt, std::vector<Row>& rows)
+{
+    std::fprintf(stderr, "\nstroke: sphere of diameter D, tool radius 6, 10 frames\n");
+    std::fprintf(stderr, "  %5s %3s %9s %9s %9s %8s %10s %10s %8s %9s %s\n", "D", "thr", "median", "p95", "max",
+                 "steps", "updated", "clayvox", "B/vox", "rss MB", "identical");
+    std::vector<Row> all;
+    for (int dia : opt.stroke) {
+        std::vector<Row> mine;
+        for (int t : opt.threads) {
+            bool ok = false;
+            std::vector<Row> got = inChild([&] { return strokeChild(dia, t); }, ok);
+            if (!ok || got.empty()) {
+                std::fprintf(stderr, "  D=%d threads=%d: failed (see above)\n", dia, t);
+                continue;
+            }
+            mine.insert(mine.end(), got.begin(), got.end());
+        }
+        bool agree = true;
+        for (const Row& r : mine) agree = agree && r.hash == mine.front().hash;
+        for (Row& r : mine) {
+            r.identical = agree ? "yes" : "no";
+            std::fprintf(stderr, "  %5d %3d %8.2fms %8.2fms %8.2fms %8llu %10llu %10llu %8.2f %9.1f %s\n", r.size,
+                         r.threads, r.medianMs, r.p95Ms, r.maxMs, (unsigned long long)r.steps,
+                         (unsigned long long)r.updated, (unsigned long long)r.clayVoxels,
+                         double(r.gridBytes) / double(r.clayVoxels), r.maxrssMb, r.identical.c_str());
+            std::fprintf(stderr, "        stages s: gather %.4f repartition %.4f grow %.4f bookkeeping %.4f; %s\n",
+                         r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping, r.note.c_str());
+        }
+        all.insert(all.end(), mine.begin(), mine.end());
+    }
+    // Flatness: median frame time relative to the smallest D, per thread count.
+    for (int t : opt.threads) {
+        const Row* first = nullptr;
+        for (const Row& r : all)
+            if (r.threads == t) {
+                if (!first) first = &r;
+                std::fprintf(stderr, "  threads %d: D=%d median / D=%d median = %.2fx\n", t, r.size, first->size,
+                             r.medianMs / first->medianMs);
+            }
+    }
+    rows.insert(rows.end(), all.begin(), all.end());
+}
+
+int usage(const char* argv0)
+{
+    std::fprintf(stderr,
+                 "usage: %s [--press 32,64,128] [--stroke 64,128,256,512] [--threads 1,2] [--repeats 3]\n"
+                 "          [--baseline-limit 60] [--vdb-limit 60] [--no-baselines] [--csv FILE]\n"
+                 "          [--press-steps K]  (press: K steps only instead of settling to rest)\n"
+                 "  a list may be 'none'\n",
+                 argv0);
+    return 2;
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    Options opt;
+    try {
+        for (int i = 1; i < argc; ++i) {
+            const std::string a = argv[i];
+            auto val = [&]() -> std::string {
+                if (i + 1 >= argc) throw std::runtime_error("missing value after " + a);
+                return argv[++i];
+            };
+            if (a == "--press") opt.press = parseList(val());
+            else if (a == "--stroke") opt.stroke = parseList(val());
+            else if (a == "--threads") opt.threads = parseList(val());
+            else if (a == "--repeats") opt.repeats = std::max(1, std::stoi(val()));
+            else if (a == "--baseline-limit") opt.baselineLimit = std::stod(val());
+            else if (a == "--vdb-limit") opt.vdbLimit = std::stod(val());
+            else if (a == "--press-steps") opt.pressSteps = std::stoull(val());
+            else if (a == "--no-baselines") opt.baselines = false;
+            else if (a == "--csv") opt.csv = val();
+            else if (a == "-h" || a == "--help") return usage(argv[0]);
+            else throw std::runtime_error("unknown argument " + a);
+        }
+        if (opt.threads.empty()) throw std::runtime_error("--threads needs at least one count");
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "bench_scenes: %s\n", e.what());
+        return usage(argv[0]);
+    }
+
+    openvdb::initialize();
+    std::vector<Row> rows;
+    try {
+        for (int n : opt.press) press(opt, n, rows);
+        if (!opt.stroke.empty()) stroke(opt, rows);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "bench_scenes: %s\n", e.what());
+        return 1;
+    }
+    FILE* out = opt.csv.empty() ? stdout : std::fopen(opt.csv.c_str(), "w");
+    if (!out) {
+        std::fprintf(stderr, "bench_scenes: cannot write %s\n", opt.csv.c_str());
+        return 1;
+    }
+    std::fprintf(out, "%s\n", kHeader);
+    for (const Row& r : rows) std::fprintf(out, "%s\n", r.csv().c_str());
+    if (out != stdout) std::fclose(out);
+    return 0;
+}
