@@ -272,7 +272,8 @@ struct Automaton::Impl {
     int64_t overload = 0;
     int64_t maxBound = 0;     // upper bound of the largest cell value
     int quietSteps = 0;       // consecutive steps that changed nothing
-    int fullScanSteps = 0;    // upcoming steps that must examine every leaf
+    int fullScanSteps = 0;    // upcoming steps that must examine every leaf holding an over cell
+    std::vector<Coord> hotLeaves; // those leaves, found by the last resync()
     struct Pending {
         Box box;
         int steps;
@@ -315,7 +316,8 @@ struct Automaton::Impl {
     struct Scan {
         int64_t mass = 0, overload = 0, maxValue = 0;
     };
-    Scan scanLeaves(const Box* region, const char* context)
+    /// When @a hot is given, the origins of the leaves holding an over cell are appended to it.
+    Scan scanLeaves(const Box* region, const char* context, std::vector<Coord>* hot = nullptr)
     {
         Scan s;
         const int64_t tc = rule.threshold;
@@ -323,6 +325,7 @@ struct Automaton::Impl {
         std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
         if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
         auto visit = [&](MassLeaf& leaf) {
+            const int64_t overloadBefore = s.overload;
             const ObsLeaf* ol = ot ? ot->probeConstLeaf(leaf.origin()) : nullptr;
             const bool tileObs = ot && !ol && ot->isValueOn(leaf.origin());
             int32_t* d = leaf.buffer().data();
@@ -347,6 +350,7 @@ struct Automaton::Impl {
                 const bool isObs = ol ? ol->isValueOn(i) : tileObs;
                 if (!isObs && v > tc) s.overload += v - tc;
             }
+            if (hot && s.overload != overloadBefore) hot->push_back(leaf.origin());
         };
         if (!region) {
             for (auto it = tree().beginLeaf(); it; ++it) visit(*it);
@@ -382,7 +386,8 @@ struct Automaton::Impl {
                             std::to_string(*it) + "; voxelize it or make it active");
             }
         }
-        const Scan s = scanLeaves(nullptr, "mass grid");
+        hotLeaves.clear();
+        const Scan s = scanLeaves(nullptr, "mass grid", &hotLeaves);
         totalMass = s.mass;
         overload = s.overload;
         maxBound = s.maxValue;
@@ -400,29 +405,33 @@ struct Automaton::Impl {
         else dilateAcrossPhase(a, anchorPhase, is3D(), contrib);
     }
 
+    /// Every block overlapping an edited region (grown by one voxel).
+    void addPending(const Pending& p, int phase)
+    {
+        const uint64_t full = fullMask(is3D());
+        const Coord lo((p.box.min[0] - 1) & ~7, (p.box.min[1] - 1) & ~7, is3D() ? ((p.box.min[2] - 1) & ~7) : 0);
+        const int zmax = is3D() ? p.box.max[2] + 1 : 0;
+        for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8) {
+            for (int y = lo.y(); y <= p.box.max[1] + 1; y += 8) {
+                for (int z = lo.z(); z <= zmax; z += 8) addCandidates(Anchor{Coord(x, y, z), full}, 0, phase);
+            }
+        }
+    }
+
     void gather(int phase)
     {
         contrib.clear();
         const uint64_t full = fullMask(is3D());
         if (fullScanSteps > 0) {
-            for (auto it = tree().cbeginLeaf(); it; ++it) {
-                addCandidates(Anchor{it->origin(), full}, 0, phase);
-            }
+            // After resync() only blocks holding an over cell can change, and those cells lie in
+            // hotLeaves (an over cell that moved at the first step is followed by changedPrev).
+            for (const Coord& o : hotLeaves) addCandidates(Anchor{o, full}, 0, phase);
+            for (const Anchor& a : changedPrev) addCandidates(a, 1 - phase, phase);
+            for (const Pending& p : pending) addPending(p, phase);
         } else {
             for (const Anchor& a : changedPrev2) contrib.push_back(a);
             for (const Anchor& a : changedPrev) addCandidates(a, 1 - phase, phase);
-            for (const Pending& p : pending) {
-                const Coord lo((p.box.min[0] - 1) & ~7, (p.box.min[1] - 1) & ~7,
-                               is3D() ? ((p.box.min[2] - 1) & ~7) : 0);
-                const int zmax = is3D() ? p.box.max[2] + 1 : 0;
-                for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8) {
-                    for (int y = lo.y(); y <= p.box.max[1] + 1; y += 8) {
-                        for (int z = lo.z(); z <= zmax; z += 8) {
-                            addCandidates(Anchor{Coord(x, y, z), full}, 0, phase);
-                        }
-                    }
-                }
-            }
+            for (const Pending& p : pending) addPending(p, phase);
         }
         std::sort(contrib.begin(), contrib.end(),
                   [](const Anchor& a, const Anchor& b) { return layerLess(a.origin, b.origin); });
@@ -802,11 +811,7 @@ void Automaton::setSeed(uint64_t seed) { mImpl->opts.seed = seed; }
 void Automaton::setStepCount(uint64_t steps)
 {
     mImpl->stepCount = steps;
-    mImpl->fullScanSteps = 2;
-    mImpl->pending.clear();
-    mImpl->changedPrev.clear();
-    mImpl->changedPrev2.clear();
-    mImpl->quietSteps = 0;
+    mImpl->resync();
 }
 void Automaton::setThreads(int threads) { mImpl->setThreads(threads); }
 const AutomatonOptions& Automaton::options() const { return mImpl->opts; }

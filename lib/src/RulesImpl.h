@@ -46,11 +46,19 @@ inline void giveRemainder(int64_t r, uint32_t under, int n, int64_t tc, uint64_t
     }
 }
 
+/// a / b for non-negative operands, in 32 bits when both fit (several times cheaper than a 64-bit
+/// division on common x86 cores, and the usual case: masses around Tc = 1000).
+inline int64_t divide(int64_t a, int64_t b)
+{
+    if (uint64_t(a) <= UINT32_MAX && uint64_t(b) <= UINT32_MAX) return int64_t(uint32_t(a) / uint32_t(b));
+    return int64_t(uint64_t(a) / uint64_t(b));
+}
+
 /// Shares @a amount equally among the cells of @a under (nu of them), remainder by hash.
 inline void shareEqually(int64_t amount, uint32_t under, int nu, int n, int64_t tc,
                          const BlockKey& key, int64_t* out)
 {
-    const int64_t share = amount / nu;
+    const int64_t share = divide(amount, nu);
     const int64_t r = amount - share * nu;
     for (int i = 0; i < n; ++i) {
         if ((under >> i) & 1u) out[i] += share;
@@ -58,19 +66,26 @@ inline void shareEqually(int64_t amount, uint32_t under, int nu, int n, int64_t 
     if (r) giveRemainder(r, under, n, tc, hashKey(key), out);
 }
 
-inline uint32_t repartition(const CompiledRule& rule, int n, const int32_t* mass, uint32_t valid,
-                            const BlockKey& key, int64_t* out)
+// Forced inline: the kernel calls this once per candidate block; as a call it was 61 % of a
+// profile of the press benchmark (docs/PERFORMANCE.md).
+__attribute__((always_inline)) inline uint32_t repartition(const CompiledRule& rule, int n,
+                                                           const int32_t* mass, uint32_t valid,
+                                                           const BlockKey& key, int64_t* out)
 {
     const int64_t tc = rule.threshold;
     uint32_t over = 0, under = 0;
+    int nu = 0;
     for (int i = 0; i < n; ++i) {
         out[i] = mass[i];
         if (!((valid >> i) & 1u)) continue;
-        if (mass[i] > tc) over |= 1u << i;
-        else under |= 1u << i;
+        if (mass[i] > tc) {
+            over |= 1u << i;
+        } else {
+            under |= 1u << i;
+            ++nu;
+        }
     }
     if (!over || !under) return 0;
-    const int nu = __builtin_popcount(under);
 
     switch (rule.rule) {
     case Rule::Arata: {
@@ -146,7 +161,7 @@ inline uint32_t repartition(const CompiledRule& rule, int n, const int32_t* mass
             for (int i = 0; i < n; ++i) {
                 if (!((under >> i) & 1u)) continue;
                 const int64_t room = tc - out[i];
-                const int64_t share = int64_t((uint64_t(e) * uint64_t(room)) / uint64_t(a));
+                const int64_t share = divide(int64_t(uint64_t(e) * uint64_t(room)), a);
                 out[i] += share;
                 given += share;
             }
