@@ -162,6 +162,39 @@ struct Result {
     bool complete = true;
 };
 
+/// After each baseline step: true when the run must stop, either because its projected time exceeds
+/// @a limit before it reaches vdbclay's step count (then res.complete = false and its time is
+/// extrapolated), or because it ran far past vdbclay's steps.
+bool baselineMustStop(Result& res, uint64_t steps, uint64_t refSteps, double elapsed, double limit)
+{
+    if (elapsed > 1.0 && elapsed / double(steps) * double(std::max(refSteps, steps)) > limit &&
+        steps < refSteps) {
+        res.complete = false;
+        return true;
+    }
+    if (steps > 4 * refSteps + 100) {
+        res.row.note = "ran past 4x vdbclay's steps";
+        return true;
+    }
+    return false;
+}
+
+/// Fills a baseline's row; an incomplete run's time is extrapolated to vdbclay's step count.
+void finishBaseline(Result& res, const char* impl, double seconds, uint64_t steps, uint64_t visited,
+                    uint64_t updated, uint64_t refSteps)
+{
+    res.row.seconds = seconds;
+    res.row.impl = impl;
+    res.row.steps = steps;
+    res.row.visited = visited;
+    res.row.updated = updated;
+    if (!res.complete) {
+        res.row.note = "estimated: " + std::to_string(steps) + " of " + std::to_string(refSteps) +
+                       " steps run, time extrapolated";
+        res.row.seconds = seconds / double(steps) * double(refSteps);
+    }
+}
+
 Result runVdbclay(const State& st, int threads, double limit, uint64_t maxSteps)
 {
     Result res;
@@ -303,28 +336,12 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
         quiet = changedBlocks ? 0 : quiet + 1;
         ++step;
         ++steps;
-        const double el = since(t0);
-        if (el > 1.0 && el / double(steps) * double(std::max(refSteps, steps)) > limit && steps < refSteps) {
-            res.complete = false;
-            break;
-        }
-        if (steps > 4 * refSteps + 100) {
-            res.row.note = "ran past 4x vdbclay's steps";
-            break;
-        }
+        if (baselineMustStop(res, steps, refSteps, since(t0), limit)) break;
     }
-    res.row.seconds = since(t0);
-    res.row.impl = "dense";
-    res.row.steps = steps;
-    res.row.visited = visited;
-    res.row.updated = updated;
+    finishBaseline(res, "dense", since(t0), steps, visited, updated, refSteps);
     if (res.complete) {
         res.grid = fromDense(d);
         res.row.hash = contentHash(*res.grid);
-    } else {
-        res.row.note = "estimated: " + std::to_string(steps) + " of " + std::to_string(refSteps) +
-                       " steps run, time extrapolated";
-        res.row.seconds = res.row.seconds / double(steps) * double(refSteps);
     }
     return res;
 }
@@ -380,28 +397,12 @@ Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSt
         quiet = changedBlocks ? 0 : quiet + 1;
         ++step;
         ++steps;
-        const double el = since(t0);
-        if (el > 1.0 && el / double(steps) * double(std::max(refSteps, steps)) > limit && steps < refSteps) {
-            res.complete = false;
-            break;
-        }
-        if (steps > 4 * refSteps + 100) {
-            res.row.note = "ran past 4x vdbclay's steps";
-            break;
-        }
+        if (baselineMustStop(res, steps, refSteps, since(t0), limit)) break;
     }
-    res.row.seconds = since(t0);
-    res.row.impl = "naive";
-    res.row.steps = steps;
-    res.row.visited = visited;
-    res.row.updated = updated;
+    finishBaseline(res, "naive", since(t0), steps, visited, updated, refSteps);
     if (res.complete) {
         res.grid = g;
-        res.row.hash = contentHash(*g);
-    } else {
-        res.row.note = "estimated: " + std::to_string(steps) + " of " + std::to_string(refSteps) +
-                       " steps run, time extrapolated";
-        res.row.seconds = res.row.seconds / double(steps) * double(refSteps);
+        res.row.hash = contentHash(*res.grid);
     }
     return res;
 }
