@@ -6,6 +6,7 @@
 #   libpng-dev:             PNG output for `vdbclay render`.
 #   libcli11-dev:           header-only command-line parsing for the CLI (subcommands, --help).
 #   libopenvdb-tools:       vdb_print, used by the tests to check our .vdb files open in OpenVDB's tools.
+#   curl, xz-utils:         scripts/test-tsan.sh fetches Debian's oneTBB source to build it with TSan.
 set -euo pipefail
 
 PKGS=(
@@ -13,6 +14,7 @@ PKGS=(
   libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
   libgtest-dev googletest
   nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
+  curl ca-certificates xz-utils
 )
 
 missing=()
