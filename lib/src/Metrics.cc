@@ -1,8 +1,21 @@
 #include "vdbclay/Metrics.h"
 
+#include "vdbclay/Shapes.h"
+#include "vdbclay/Types.h"
+
 #include "RulesImpl.h"
 
 #include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <array>
+#include <climits>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace vdbclay {
 
@@ -64,6 +77,258 @@ uint64_t contentHash(const MassGrid& mass)
         ++count;
     }
     return rules_internal::mix64(h ^ rules_internal::mix64(count));
+}
+
+// ---- Accuracy metrics ---------------------------------------------------------------------------
+
+namespace {
+
+using openvdb::Coord;
+
+void checkArgs(const char* what, int32_t threshold, int dims)
+{
+    if (threshold <= 0) {
+        throw Error(std::string(what) + ": the threshold Tc must be > 0, not " + std::to_string(threshold));
+    }
+    if (dims != 2 && dims != 3) {
+        throw Error(std::string(what) + ": dimensions must be 2 or 3, not " + std::to_string(dims));
+    }
+}
+
+/// The face neighbour offsets: the first 4 in 2D, all 6 in 3D.
+const Coord kFaces[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
+                         Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
+int faceCount(int dims) { return dims == 3 ? 6 : 4; }
+
+/// 2 m >= Tc, in 64 bits.
+inline bool occupied(int32_t m, int32_t threshold) { return 2 * int64_t(m) >= int64_t(threshold); }
+
+/// Calls @a fn(coord, mass) for every voxel holding clay; refuses nonzero tiles.
+template<typename Fn>
+void forEachClayVoxel(const MassGrid& mass, const char* what, Fn&& fn)
+{
+    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
+        if (*it == 0) continue;
+        if (!it.isVoxelValue()) throw Error(std::string(what) + ": the grid holds a nonzero tile; voxelize it first");
+        fn(it.getCoord(), *it);
+    }
+}
+
+} // namespace
+
+ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims)
+{
+    checkArgs("measureClay", threshold, dims);
+    ClayMetrics r;
+    auto acc = mass.getConstAccessor();
+    std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
+    if (obstacles) oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+    const int faces = faceCount(dims);
+    auto isInterior = [&](const Coord& c) {
+        if (dims == 2 && c.z() != 0) return false;
+        if (oacc && oacc->isValueOn(c)) return false;
+        for (int f = 0; f < faces; ++f) {
+            if (acc.getValue(c + kFaces[f]) == 0) return false;
+        }
+        return true;
+    };
+
+    // First pass: the sums; the interior mass sum is exact in 64 bits.
+    int64_t interiorSum = 0;
+    forEachClayVoxel(mass, "measureClay", [&](const Coord& c, int32_t m) {
+        r.mass += m;
+        r.maxCell = std::max(r.maxCell, m);
+        ++r.clayVoxels;
+        if (occupied(m, threshold)) ++r.occupiedVoxels;
+        const bool obstacle = oacc && oacc->isValueOn(c);
+        if (!obstacle && m > threshold) r.residualOverload += int64_t(m) - threshold;
+        if (isInterior(c)) {
+            ++r.interiorCells;
+            interiorSum += m;
+        }
+    });
+    if (r.mass > 0) {
+        const int64_t cellsAtRest = (r.mass + threshold - 1) / threshold;
+        r.compaction = double(r.clayVoxels) / double(cellsAtRest);
+    }
+    if (r.interiorCells == 0) return r;
+
+    // Second pass: the spread about the mean (two passes: no cancellation in a sum of squares).
+    const double mean = double(interiorSum) / double(r.interiorCells);
+    double squares = 0;
+    forEachClayVoxel(mass, "measureClay", [&](const Coord& c, int32_t m) {
+        if (!isInterior(c)) return;
+        const double d = double(m) - mean;
+        squares += d * d;
+    });
+    r.interiorMeanDensity = mean / double(threshold);
+    r.heterogeneityCV = std::sqrt(squares / double(r.interiorCells)) / mean;
+    return r;
+}
+
+namespace {
+
+using Point = std::array<int32_t, 3>;
+
+int64_t squaredDistance(const Point& a, const Point& b)
+{
+    int64_t s = 0;
+    for (int i = 0; i < 3; ++i) {
+        const int64_t d = int64_t(a[i]) - int64_t(b[i]);
+        s += d * d;
+    }
+    return s;
+}
+
+/// A static 3D tree for exact nearest-neighbour queries on voxel centres (integer distances).
+class PointTree {
+public:
+    explicit PointTree(std::vector<Point> points) : mPoints(std::move(points)) { build(0, mPoints.size(), 0); }
+
+    /// The squared distance from @a q to the nearest point; the tree must not be empty.
+    int64_t nearest(const Point& q) const
+    {
+        int64_t best = INT64_MAX;
+        search(0, mPoints.size(), 0, q, best);
+        return best;
+    }
+
+private:
+    // The median of [lo, hi) along axis (depth % 3) sits at the middle; each half is a subtree.
+    void build(size_t lo, size_t hi, int depth)
+    {
+        if (hi - lo <= 1) return;
+        const size_t mid = lo + (hi - lo) / 2;
+        const int axis = depth % 3;
+        std::nth_element(mPoints.begin() + lo, mPoints.begin() + mid, mPoints.begin() + hi,
+                         [axis](const Point& a, const Point& b) { return a[axis] < b[axis]; });
+        build(lo, mid, depth + 1);
+        build(mid + 1, hi, depth + 1);
+    }
+
+    void search(size_t lo, size_t hi, int depth, const Point& q, int64_t& best) const
+    {
+        if (lo >= hi) return;
+        const size_t mid = lo + (hi - lo) / 2;
+        const Point& p = mPoints[mid];
+        best = std::min(best, squaredDistance(p, q));
+        const int axis = depth % 3;
+        const int64_t d = int64_t(q[axis]) - int64_t(p[axis]);
+        // Near side first; the far side only if the splitting plane is closer than the best.
+        if (d < 0) {
+            search(lo, mid, depth + 1, q, best);
+            if (d * d < best) search(mid + 1, hi, depth + 1, q, best);
+        } else {
+            search(mid + 1, hi, depth + 1, q, best);
+            if (d * d < best) search(lo, mid, depth + 1, q, best);
+        }
+    }
+
+    std::vector<Point> mPoints;
+};
+
+/// The surface voxels of the active set of @a set: active voxels with an inactive face neighbour.
+std::vector<Point> surfaceVoxels(const openvdb::MaskGrid& set, int dims)
+{
+    std::vector<Point> out;
+    auto acc = set.getConstAccessor();
+    const int faces = faceCount(dims);
+    for (auto it = set.tree().cbeginValueOn(); it; ++it) {
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box); // a voxel, or an active tile of the mask
+        for (auto c = box.begin(); c; ++c) {
+            for (int f = 0; f < faces; ++f) {
+                if (!acc.isValueOn(*c + kFaces[f])) {
+                    const Coord v = *c;
+                    out.push_back(Point{{v.x(), v.y(), v.z()}});
+                    break;
+                }
+            }
+        }
+    }
+    return out;
+}
+
+/// Sum and maximum over @a from of the distance to the nearest point of @a to (not empty).
+void accumulateDistances(const std::vector<Point>& from, const PointTree& to, double& sum, double& max)
+{
+    for (const Point& p : from) {
+        const double d = std::sqrt(double(to.nearest(p)));
+        sum += d;
+        max = std::max(max, d);
+    }
+}
+
+openvdb::MaskGrid::Ptr occupiedSet(const MassGrid& mass, int32_t threshold, int dims, const char* what)
+{
+    auto set = openvdb::MaskGrid::create(false);
+    auto acc = set->getAccessor();
+    forEachClayVoxel(mass, what, [&](const Coord& c, int32_t m) {
+        if (dims == 2 && c.z() != 0) return;
+        if (occupied(m, threshold)) acc.setValueOn(c);
+    });
+    return set;
+}
+
+ShapeError compareSets(const openvdb::MaskGrid& clay, const openvdb::MaskGrid& reference, int dims)
+{
+    ShapeError e;
+    e.clayVoxels = clay.tree().activeVoxelCount();
+    e.referenceVoxels = reference.tree().activeVoxelCount();
+    openvdb::MaskTree both(clay.tree());
+    both.topologyIntersection(reference.tree());
+    e.intersection = both.activeVoxelCount();
+    e.unionVoxels = e.clayVoxels + e.referenceVoxels - e.intersection;
+    e.iou = e.unionVoxels == 0 ? 1.0 : double(e.intersection) / double(e.unionVoxels);
+
+    std::vector<Point> a = surfaceVoxels(clay, dims), b = surfaceVoxels(reference, dims);
+    e.claySurface = a.size();
+    e.referenceSurface = b.size();
+    if (a.empty() && b.empty()) return e;
+    if (a.empty() || b.empty()) {
+        e.meanSurfaceDistance = e.maxSurfaceDistance = std::numeric_limits<double>::infinity();
+        return e;
+    }
+    double sum = 0, max = 0;
+    {
+        const PointTree tb(b);
+        accumulateDistances(a, tb, sum, max);
+    }
+    const PointTree ta(std::move(a));
+    accumulateDistances(b, ta, sum, max);
+    e.meanSurfaceDistance = sum / double(e.claySurface + e.referenceSurface);
+    e.maxSurfaceDistance = max;
+    return e;
+}
+
+} // namespace
+
+ShapeError compareShapes(const MassGrid& clay, int32_t threshold, const MassGrid& reference,
+                         int32_t referenceThreshold, int dims)
+{
+    checkArgs("compareShapes", threshold, dims);
+    checkArgs("compareShapes (reference)", referenceThreshold, dims);
+    return compareSets(*occupiedSet(clay, threshold, dims, "compareShapes"),
+                       *occupiedSet(reference, referenceThreshold, dims, "compareShapes (reference)"), dims);
+}
+
+ShapeError compareShapes(const MassGrid& clay, int32_t threshold, const Shape& reference, int dims)
+{
+    checkArgs("compareShapes", threshold, dims);
+    auto ref = openvdb::MaskGrid::create(false);
+    Box b = reference.bounds();
+    if (dims == 2) {
+        b.min[2] = std::max(b.min[2], 0);
+        b.max[2] = std::min(b.max[2], 0);
+    }
+    if (!b.empty()) {
+        auto acc = ref->getAccessor();
+        for (int32_t x = b.min[0]; x <= b.max[0]; ++x)
+            for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
+                for (int32_t z = b.min[2]; z <= b.max[2]; ++z)
+                    if (reference.distance(Vec3{{double(x), double(y), double(z)}}) < 0) acc.setValueOn(Coord(x, y, z));
+    }
+    return compareSets(*occupiedSet(clay, threshold, dims, "compareShapes"), *ref, dims);
 }
 
 } // namespace vdbclay

@@ -1,0 +1,279 @@
+// Accuracy: the metrics of Metrics.h on hand-built grids (exact expectations), then the hard cases
+// of the accuracy issue, each with its expected outcome written in it.
+#include <vdbclay/Automaton.h>
+#include <vdbclay/IO.h>
+#include <vdbclay/Metrics.h>
+#include <vdbclay/Shapes.h>
+
+#include <openvdb/openvdb.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+using namespace vdbclay;
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+namespace {
+
+class Accuracy : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() { openvdb::initialize(); }
+};
+
+/// A mass grid with @a m in every voxel of [lo, hi].
+openvdb::Int32Grid::Ptr boxGrid(const Coord& lo, const Coord& hi, int32_t m)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    g->tree().fill(CoordBBox(lo, hi), m, true);
+    g->tree().voxelizeActiveTiles();
+    return g;
+}
+
+/// Expects @a fn to throw an Error whose message contains @a needle.
+template<typename Fn>
+void expectError(Fn&& fn, const std::string& needle)
+{
+    try {
+        fn();
+        ADD_FAILURE() << "no error; expected one containing \"" << needle << "\"";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+}
+
+} // namespace
+
+// ---- measureClay --------------------------------------------------------------------------------
+
+TEST_F(Accuracy, FullCubeOfThreeHasOneInteriorCellNoSpreadAndIsCompact)
+{
+    const auto g = boxGrid(Coord(0, 0, 0), Coord(2, 2, 2), 100);
+    const ClayMetrics m = measureClay(*g, 100, nullptr, 3);
+    EXPECT_EQ(m.mass, 2700);
+    EXPECT_EQ(m.residualOverload, 0);
+    EXPECT_EQ(m.maxCell, 100);
+    EXPECT_EQ(m.clayVoxels, 27u);
+    EXPECT_EQ(m.occupiedVoxels, 27u);
+    EXPECT_EQ(m.interiorCells, 1u);
+    EXPECT_EQ(m.interiorMeanDensity, 1.0);
+    EXPECT_EQ(m.heterogeneityCV, 0.0);
+    EXPECT_EQ(m.compaction, 1.0);
+}
+
+TEST_F(Accuracy, InteriorIn2DUsesTheFourNeighboursInTheZ0Layer)
+{
+    const auto g = boxGrid(Coord(0, 0, 0), Coord(3, 2, 0), 7); // 4 x 3 square
+    const ClayMetrics m = measureClay(*g, 10, nullptr, 2);
+    EXPECT_EQ(m.interiorCells, 2u); // (1,1) and (2,1)
+    EXPECT_EQ(m.clayVoxels, 12u);
+    // 84 units in cells of 10: at least 9 cells; 12 used.
+    EXPECT_EQ(m.compaction, 12.0 / 9.0);
+    // The same square read as 3D has no interior cell (nothing above or below).
+    EXPECT_EQ(measureClay(*g, 10, nullptr, 3).interiorCells, 0u);
+}
+
+TEST_F(Accuracy, HeterogeneityIsTheCoefficientOfVariationOverInteriorCells)
+{
+    // 3 x 3 x 4: interior cells (1,1,1) and (1,1,2). They hold 60 and 100: mean 80, sd 20, CV 1/4.
+    auto g = boxGrid(Coord(0, 0, 0), Coord(2, 2, 3), 100);
+    g->tree().setValue(Coord(1, 1, 1), 60);
+    // A surface cell's value does not enter the CV.
+    g->tree().setValue(Coord(0, 0, 0), 1);
+    const ClayMetrics m = measureClay(*g, 100, nullptr, 3);
+    EXPECT_EQ(m.interiorCells, 2u);
+    EXPECT_EQ(m.interiorMeanDensity, 0.8);
+    EXPECT_EQ(m.heterogeneityCV, 0.25);
+    EXPECT_EQ(m.mass, 34 * 100 + 60 + 1);
+    // 3461 units: at least 35 cells; 36 used.
+    EXPECT_EQ(m.compaction, 36.0 / 35.0);
+    EXPECT_EQ(m.occupiedVoxels, 35u); // (0,0,0) holds 1 < Tc / 2
+}
+
+TEST_F(Accuracy, OverloadCompactionAndOccupancyAtTheHalfThreshold)
+{
+    // Eight cells of Tc / 2 = 50: occupied (2 m >= Tc), 400 units fit in 4 cells: compaction 2.
+    auto g = boxGrid(Coord(0, 0, 0), Coord(1, 1, 1), 50);
+    ClayMetrics m = measureClay(*g, 100, nullptr, 3);
+    EXPECT_EQ(m.occupiedVoxels, 8u);
+    EXPECT_EQ(m.compaction, 2.0);
+    EXPECT_EQ(m.interiorCells, 0u);
+    EXPECT_EQ(m.heterogeneityCV, 0.0);
+    // Odd Tc: 2 x 50 = 100 < 101, not occupied.
+    EXPECT_EQ(measureClay(*g, 101, nullptr, 3).occupiedVoxels, 0u);
+    // Everything in one cell: 400 at Tc 100 is 300 over; 1 cell against 4: compaction 1/4.
+    auto one = boxGrid(Coord(5, 5, 5), Coord(5, 5, 5), 400);
+    m = measureClay(*one, 100, nullptr, 3);
+    EXPECT_EQ(m.residualOverload, 300);
+    EXPECT_EQ(m.maxCell, 400);
+    EXPECT_EQ(m.compaction, 0.25);
+}
+
+TEST_F(Accuracy, ObstacleCellsAreNeverInteriorAndCarryNoOverload)
+{
+    auto g = boxGrid(Coord(0, 0, 0), Coord(2, 2, 2), 100);
+    g->tree().setValue(Coord(1, 1, 1), 500);
+    g->tree().setValue(Coord(0, 0, 0), 300);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().setValueOn(Coord(1, 1, 1));
+    const ClayMetrics m = measureClay(*g, 100, obs.get(), 3);
+    EXPECT_EQ(m.interiorCells, 0u);
+    EXPECT_EQ(m.residualOverload, 200); // (0,0,0) only; (1,1,1) is an obstacle
+    EXPECT_EQ(m.mass, 25 * 100 + 500 + 300);
+    EXPECT_EQ(measureClay(*g, 100, nullptr, 3).residualOverload, 600);
+}
+
+TEST_F(Accuracy, EmptyGridMeasuresZeroAndBadArgumentsAreRefused)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    const ClayMetrics m = measureClay(*g, 100, nullptr, 3);
+    EXPECT_EQ(m.mass, 0);
+    EXPECT_EQ(m.clayVoxels, 0u);
+    EXPECT_EQ(m.compaction, 0.0);
+    EXPECT_EQ(m.heterogeneityCV, 0.0);
+    expectError([&] { measureClay(*g, 0, nullptr, 3); }, "threshold Tc must be > 0");
+    expectError([&] { measureClay(*g, 100, nullptr, 4); }, "dimensions must be 2 or 3");
+    g->tree().addTile(1, Coord(0, 0, 0), 5, true);
+    expectError([&] { measureClay(*g, 100, nullptr, 3); }, "nonzero tile");
+}
+
+// ---- compareShapes ------------------------------------------------------------------------------
+
+TEST_F(Accuracy, IdenticalShapesHaveIoUOneAndNoSurfaceDistance)
+{
+    const auto a = boxGrid(Coord(0, 0, 0), Coord(3, 3, 3), 100);
+    const ShapeError e = compareShapes(*a, 100, *a, 100, 3);
+    EXPECT_EQ(e.iou, 1.0);
+    EXPECT_EQ(e.intersection, 64u);
+    EXPECT_EQ(e.claySurface, 56u); // 64 - the 2^3 inside
+    EXPECT_EQ(e.meanSurfaceDistance, 0.0);
+    EXPECT_EQ(e.maxSurfaceDistance, 0.0);
+    // The same box as an analytic shape, rasterised on the voxels.
+    const ShapeError s = compareShapes(*a, 100, *makeBox({{0, 0, 0}}, {{3, 3, 3}}), 3);
+    EXPECT_EQ(s.iou, 1.0);
+    EXPECT_EQ(s.meanSurfaceDistance, 0.0);
+    // Clay made from a sphere matches the sphere exactly.
+    const ShapePtr ball = makeSphere({{0.3, -1.2, 2.5}}, 6.4);
+    const MassGridPtr clay = makeClay(*ball, 100, 3);
+    EXPECT_EQ(compareShapes(*clay, 100, *ball, 3).iou, 1.0);
+}
+
+TEST_F(Accuracy, OffsetBoxesHaveIoUOneThird)
+{
+    // 4^3 boxes two voxels apart along x: 32 shared voxels of 96.
+    const auto a = boxGrid(Coord(0, 0, 0), Coord(3, 3, 3), 100);
+    const auto b = boxGrid(Coord(2, 0, 0), Coord(5, 3, 3), 100);
+    const ShapeError e = compareShapes(*a, 100, *b, 100, 3);
+    EXPECT_EQ(e.intersection, 32u);
+    EXPECT_EQ(e.unionVoxels, 96u);
+    EXPECT_EQ(e.iou, 1.0 / 3.0);
+    EXPECT_EQ(compareShapes(*a, 100, *makeBox({{2, 0, 0}}, {{5, 3, 3}}), 3).iou, 1.0 / 3.0);
+    // 2D: 4 x 4 squares two apart, 8 shared of 24; clay outside z = 0 does not count.
+    auto a2 = boxGrid(Coord(0, 0, 0), Coord(3, 3, 0), 100);
+    a2->tree().setValue(Coord(0, 0, 5), 100);
+    const auto b2 = boxGrid(Coord(2, 0, 0), Coord(5, 3, 0), 100);
+    const ShapeError e2 = compareShapes(*a2, 100, *b2, 100, 2);
+    EXPECT_EQ(e2.unionVoxels, 24u);
+    EXPECT_EQ(e2.iou, 1.0 / 3.0);
+}
+
+TEST_F(Accuracy, OccupancyIsDensityAtLeastOneHalfOnEachSide)
+{
+    auto a = boxGrid(Coord(0, 0, 0), Coord(1, 0, 0), 50); // 2 voxels at Tc / 2
+    a->tree().setValue(Coord(2, 0, 0), 49);                // under half: not occupied
+    const auto b = boxGrid(Coord(0, 0, 0), Coord(2, 0, 0), 1000);
+    ShapeError e = compareShapes(*a, 100, *b, 1000, 3);
+    EXPECT_EQ(e.clayVoxels, 2u);
+    EXPECT_EQ(e.referenceVoxels, 3u);
+    EXPECT_EQ(e.iou, 2.0 / 3.0);
+    // The reference's own threshold decides its occupancy: at Tc 2001, 1000 is under half.
+    e = compareShapes(*a, 100, *b, 2001, 3);
+    EXPECT_EQ(e.referenceVoxels, 0u);
+    EXPECT_EQ(e.iou, 0.0);
+    EXPECT_TRUE(std::isinf(e.meanSurfaceDistance));
+}
+
+TEST_F(Accuracy, MeanSurfaceDistanceIsSymmetricAndExactOnHandCases)
+{
+    // Two single voxels (3, 4, 0) apart: each its own surface, 5 away from the other.
+    const auto p = boxGrid(Coord(0, 0, 0), Coord(0, 0, 0), 10);
+    const auto q = boxGrid(Coord(3, 4, 0), Coord(3, 4, 0), 10);
+    ShapeError e = compareShapes(*p, 10, *q, 10, 3);
+    EXPECT_EQ(e.iou, 0.0);
+    EXPECT_EQ(e.meanSurfaceDistance, 5.0);
+    EXPECT_EQ(e.maxSurfaceDistance, 5.0);
+
+    // A 4^3 box against the same box one voxel longer in x (5 x 4 x 4). The box's 56 surface
+    // voxels all lie on the longer box's surface except the 4 in the middle of its x = 3 face
+    // (1 away from x = 4); of the longer box's 68, the 16 at x = 4 are 1 away from x = 3 and
+    // the rest are on the box's surface. Mean: (4 + 16) / (56 + 68) = 5 / 31.
+    const auto a = boxGrid(Coord(0, 0, 0), Coord(3, 3, 3), 10);
+    const auto b = boxGrid(Coord(0, 0, 0), Coord(4, 3, 3), 10);
+    e = compareShapes(*a, 10, *b, 10, 3);
+    EXPECT_EQ(e.claySurface, 56u);
+    EXPECT_EQ(e.referenceSurface, 68u);
+    EXPECT_DOUBLE_EQ(e.meanSurfaceDistance, 5.0 / 31.0);
+    EXPECT_EQ(e.maxSurfaceDistance, 1.0);
+    EXPECT_EQ(e.iou, 64.0 / 80.0);
+    // Symmetric: swapping the two gives the same distances.
+    const ShapeError r = compareShapes(*b, 10, *a, 10, 3);
+    EXPECT_EQ(r.meanSurfaceDistance, e.meanSurfaceDistance);
+    EXPECT_EQ(r.maxSurfaceDistance, e.maxSurfaceDistance);
+
+    // Both empty: IoU 1, no distance.
+    const auto empty = openvdb::Int32Grid::create(0);
+    e = compareShapes(*empty, 10, *empty, 10, 3);
+    EXPECT_EQ(e.iou, 1.0);
+    EXPECT_EQ(e.meanSurfaceDistance, 0.0);
+}
+
+TEST_F(Accuracy, SurfaceDistanceMatchesBruteForceOnRandomBlobs)
+{
+    std::mt19937 rng(7);
+    for (int trial = 0; trial < 6; ++trial) {
+        auto a = openvdb::Int32Grid::create(0), b = openvdb::Int32Grid::create(0);
+        std::uniform_int_distribution<int> coord(0, 11), coin(0, 2);
+        for (int i = 0; i < 300; ++i) {
+            a->tree().setValue(Coord(coord(rng), coord(rng), coord(rng)), 10);
+            b->tree().setValue(Coord(coord(rng) + 3, coord(rng), coord(rng) - 2), 10);
+        }
+        const ShapeError e = compareShapes(*a, 10, *b, 10, 3);
+        // Brute force: surface voxels and nearest distances by looking at every pair.
+        auto surface = [](const openvdb::Int32Grid& g) {
+            std::vector<Coord> s;
+            auto acc = g.getConstAccessor();
+            for (auto it = g.tree().cbeginValueOn(); it; ++it) {
+                const Coord c = it.getCoord();
+                const Coord n[6] = {c.offsetBy(1, 0, 0), c.offsetBy(-1, 0, 0), c.offsetBy(0, 1, 0),
+                                    c.offsetBy(0, -1, 0), c.offsetBy(0, 0, 1), c.offsetBy(0, 0, -1)};
+                for (const Coord& x : n)
+                    if (acc.getValue(x) == 0) {
+                        s.push_back(c);
+                        break;
+                    }
+            }
+            return s;
+        };
+        const std::vector<Coord> sa = surface(*a), sb = surface(*b);
+        double sum = 0, max = 0;
+        for (int dir = 0; dir < 2; ++dir) {
+            const std::vector<Coord>& from = dir ? sb : sa;
+            const std::vector<Coord>& to = dir ? sa : sb;
+            for (const Coord& p : from) {
+                int64_t best = INT64_MAX;
+                for (const Coord& q : to) best = std::min<int64_t>(best, (p - q).asVec3d().lengthSqr());
+                sum += std::sqrt(double(best));
+                max = std::max(max, std::sqrt(double(best)));
+            }
+        }
+        EXPECT_EQ(e.claySurface, sa.size());
+        EXPECT_EQ(e.referenceSurface, sb.size());
+        EXPECT_DOUBLE_EQ(e.meanSurfaceDistance, sum / double(sa.size() + sb.size()));
+        EXPECT_EQ(e.maxSurfaceDistance, max);
+    }
+}
