@@ -225,6 +225,9 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     }
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     s.massFinal = totalMass(*mImpl->mass);
+    s.massDrift = s.massFinal - s.massInitial;
+    s.metrics = measureClay(*mImpl->mass, mImpl->scene.rule.threshold, mImpl->automaton->obstacles().get(),
+                            mImpl->scene.dimensions);
     s.residualOverload = mImpl->automaton->residualOverload();
     s.settled = mImpl->automaton->settled();
     return s;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "vdbclay/Automaton.h"
+#include "vdbclay/Metrics.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Scene.h"
 
@@ -25,6 +26,7 @@ struct RunSummary {
     double seconds = 0;
     int64_t massInitial = 0;
     int64_t massFinal = 0;
+    int64_t massDrift = 0;      ///< massFinal - massInitial: exactly 0 unless mass was lost or made
     int64_t residualOverload = 0;
     bool settled = false;       ///< the last frame settled
     uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget
@@ -32,6 +34,8 @@ struct RunSummary {
     uint64_t blocksVisited = 0, blocksUpdated = 0;
     double pushSeconds = 0;
     StageSeconds stages;
+    /// The final clay measured by measureClay() with the automaton's obstacles (tools included).
+    ClayMetrics metrics;
 };
 
 class Sculptor {
