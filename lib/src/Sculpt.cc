@@ -216,7 +216,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.blocksVisited += r.settle.blocksVisited;
         s.blocksUpdated += r.settle.blocksUpdated;
         s.massTrapped = r.push.massTrapped; // clay inside tools now (it is retried every frame)
-        if (r.settle.reason == StopReason::StepBudget) ++s.framesUnsettled;
+        if (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom) ++s.framesUnsettled;
+        if (r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
         s.stages.gather += r.settle.seconds.gather;
         s.stages.repartition += r.settle.seconds.repartition;
         s.stages.grow += r.settle.seconds.grow;

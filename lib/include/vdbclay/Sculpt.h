@@ -29,7 +29,8 @@ struct RunSummary {
     int64_t massDrift = 0;      ///< massFinal - massInitial: exactly 0 unless mass was lost or made
     int64_t residualOverload = 0;
     bool settled = false;       ///< the last frame settled
-    uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget
+    uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget or had no room
+    uint64_t framesNoRoom = 0;  ///< of those, frames stopped because the overload had no room (NoRoom)
     int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
     uint64_t blocksVisited = 0, blocksUpdated = 0;
     double pushSeconds = 0;
