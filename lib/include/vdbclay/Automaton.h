@@ -60,7 +60,7 @@ enum class StopReason {
     /// obstacles and hold more than Tc each on average (clay squeezed with no room). Reported when
     /// nothing can move any more while cells are over Tc (settled is then true: every over cell is
     /// walled in by obstacles and other over cells), or, while clay still moves inside such a region
-    /// (settled false), once a settle() call has run 1024 steps, then at each doubling. The state is
+    /// (settled false), once a settle() call has run 8192 steps, then at each doubling. The state is
     /// exact; residualOverload says how much clay found no room.
     NoRoom
 };
