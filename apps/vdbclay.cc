@@ -186,9 +186,15 @@ int runScene(const RunArgs& a)
     std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s", (long long)s.massInitial,
                 (long long)s.massFinal, exact ? "exact" : "DRIFT", (long long)s.residualOverload,
                 s.settled ? "yes" : "no");
-    if (s.framesUnsettled) std::printf(" (%llu frames hit the step budget)", (unsigned long long)s.framesUnsettled);
+    if (s.framesUnsettled > s.framesNoRoom) {
+        std::printf(" (%llu frames hit the step budget)", (unsigned long long)(s.framesUnsettled - s.framesNoRoom));
+    }
+    if (s.framesNoRoom) std::printf(" (%llu frames had no room for their overload)", (unsigned long long)s.framesNoRoom);
     if (s.massTrapped) std::printf("; %lld clay trapped in tools", (long long)s.massTrapped);
     std::printf("\n");
+    std::printf("clay %llu voxels, %llu interior (mean density %.4f, heterogeneity CV %.4f), compaction %.4f\n",
+                (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,
+                s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
 
     if (!outVdb.empty()) {
         vdbclay::ClayMeta meta;
@@ -230,6 +236,14 @@ int runScene(const RunArgs& a)
         j["blocks_visited"] = s.blocksVisited;
         j["blocks_updated"] = s.blocksUpdated;
         j["clay_voxels"] = vdbclay::clayVoxelCount(*sculptor.mass());
+        j["frames_no_room"] = s.framesNoRoom;
+        j["mass_drift"] = s.massDrift;
+        j["max_cell"] = s.metrics.maxCell;
+        j["occupied_voxels"] = s.metrics.occupiedVoxels;
+        j["interior_cells"] = s.metrics.interiorCells;
+        j["interior_mean_density"] = s.metrics.interiorMeanDensity;
+        j["heterogeneity_cv"] = s.metrics.heterogeneityCV;
+        j["compaction"] = s.metrics.compaction;
         writeTextAtomically(outStats, j.dump(2) + "\n");
         std::printf("wrote %s\n", outStats.c_str());
     }

@@ -193,6 +193,29 @@ bool readMeta(const openvdb::GridBase& grid, const char* name, T& out, const std
     return true;
 }
 
+/// For an Int32 grid that records Tc (vdbclay_threshold), the accuracy metrics of Metrics.h, in
+/// the dimensions it records (3 without vdbclay_dimensions).
+void describeClayMetrics(std::ostream& s, const openvdb::Int32Grid& g, const std::string& path)
+{
+    int32_t tc = 0, dims = 3;
+    if (!readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaThreshold, tc, path, "int32") || tc <= 0) return;
+    readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaDimensions, dims, path, "int32");
+    if (dims != 2 && dims != 3) return;
+    ClayMetrics m;
+    try {
+        m = measureClay(g, tc, nullptr, dims);
+    } catch (const Error& e) {
+        s << "  clay metrics: not measured: " << e.what() << "\n";
+        return;
+    }
+    s << "  clay (Tc " << tc << ", " << dims << "D): " << m.clayVoxels << " voxels holding clay, "
+      << m.occupiedVoxels << " at density >= 0.5, largest cell " << m.maxCell << "\n";
+    s << "  residual overload: " << m.residualOverload << " (mass above Tc, obstacles not recorded)\n";
+    s << "  interior cells: " << m.interiorCells << ", mean density " << m.interiorMeanDensity
+      << ", heterogeneity CV " << m.heterogeneityCV << "\n";
+    s << "  compaction: " << m.compaction << " (clay voxels / ceil(mass / Tc); 1 = compact)\n";
+}
+
 std::string coordText(const openvdb::Coord& c)
 {
     std::ostringstream s;
@@ -382,6 +405,7 @@ std::string describeVdb(const std::string& path)
             char hash[32];
             std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)contentHash(*ig));
             s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
+            describeClayMetrics(s, *ig, path);
         }
         if (g->metaCount() > 1) {
             s << "  metadata:\n";

@@ -216,7 +216,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.blocksVisited += r.settle.blocksVisited;
         s.blocksUpdated += r.settle.blocksUpdated;
         s.massTrapped = r.push.massTrapped; // clay inside tools now (it is retried every frame)
-        if (r.settle.reason == StopReason::StepBudget) ++s.framesUnsettled;
+        if (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom) ++s.framesUnsettled;
+        if (r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
         s.stages.gather += r.settle.seconds.gather;
         s.stages.repartition += r.settle.seconds.repartition;
         s.stages.grow += r.settle.seconds.grow;
@@ -225,6 +226,9 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     }
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     s.massFinal = totalMass(*mImpl->mass);
+    s.massDrift = s.massFinal - s.massInitial;
+    s.metrics = measureClay(*mImpl->mass, mImpl->scene.rule.threshold, mImpl->automaton->obstacles().get(),
+                            mImpl->scene.dimensions);
     s.residualOverload = mImpl->automaton->residualOverload();
     s.settled = mImpl->automaton->settled();
     return s;

@@ -12,11 +12,14 @@ m0=$(num mass_initial); m1=$(num mass_final); unsettled=$(num frames_unsettled)
 [ -n "$m0" ] && [ "$m0" = "$m1" ] || { echo "FAIL $name: mass $m0 -> $m1"; exit 1; }
 grep -q '"settled": true' "$out.json" || { echo "FAIL $name: not settled"; cat "$out.json"; exit 1; }
 [ "$unsettled" = 0 ] || { echo "FAIL $name: $unsettled frames hit the step budget"; exit 1; }
+[ "$(num mass_drift)" = 0 ] && grep -q '"heterogeneity_cv": ' "$out.json" && grep -q '"compaction": ' "$out.json" \
+  || { echo "FAIL $name: stats lack mass_drift 0, heterogeneity_cv or compaction"; cat "$out.json"; exit 1; }
 [ "$(head -c 8 "$out.png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || { echo "FAIL $name: not a PNG"; exit 1; }
 grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
 "$bin" info "$out.vdb" > "$out.info"
 grep -q "total mass:\? $m1" "$out.info" || { echo "FAIL $name: info does not report total mass $m1"; cat "$out.info"; exit 1; }
 for g in mass density surface; do grep -q "\"$g\"" "$out.info" || { echo "FAIL $name: no grid $g"; exit 1; }; done
+grep -q "heterogeneity CV" "$out.info" || { echo "FAIL $name: info does not report the clay metrics"; cat "$out.info"; exit 1; }
 # Other tools read it: OpenVDB's own vdb_print (libopenvdb-tools) lists the three grids.
 if command -v vdb_print >/dev/null; then
   vdb_print "$out.vdb" > "$out.vdbprint"

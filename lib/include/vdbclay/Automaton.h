@@ -53,9 +53,16 @@ struct StageSeconds {
 
 /// Why settle() stopped.
 enum class StopReason {
-    Settled,    ///< a full even+odd pair of steps changed nothing
+    Settled,    ///< a full even+odd pair of steps changed nothing, and no cell is over Tc
     Tolerance,  ///< residual overload fell to the requested tolerance
-    StepBudget  ///< the step budget ran out first
+    StepBudget, ///< the step budget ran out first
+    /// The overload can never vanish: the cells connected to the over cells are walled in by
+    /// obstacles and hold more than Tc each on average (clay squeezed with no room). Reported when
+    /// nothing can move any more while cells are over Tc (settled is then true: every over cell is
+    /// walled in by obstacles and other over cells), or, while clay still moves inside such a region
+    /// (settled false), once a settle() call has run 8192 steps, then at each doubling. The state is
+    /// exact; residualOverload says how much clay found no room.
+    NoRoom
 };
 const char* stopReasonName(StopReason reason);
 
@@ -93,8 +100,9 @@ public:
     StepReport step();
     /// @a n steps (fewer if a step throws).
     StepReport run(uint64_t n);
-    /// Steps until the automaton settles, residual overload <= @a tolerance (when tolerance > 0), or
-    /// @a maxSteps steps have run, whichever comes first.
+    /// Steps until the automaton settles, residual overload <= @a tolerance (when tolerance > 0),
+    /// @a maxSteps steps have run, or the overload provably has no room (StopReason::NoRoom),
+    /// whichever comes first.
     StepReport settle(uint64_t maxSteps, int64_t tolerance = 0);
 
     /// Lets @a fn change voxels of the mass grid inside @a region (inclusive), e.g. a tool pushing

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "vdbclay/Automaton.h"
+#include "vdbclay/Metrics.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Scene.h"
 
@@ -25,13 +26,17 @@ struct RunSummary {
     double seconds = 0;
     int64_t massInitial = 0;
     int64_t massFinal = 0;
+    int64_t massDrift = 0;      ///< massFinal - massInitial: exactly 0 unless mass was lost or made
     int64_t residualOverload = 0;
     bool settled = false;       ///< the last frame settled
-    uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget
+    uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget or had no room
+    uint64_t framesNoRoom = 0;  ///< of those, frames stopped because the overload had no room (NoRoom)
     int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
     uint64_t blocksVisited = 0, blocksUpdated = 0;
     double pushSeconds = 0;
     StageSeconds stages;
+    /// The final clay measured by measureClay() with the automaton's obstacles (tools included).
+    ClayMetrics metrics;
 };
 
 class Sculptor {
