@@ -448,7 +448,7 @@ void checkMemoryBudget(const Scene& scene)
     const MemoryEstimate e = estimateSceneMemory(scene);
     if (e.total() <= budget) return;
     throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " + formatBytes(budget) +
-                (scene.memoryBudget ? " (memory_budget)" : " (the default: 3/4 of this machine's memory)") +
+                (scene.memoryBudget ? "" : " (the default: 3/4 of this machine's memory)") +
                 "; shrink the scene or raise the budget (\"memory_budget\" in the scene, --memory-budget)");
 }
 
