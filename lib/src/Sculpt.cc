@@ -152,15 +152,17 @@ Box growBox(Box b, int by, int dims)
 }
 /// @a b (a shape's bounds) without the faces that hold no voxel centre inside @a shape: bounds()
 /// may be a voxel or two larger than the voxels inside, which at leaf boundaries counts whole extra
-/// layers of leaves. Faces of over 2^20 voxels are left as they are (a shape that large is off by
-/// under 0.1%).
-Box tighten(const Shape& shape, Box b, int dims)
+/// layers of leaves. Spends at most @a budget distance evaluations (shared by all calls of one
+/// estimate, so that huge or many shapes cost well under a second); a face it cannot afford stays.
+Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
 {
     auto anyInside = [&](const Box& face) {
         for (int x = face.min[0]; x <= face.max[0]; ++x)
             for (int y = face.min[1]; y <= face.max[1]; ++y)
-                for (int z = face.min[2]; z <= face.max[2]; ++z)
+                for (int z = face.min[2]; z <= face.max[2]; ++z) {
+                    --budget;
                     if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) return true;
+                }
         return false;
     };
     for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
@@ -169,7 +171,7 @@ Box tighten(const Shape& shape, Box b, int dims)
                 Box face = b;
                 if (side == 0) face.max[a] = b.min[a];
                 else face.min[a] = b.max[a];
-                if (voxelsIn(face) > (uint64_t(1) << 20) || anyInside(face)) break;
+                if (voxelsIn(face) > budget || anyInside(face)) break;
                 if (side == 0) ++b.min[a];
                 else --b.max[a];
             }
@@ -177,6 +179,9 @@ Box tighten(const Shape& shape, Box b, int dims)
     }
     return b;
 }
+
+/// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
+constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
 
 bool touches(const Box& a, const Box& b) { return !intersect(a, b).empty(); }
 
@@ -309,17 +314,16 @@ uint64_t unionLeaves(const std::vector<Box>& boxes)
 
 /// The bounds of @a tool over frames 0..@a frames (every frame up to 100000 of them, else 100000
 /// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
-/// Up to 1024 frames, each frame's bounds are tightened (tighten()).
-std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims)
+/// Each frame's bounds are tightened while @a budget lasts (tighten()).
+std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget)
 {
     const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
-    const bool tight = end < 1024;
     Box all;
     uint64_t most = 0;
     auto at = [&](uint64_t f) {
         const ShapePtr s = makeTransformed(tool.shape.shape, tool.poseAt(f));
         Box b = clip2D(s->bounds(), dims);
-        if (tight) b = tighten(*s, b, dims);
+        b = tighten(*s, b, dims, budget);
         all = unite(all, b);
         most = std::max(most, voxelsIn(b));
     };
@@ -356,6 +360,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     openvdb::initialize();
     const int dims = scene.dimensions;
     MemoryEstimate e;
+    uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
     std::vector<std::pair<Box, bool>> areas; // (box, holds clay)
     uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
     uint64_t fileTreeBytes = 0;
@@ -376,7 +381,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 addFileClay(c.shape.file, c.shape.grid);
                 continue;
             }
-            const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims);
+            const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
             e.clayLeaves += nodesIn(b, 3);
                 areas.push_back({b, true});
             const double m = double(c.mass) * double(voxelsIn(b));
@@ -386,7 +391,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     uint64_t toolLeaves = 0;
     std::vector<Box> toolBoxes;
     for (const ToolSpec& t : scene.tools) {
-        const auto sw = sweep(t, scene.frames, dims);
+        const auto sw = sweep(t, scene.frames, dims, toolBudget);
         areas.push_back({sw.first, false});
         e.toolVoxels += sw.second;
         toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
@@ -410,7 +415,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
 
     std::vector<Box> obsBoxes;
     for (const ShapeSpec& o : scene.obstacles) {
-        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims);
+        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims, budget);
         e.obstacleLeaves += nodesIn(b, 3);
         obsBoxes.push_back(b);
     }
