@@ -160,7 +160,7 @@ void catchStopSignals()
     std::memset(&sa, 0, sizeof sa);
     sa.sa_handler = onStopSignal;
     sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESETHAND;
+    sa.sa_flags = SA_RESETHAND | SA_RESTART; // no EINTR in the middle of writing a file
     for (int sig : {SIGINT, SIGTERM}) {
         struct sigaction old;
         if (::sigaction(sig, nullptr, &old) == 0 && sig == SIGINT && old.sa_handler == SIG_IGN) continue;
@@ -205,7 +205,7 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
     const char* name = sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal");
     const uint64_t steps = sculptor.automaton().stepCount();
     const vdbclay::ClayMeta meta = sculptor.checkpointMeta();
-    std::string where = meta.frameSteps
+    const std::string where = meta.frameSteps
                             ? "in frame " + std::to_string(meta.frames + 1) + "/" + std::to_string(sculptor.totalFrames()) +
                                   " after " + std::to_string(meta.frameSteps) + " of its settling steps"
                             : "after frame " + std::to_string(meta.frames) + "/" + std::to_string(sculptor.totalFrames());
