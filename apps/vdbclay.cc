@@ -13,8 +13,10 @@
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
 
+#include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <climits>
@@ -134,30 +136,136 @@ int runDemo(const DemoArgs& a)
 
 
 struct RunArgs {
-    std::string scene, out, stats, png, mesh, rule;
+    std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget;
     int threads = 0;
     int64_t seed = -1;
     uint64_t frames = 0;
     bool quiet = false;
 };
 
+// ---- interrupts -----------------------------------------------------------------------------------
+// SIGINT and SIGTERM only set this flag (a lock-free atomic store is async-signal-safe); the run
+// polls it between automaton steps, stops where a checkpoint resumes exactly, and writes one.
+
+std::atomic<int> gStopSignal{0};
+static_assert(std::atomic<int>::is_always_lock_free, "the signal flag must be lock-free");
+
+extern "C" void onStopSignal(int sig) { gStopSignal.store(sig, std::memory_order_relaxed); }
+
+/// Catches SIGINT and SIGTERM for the run. SA_RESETHAND: a second signal kills at once. A SIGINT
+/// the caller ignores (a background job of a script) stays ignored.
+void catchStopSignals()
+{
+    struct sigaction sa;
+    std::memset(&sa, 0, sizeof sa);
+    sa.sa_handler = onStopSignal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESETHAND | SA_RESTART; // no EINTR in the middle of writing a file
+    for (int sig : {SIGINT, SIGTERM}) {
+        struct sigaction old;
+        if (::sigaction(sig, nullptr, &old) == 0 && sig == SIGINT && old.sa_handler == SIG_IGN) continue;
+        ::sigaction(sig, &sa, nullptr);
+    }
+}
+
+/// "out.vdb" -> "out.checkpoint.vdb": where an interrupted run saves itself by default.
+std::string defaultCheckpointPath(const std::string& outVdb)
+{
+    if (outVdb.empty()) return "";
+    const size_t slash = outVdb.find_last_of('/');
+    const size_t dot = outVdb.find_last_of('.');
+    const bool hasExt = dot != std::string::npos && (slash == std::string::npos || dot > slash);
+    return (hasExt ? outVdb.substr(0, dot) : outVdb) + ".checkpoint.vdb";
+}
+
+/// --resume continues a run of the same scene: refuse a file written with other parameters, whose
+/// continuation would not be the run it was cut from.
+void checkResumeFits(const vdbclay::Scene& scene, const vdbclay::ClayMeta& m, const std::string& path)
+{
+    auto differs = [&](const char* what, const std::string& file, const std::string& here) {
+        throw vdbclay::Error("--resume " + path + ": it was written with " + what + " " + file + " but " +
+                             scene.source + " has " + here + " (give the same scene and options as the run it came from)");
+    };
+    if (m.version.empty()) throw vdbclay::Error("--resume " + path + ": not written by vdbclay (no vdbclay metadata)");
+    if (m.dimensions != scene.dimensions) differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
+    if (m.rule.rule != scene.rule.rule) differs("rule", vdbclay::ruleName(m.rule.rule), vdbclay::ruleName(scene.rule.rule));
+    if (m.rule.threshold != scene.rule.threshold) differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
+    if (m.seed != scene.seed) differs("seed", std::to_string(m.seed), std::to_string(scene.seed));
+    if (m.frames > scene.frames) {
+        differs("frames", std::to_string(m.frames) + " done", std::to_string(scene.frames) + " frames");
+    }
+}
+
+/// After a stop request: writes the checkpoint (or nothing when no step ran or there is nowhere to
+/// write it), says so in one line on stderr, returns 128 + the signal number.
+int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::string& checkpoint,
+                      uint64_t frame0, uint64_t steps0, bool tty)
+{
+    const int sig = gStopSignal.load();
+    const char* name = sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal");
+    const uint64_t steps = sculptor.automaton().stepCount();
+    const vdbclay::ClayMeta meta = sculptor.checkpointMeta();
+    const std::string where = meta.frameSteps
+                            ? "in frame " + std::to_string(meta.frames + 1) + "/" + std::to_string(sculptor.totalFrames()) +
+                                  " after " + std::to_string(meta.frameSteps) + " of its settling steps"
+                            : "after frame " + std::to_string(meta.frames) + "/" + std::to_string(sculptor.totalFrames());
+    if (tty) std::fprintf(stderr, "\n");
+    std::fflush(stdout);
+    if (sculptor.frame() == frame0 && steps == steps0) {
+        std::fprintf(stderr, "vdbclay: interrupted by %s before any step; nothing written\n", name);
+    } else if (checkpoint.empty()) {
+        std::fprintf(stderr, "vdbclay: interrupted by %s %s (step %llu); no checkpoint written (give -o or --checkpoint)\n",
+                     name, where.c_str(), (unsigned long long)steps);
+    } else {
+        try {
+            vdbclay::writeClayFile(checkpoint, *sculptor.mass(), meta);
+            const std::string scene = a.scene.empty() ? "" : " " + a.scene;
+            std::fprintf(stderr, "vdbclay: interrupted by %s %s (step %llu); checkpoint written to %s "
+                                 "(continue: vdbclay run%s --resume %s)\n",
+                         name, where.c_str(), (unsigned long long)steps, checkpoint.c_str(), scene.c_str(), checkpoint.c_str());
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "vdbclay: interrupted by %s %s; no checkpoint written: %s\n", name, where.c_str(), e.what());
+        }
+    }
+    return 128 + (sig > 0 ? sig : SIGINT);
+}
+
 int runScene(const RunArgs& a)
 {
     vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene);
     if (!a.rule.empty()) scene.rule.rule = vdbclay::parseRule(a.rule);
     if (a.seed >= 0) scene.seed = uint64_t(a.seed);
+    if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
+    if (!a.memoryBudget.empty()) {
+        try {
+            scene.memoryBudget = vdbclay::parseByteSize(a.memoryBudget);
+        } catch (const vdbclay::Error& e) {
+            throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
+        }
+    }
     const std::string outVdb = a.out.empty() ? scene.outputs.vdb : a.out;
     const std::string outStats = a.stats.empty() ? scene.outputs.stats : a.stats;
     const std::string outPng = a.png.empty() ? scene.outputs.png : a.png;
     const std::string outMesh = a.mesh.empty() ? scene.outputs.mesh : a.mesh;
+    const std::string checkpoint = a.checkpoint.empty() ? defaultCheckpointPath(outVdb) : a.checkpoint;
 
     vdbclay::Sculptor sculptor(scene, a.threads);
+    if (!a.resume.empty()) checkResumeFits(scene, sculptor.startMeta(), a.resume);
     const bool tty = ::isatty(2) && !a.quiet;
-    for (const std::string* o : {&outVdb, &outStats, &outPng, &outMesh}) checkWritable(*o);
+    for (const std::string* o : {&outVdb, &outStats, &outPng, &outMesh, &checkpoint}) checkWritable(*o);
+    // From here on SIGINT/SIGTERM stop the run at the next step and save it; before, there is
+    // nothing to save and they end the process as usual.
+    catchStopSignals();
     if (!a.quiet) std::cout << "vdbclay: " << scene.source << ": " << scene.dimensions << "D, Tc " << scene.rule.threshold
               << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
               << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
               << sculptor.frame() + 1 << ".." << sculptor.totalFrames() << "\n";
+    if (!a.quiet) {
+        const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
+        std::cout << "memory: " << vdbclay::estimateSceneMemory(scene).describe() << "; budget "
+                  << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget)) << "\n";
+    }
+    std::cout.flush();
     const uint64_t total = sculptor.totalFrames();
     auto onFrame = [&](const vdbclay::FrameReport& r) {
         if (a.quiet) return;
@@ -168,17 +276,23 @@ int runScene(const RunArgs& a)
                          std::string(done, '#').c_str(), std::string(width - done, '.').c_str(),
                          (unsigned long long)r.frame, (unsigned long long)total,
                          (unsigned long long)r.settle.steps, (long long)r.settle.residualOverload);
-            if (r.frame == total) std::fprintf(stderr, "\n");
+            if (r.frame == total && r.finished) std::fprintf(stderr, "\n");
         } else {
             std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
                          "residual overload %lld\n",
                          (unsigned long long)r.frame, (unsigned long long)total,
                          (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
                          (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
-                         vdbclay::stopReasonName(r.settle.reason), (long long)r.settle.residualOverload);
+                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
+                         (long long)r.settle.residualOverload);
+            std::fflush(stdout); // a log file follows the run frame by frame
         }
     };
+    const uint64_t frame0 = sculptor.frame(), steps0 = sculptor.automaton().stepCount();
+    sculptor.setStopRequest([] { return gStopSignal.load(std::memory_order_relaxed) != 0; });
     const vdbclay::RunSummary s = sculptor.run(a.frames, onFrame);
+    sculptor.setStopRequest({});
+    if (sculptor.stopped()) return finishInterrupted(sculptor, a, checkpoint, frame0, steps0, tty);
     const bool exact = s.massFinal == s.massInitial;
     std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
@@ -197,14 +311,7 @@ int runScene(const RunArgs& a)
                 s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
 
     if (!outVdb.empty()) {
-        vdbclay::ClayMeta meta;
-        meta.dimensions = scene.dimensions;
-        meta.rule = scene.rule;
-        meta.seed = scene.seed;
-        meta.steps = sculptor.automaton().stepCount();
-        meta.frames = sculptor.frame();
-        meta.voxelSize = scene.voxelSize;
-        vdbclay::writeClayFile(outVdb, *sculptor.mass(), meta);
+        vdbclay::writeClayFile(outVdb, *sculptor.mass(), sculptor.checkpointMeta());
         std::printf("wrote %s\n", outVdb.c_str());
     }
     if (!outPng.empty()) {
@@ -286,6 +393,11 @@ int main(int argc, char** argv)
     run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply");
     run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")");
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
+    run->add_option("--checkpoint", ra.checkpoint,
+                    "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
+    run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
+    run->add_option("--memory-budget", ra.memoryBudget,
+                    "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)");
 
     std::string infoPath;
     CLI::App* inf = app.add_subcommand("info", "Describe a .vdb file: grids, voxels, bounds, total mass, metadata");

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -267,4 +268,288 @@ TEST_F(SceneTest, ContinuingFromASavedRunIsIdenticalToAnUnbrokenRun)
         EXPECT_EQ(contentHash(*rest.mass()), h) << rule;
         EXPECT_EQ(rest.automaton().stepCount(), whole.automaton().stepCount()) << rule;
     }
+}
+
+// ---- interrupts, checkpoints, the memory budget ---------------------------------------------------
+
+namespace {
+
+struct RunResult {
+    uint64_t hash = 0, steps = 0, frames = 0;
+    int checkpoints = 0, midFrame = 0; ///< checkpoints written, and those written inside a frame
+};
+
+RunResult unbroken(const Scene& s)
+{
+    Sculptor sc(s, 2);
+    sc.run();
+    return {contentHash(*sc.mass()), sc.automaton().stepCount(), sc.frame(), 0, 0};
+}
+
+/// Runs @a s, asking it to stop whenever another @a every steps have run; each time, writes the
+/// checkpoint, then goes on in a new Sculptor started from it (as `vdbclay run --resume` does).
+RunResult interrupted(Scene s, uint64_t every, const std::string& file)
+{
+    RunResult r;
+    for (;;) {
+        Sculptor sc(s, r.checkpoints % 2 ? 1 : 3); // thread counts differ too: same result
+        const uint64_t stopAt = sc.automaton().stepCount() + every;
+        sc.setStopRequest([&sc, stopAt] { return sc.automaton().stepCount() >= stopAt; });
+        sc.run();
+        if (!sc.stopped()) {
+            EXPECT_TRUE(sc.done());
+            r.hash = contentHash(*sc.mass());
+            r.steps = sc.automaton().stepCount();
+            r.frames = sc.frame();
+            return r;
+        }
+        const ClayMeta m = sc.checkpointMeta();
+        EXPECT_EQ(m.frameSteps > 0, sc.frameOpen());
+        writeClayFile(file, *sc.mass(), m);
+        ++r.checkpoints;
+        if (m.frameSteps) ++r.midFrame;
+        s.start = file;
+        if (r.checkpoints > 100000) {
+            ADD_FAILURE() << "no end";
+            return r;
+        }
+    }
+}
+
+} // namespace
+
+TEST_F(SceneTest, AStoppedRunResumedFromItsCheckpointIsIdenticalToAnUnbrokenRun)
+{
+    struct Case {
+        const char* name;
+        std::string json;
+        std::vector<uint64_t> every;
+    };
+    const std::vector<Case> cases = {
+        // tools, obstacles, and a step budget that cuts frames short
+        {"press", R"({"threshold": 100, "seed": 5,
+            "clay":  [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 95}],
+            "tools": [{"shape": "sphere", "center": [6,16,6], "radius": 4, "path": [{"translate": [0,-1,0], "frames": 6}]}],
+            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}],
+            "settle": {"max_steps": 30}})", {9, 30, 31}},
+        // no tools: frames only continue settling, so quiet steps carry across frame boundaries
+        {"no tools", R"({"threshold": 100, "rule": "bingham", "frames": 6,
+            "clay":  [{"shape": "box", "min": [0,0,0], "max": [5,5,5], "mass": 400}],
+            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}],
+            "settle": {"max_steps": 25}})", {1, 24, 26}},
+        // 2D, arata, a tolerance
+        {"2d", R"({"dimensions": 2, "threshold": 100, "rule": "arata", "alpha": 0.3,
+            "clay":  [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 90}],
+            "tools": [{"shape": "box", "min": [-4,16], "max": [19,18], "path": [{"translate": [0,-1], "frames": 5}]}],
+            "obstacles": [{"shape": "box", "min": [-30,-3], "max": [40,-1]}],
+            "settle": {"max_steps": 1000, "tolerance": 40}})", {13, 50}},
+    };
+    // About 100 checkpoints, each ~0.1 s (building the surface level set); on tmpfs where there is
+    // one, as fsync on a loaded disk costs up to 0.5 s a file.
+    const std::string ckpt = (::access("/dev/shm", W_OK) == 0 ? std::string("/dev/shm") : dir) +
+                             "/vdbclay-test-ckpt-" + std::to_string(::getpid()) + ".vdb";
+    for (const Case& c : cases) {
+        const Scene s = parseScene(c.json, c.name, "");
+        const RunResult whole = unbroken(s);
+        for (uint64_t every : c.every) {
+            const RunResult r = interrupted(s, every, ckpt);
+            EXPECT_EQ(r.hash, whole.hash) << c.name << ", stopped every " << every << " steps";
+            EXPECT_EQ(r.steps, whole.steps) << c.name << ", stopped every " << every << " steps";
+            EXPECT_EQ(r.frames, whole.frames) << c.name;
+            EXPECT_GT(r.checkpoints, 0) << c.name << ", every " << every;
+            EXPECT_GT(r.midFrame, 0) << c.name << ", every " << every;
+        }
+    }
+    std::remove(ckpt.c_str());
+}
+
+TEST_F(SceneTest, StoppingWaitsForAStepThatResumesExactlyAndSavesTheOpenFrame)
+{
+    const Scene s = parseScene(R"({"threshold": 100, "seed": 1,
+        "clay":  [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 95}],
+        "tools": [{"shape": "box", "min": [-2,12,-2], "max": [13,14,13], "path": [{"translate": [0,-1,0], "frames": 3}]}],
+        "settle": {"max_steps": 100000}})", "s.json", "");
+    Sculptor sc(s);
+    bool stop = false;
+    sc.setStopRequest([&] { return stop; });
+    // A stop request before the first frame: nothing runs.
+    stop = true;
+    RunSummary r = sc.run();
+    EXPECT_TRUE(sc.stopped());
+    EXPECT_EQ(r.frames, 0u);
+    EXPECT_EQ(sc.automaton().stepCount(), 0u);
+    // During frame 1: it stops after its first step (which moved clay), the frame left open.
+    FrameReport f = sc.runFrame();
+    EXPECT_FALSE(f.finished);
+    EXPECT_TRUE(sc.stopped());
+    EXPECT_TRUE(sc.frameOpen());
+    // Its first (even) step changes nothing: the overloaded layer y = 10 meets only the plate's
+    // cells at y = 11 in even blocks. A resumed automaton would not know that step was quiet (and
+    // would settle one step later), so the stop waits for step 2, which moves clay.
+    EXPECT_EQ(f.settle.steps, 2u);
+    EXPECT_EQ(f.settle.blocksUpdated > 0, true);
+    EXPECT_EQ(sc.frame(), 0u);
+    const ClayMeta m = sc.checkpointMeta();
+    EXPECT_EQ(m.frames, 0u);
+    EXPECT_EQ(m.frameSteps, 2u);
+    EXPECT_EQ(m.steps, 2u);
+    // The file records it; a Sculptor started from it reopens frame 1 without pushing again.
+    const std::string file = dir + "/open.vdb";
+    writeClayFile(file, *sc.mass(), m);
+    EXPECT_EQ(readClayFile(file).meta.frameSteps, 2u);
+    Scene cont = s;
+    cont.start = file;
+    Sculptor rest(cont);
+    EXPECT_TRUE(rest.frameOpen());
+    EXPECT_EQ(rest.frame(), 0u);
+    const FrameReport g = rest.runFrame();
+    EXPECT_TRUE(g.finished);
+    EXPECT_EQ(g.push.voxelsPushed, 0u);
+    EXPECT_EQ(rest.frame(), 1u);
+    // Without a stop request the first Sculptor finishes the frame the same way.
+    stop = false;
+    const FrameReport h = sc.runFrame();
+    EXPECT_TRUE(h.finished);
+    EXPECT_EQ(h.settle.steps, g.settle.steps);
+    EXPECT_EQ(contentHash(*sc.mass()), contentHash(*rest.mass()));
+    // A frame boundary is a checkpoint without frameSteps (0 is not written at all).
+    EXPECT_EQ(sc.checkpointMeta().frameSteps, 0u);
+}
+
+TEST_F(SceneTest, AnOpenFrameIsOnlyFinishedByTheSceneThatBeganIt)
+{
+    const std::string json = R"({"threshold": 100, "seed": 1,
+        "clay":  [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 95}],
+        "tools": [{"shape": "box", "min": [-2,12,-2], "max": [13,14,13], "path": [{"translate": [0,-1,0], "frames": 3}]}]})";
+    Sculptor sc(parseScene(json, "s.json", ""));
+    sc.setStopRequest([] { return true; });
+    sc.runFrame();
+    const std::string file = dir + "/open.vdb";
+    writeClayFile(file, *sc.mass(), sc.checkpointMeta());
+    Scene other = parseScene(json, "s.json", "");
+    other.start = file;
+    other.seed = 2;
+    try {
+        Sculptor bad(other);
+        ADD_FAILURE() << "resumed an open frame with another seed";
+    } catch (const Error& e) {
+        const std::string m = e.what();
+        EXPECT_NE(m.find("during frame 1"), std::string::npos) << m;
+        EXPECT_NE(m.find("seed 1"), std::string::npos) << m;
+        EXPECT_NE(m.find("has 2"), std::string::npos) << m;
+    }
+    other.seed = 1;
+    other.frames = 0; // fewer frames than the open one
+    EXPECT_THROW(Sculptor{other}, Error);
+}
+
+TEST_F(SceneTest, ByteSizesParseExactlyAndNonsenseIsRefused)
+{
+    EXPECT_EQ(parseByteSize("8G"), uint64_t(8) << 30);
+    EXPECT_EQ(parseByteSize("512M"), uint64_t(512) << 20);
+    EXPECT_EQ(parseByteSize("1.5GiB"), uint64_t(3) << 29);
+    EXPECT_EQ(parseByteSize("64k"), uint64_t(64) << 10);
+    EXPECT_EQ(parseByteSize("2 TB"), uint64_t(2) << 40);
+    EXPECT_EQ(parseByteSize("1000000"), 1000000u);
+    EXPECT_EQ(parseByteSize("none"), kNoMemoryBudget);
+    EXPECT_EQ(parseByteSize("Unlimited"), kNoMemoryBudget);
+    for (const char* bad : {"", "G", "abc", "0", "0.1", "-5G", "5X", "1e30G", "8GG"}) {
+        EXPECT_THROW(parseByteSize(bad), Error) << bad;
+    }
+    EXPECT_EQ(formatBytes(900), "900 B");
+    EXPECT_EQ(formatBytes(uint64_t(3) << 29), "1.50 GiB");
+    EXPECT_EQ(formatBytes(uint64_t(512) << 20), "512 MiB");
+    // In a scene: a size string or a byte count.
+    EXPECT_EQ(parseScene(R"({"memory_budget": "2G"})", "s.json", "").memoryBudget, uint64_t(2) << 30);
+    EXPECT_EQ(parseScene(R"({"memory_budget": 4096})", "s.json", "").memoryBudget, 4096u);
+    EXPECT_EQ(parseScene(R"({"memory_budget": "none"})", "s.json", "").memoryBudget, kNoMemoryBudget);
+    EXPECT_EQ(parseScene("{}", "s.json", "").memoryBudget, 0u);
+    expectRefused(R"({"memory_budget": "lots"})", {"memory_budget", "\"lots\" is not a size"});
+    expectRefused(R"({"memory_budget": 0})", {"memory_budget", "[1, "});
+    expectRefused(R"({"memory_budget": true})", {"memory_budget", "expected an integer"});
+}
+
+TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
+{
+    // A 32^3 cube is 4^3 = 64 leaves. With no tool its area grows by one leaf on every side:
+    // voxels -8..39, leaves -1..4, 6^3 = 216. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
+    const Scene still = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}],
+        "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}]})", "s.json", "");
+    const MemoryEstimate a = estimateSceneMemory(still);
+    EXPECT_EQ(a.clayLeaves, 64u);
+    EXPECT_EQ(a.clayLeavesGrown, 216u);
+    EXPECT_EQ(a.obstacleLeaves, 21u * 21u);
+    EXPECT_EQ(a.toolVoxels, 0u);
+    EXPECT_GE(a.clayBytes, 216u * (512u * 4u));
+    EXPECT_EQ(a.total(), a.clayBytes + a.obstacleBytes + a.toolBytes + a.automatonBytes + a.outputBytes);
+
+    // The default scene: the plate -8..39 x 32..40 x -8..39 (48 x 9 x 48 voxels) sweeps down to
+    // y = 24. Grown by a leaf, the clay covers leaves -1..4 on every axis (216) and the sweep
+    // -16..47 x 16..48 x -16..47, leaves -2..5 x 2..6 x -2..5 (320); they share -1..4 x 2..4 x
+    // -1..4 (108): 428 leaves.
+    const Scene def = defaultScene();
+    const MemoryEstimate d = estimateSceneMemory(def);
+    EXPECT_EQ(d.clayLeaves, 64u);
+    EXPECT_EQ(d.toolVoxels, 48u * 9u * 48u);
+    EXPECT_EQ(d.clayLeavesGrown, 428u);
+    // Honest: the run stays inside the estimate, leaves and bytes.
+    Sculptor sc(def);
+    sc.run();
+    EXPECT_LE(sc.mass()->tree().leafCount(), d.clayLeavesGrown);
+    EXPECT_LE(sc.mass()->memUsage(), d.clayBytes);
+    EXPECT_LE(sc.automaton().obstacles()->memUsage(), d.obstacleBytes + d.toolBytes);
+
+    // Two lumps far apart are two areas, not one huge box: each 3^3 leaves once grown.
+    const Scene apart = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 800},
+        {"shape": "box", "min": [100000,0,0], "max": [100007,7,7], "mass": 800}]})", "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(apart).clayLeavesGrown, 2u * 27u);
+    // No more leaves than units of mass: each leaf holds at least one.
+    const Scene light = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 5}],
+        "tools": [{"shape": "box", "min": [0,0,0], "max": [800,800,800], "path": [{"translate": [1,0,0]}]}]})", "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(light).clayLeavesGrown, 5u);
+    // 2D: one layer of leaves.
+    const Scene flat = parseScene(R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 8}]})",
+                                  "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(flat).clayLeaves, 4u);
+    EXPECT_EQ(estimateSceneMemory(flat).clayLeavesGrown, 16u);
+}
+
+TEST_F(SceneTest, ASceneOverItsMemoryBudgetIsRefusedBeforeAnyWork)
+{
+    // A sphere of radius 3000 voxels: about 1.4e10 voxels of clay, far over 1 GiB.
+    Scene big = parseScene(R"({"memory_budget": "1G",
+        "clay": [{"shape": "sphere", "center": [0,0,0], "radius": 3000, "mass": 800}]})", "big.json", "");
+    const MemoryEstimate e = estimateSceneMemory(big);
+    EXPECT_GT(e.total(), uint64_t(1) << 40);
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+        Sculptor sc(big);
+        ADD_FAILURE() << "accepted";
+    } catch (const Error& err) {
+        const std::string m = err.what();
+        EXPECT_EQ(m.rfind("big.json: needs about ", 0), 0u) << m;
+        EXPECT_NE(m.find("memory budget of 1.00 GiB"), std::string::npos) << m;
+        EXPECT_NE(m.find(formatBytes(e.total())), std::string::npos) << m;
+        EXPECT_NE(m.find("leaves"), std::string::npos) << m;
+        EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    }
+    // Refused from the bounds alone: no clay was built (that would take minutes).
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
+    EXPECT_THROW(checkMemoryBudget(big), Error);
+    // The default budget applies too, and a small scene passes it.
+    big.memoryBudget = 0;
+    EXPECT_GT(defaultMemoryBudget(), uint64_t(64) << 20);
+    if (e.total() > defaultMemoryBudget()) {
+        EXPECT_THROW(checkMemoryBudget(big), Error);
+    }
+    EXPECT_NO_THROW(checkMemoryBudget(defaultScene()));
+    // "none" lifts it (only checked, not run).
+    big.memoryBudget = kNoMemoryBudget;
+    EXPECT_NO_THROW(checkMemoryBudget(big));
+    // The default scene under a budget just below its estimate is refused, at it accepted.
+    Scene def = defaultScene();
+    def.memoryBudget = estimateSceneMemory(def).total() - 1;
+    EXPECT_THROW(Sculptor{def}, Error);
+    def.memoryBudget += 1;
+    EXPECT_NO_THROW(Sculptor{def});
 }

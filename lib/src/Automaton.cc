@@ -775,6 +775,8 @@ StepReport Automaton::run(uint64_t n)
     return total;
 }
 
+bool Automaton::overloadHasNoRoom() { return mImpl->overloadHasNoRoom(); }
+
 StepReport Automaton::settle(uint64_t maxSteps, int64_t tolerance)
 {
     StepReport total;
@@ -784,7 +786,7 @@ StepReport Automaton::settle(uint64_t maxSteps, int64_t tolerance)
     // A flood can cost as much as a few hundred steps of a large lump (measured: 0.17 s for a 48^3
     // lump, ~500 steps' worth), so it waits until settling is long; callers settling in short
     // chunks never pay it.
-    uint64_t roomCheck = 8192;
+    uint64_t roomCheck = kNoRoomCheckSteps;
     for (;;) {
         if (mImpl->settled()) {
             // Quiet with overload left: every over cell is walled in by obstacles and over cells.

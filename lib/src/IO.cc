@@ -76,6 +76,7 @@ const char* kMetaAlpha = "vdbclay_alpha";
 const char* kMetaSeed = "vdbclay_seed";
 const char* kMetaSteps = "vdbclay_steps";
 const char* kMetaFrames = "vdbclay_frames";
+const char* kMetaFrameSteps = "vdbclay_frame_steps";
 const char* kMetaDimensions = "vdbclay_dimensions";
 const char* kMetaVoxelSize = "vdbclay_voxel_size";
 const char* kMetaVersion = "vdbclay_version";
@@ -241,6 +242,9 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     massMeta.insertMeta(kMetaSeed, openvdb::Int64Metadata(int64_t(meta.seed)));
     massMeta.insertMeta(kMetaSteps, openvdb::Int64Metadata(int64_t(meta.steps)));
     massMeta.insertMeta(kMetaFrames, openvdb::Int64Metadata(int64_t(meta.frames)));
+    if (meta.frameSteps > 0) {
+        massMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
+    }
     massMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
     massMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
     massMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));
@@ -330,6 +334,11 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     }
     if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaFrames, i64, path, "int64")) {
         m.frames = uint64_t(i64);
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaFrameSteps, i64, path, "int64")) {
+        if (i64 < 0) throw Error(path + ": invalid vdbclay metadata: " + kMetaFrameSteps + " is negative");
+        m.frameSteps = uint64_t(i64);
         any = true;
     }
     if (readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaDimensions, i32, path, "int32")) {

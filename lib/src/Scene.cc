@@ -4,7 +4,9 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <climits>
 #include <fstream>
 #include <sstream>
@@ -255,7 +257,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         throw Error(source + ": invalid JSON: " + (p == std::string::npos ? what : what.substr(p + 2)));
     }
     cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
-                       "obstacles", "settle", "frames", "start", "outputs", "description", "comment"});
+                       "obstacles", "settle", "frames", "start", "outputs", "memory_budget", "description",
+                       "comment"});
     Scene sc;
     sc.source = source;
     if (const json* v = cx.find(root, "dimensions")) {
@@ -358,6 +361,17 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     sc.frames = std::max<uint64_t>(longest, 1);
     if (const json* v = cx.find(root, "frames")) sc.frames = uint64_t(cx.integer(*v, "frames", 1, 100000000));
     if (const json* v = cx.find(root, "start")) sc.start = cx.path(cx.string(*v, "start"));
+    if (const json* v = cx.find(root, "memory_budget")) {
+        if (v->is_string()) {
+            try {
+                sc.memoryBudget = parseByteSize(v->get<std::string>());
+            } catch (const Error& e) {
+                cx.fail("memory_budget", e.what());
+            }
+        } else {
+            sc.memoryBudget = uint64_t(cx.integer(*v, "memory_budget", 1, INT64_MAX));
+        }
+    }
     if (const json* v = cx.find(root, "outputs")) {
         cx.keys(*v, "outputs", {"vdb", "png", "mesh", "stats"});
         auto out = [&](const char* k, std::string& dst) {
@@ -393,6 +407,55 @@ const char* defaultSceneJson()
   "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}],
   "settle": {"max_steps": 100000}
 })";
+}
+
+uint64_t parseByteSize(const std::string& text)
+{
+    auto bad = [&](const std::string& why) -> Error {
+        return Error("\"" + text + "\" is not a size: " + why +
+                     " (expected e.g. 8G, 512M, 1.5GiB, a number of bytes, or none)");
+    };
+    std::string t;
+    for (char c : text) {
+        if (c != ' ') t += char(std::tolower(static_cast<unsigned char>(c)));
+    }
+    if (t == "none" || t == "unlimited") return kNoMemoryBudget;
+    size_t used = 0;
+    double value = 0;
+    if (t.empty() || !(std::isdigit(static_cast<unsigned char>(t[0])) || t[0] == '.')) throw bad("no number");
+    try {
+        value = std::stod(t, &used);
+    } catch (const std::exception&) {
+        throw bad("no number");
+    }
+    std::string unit = t.substr(used);
+    if (!unit.empty() && unit.back() == 'b') unit.pop_back();
+    if (!unit.empty() && unit.back() == 'i') unit.pop_back();
+    double scale = 1;
+    if (unit == "k") scale = 1024.0;
+    else if (unit == "m") scale = 1024.0 * 1024;
+    else if (unit == "g") scale = 1024.0 * 1024 * 1024;
+    else if (unit == "t") scale = 1024.0 * 1024 * 1024 * 1024;
+    else if (!unit.empty()) throw bad("unknown unit \"" + t.substr(used) + "\"");
+    const double bytes = std::floor(value * scale);
+    if (!std::isfinite(bytes) || bytes < 1) throw bad("it must be at least one byte");
+    if (bytes >= 9.2e18) throw bad("too large");
+    return uint64_t(bytes);
+}
+
+std::string formatBytes(uint64_t bytes)
+{
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
+    double v = double(bytes);
+    int u = 0;
+    while (v >= 1024 && u < 6) {
+        v /= 1024;
+        ++u;
+    }
+    char buf[32];
+    if (u == 0) std::snprintf(buf, sizeof buf, "%llu B", (unsigned long long)bytes);
+    else std::snprintf(buf, sizeof buf, "%.*f %s", v < 10 ? 2 : (v < 100 ? 1 : 0), v, units[u]);
+    return buf;
 }
 
 Scene defaultScene() { return parseScene(defaultSceneJson(), "<built-in scene>", ""); }

@@ -8,10 +8,15 @@
 
 #include <openvdb/openvdb.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cmath>
+#include <fstream>
 #include <sstream>
+#include <thread>
 
 namespace vdbclay {
 
@@ -50,16 +55,426 @@ void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
                 }
 }
 
+/// A start file written in the middle of a frame continues that frame: only the scene that wrote it
+/// can do that exactly, so its rule, Tc, alpha, seed, dimensions and frame must fit the scene.
+void checkResumable(const Scene& scene, const ClayMeta& m)
+{
+    const std::string where = scene.source + ": start: " + scene.start + " was written during frame " +
+                              std::to_string(m.frames + 1) + " ";
+    auto differs = [&](const std::string& what, const std::string& file, const std::string& here) {
+        throw Error(where + "with " + what + " " + file + ", but the scene has " + here +
+                    "; a frame can only be finished by the scene that began it");
+    };
+    if (m.dimensions != scene.dimensions) differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
+    if (m.rule.rule != scene.rule.rule) differs("rule", ruleName(m.rule.rule), ruleName(scene.rule.rule));
+    if (m.rule.threshold != scene.rule.threshold) differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
+    if (m.rule.rule == Rule::Arata && m.rule.alpha != scene.rule.alpha) differs("alpha", std::to_string(m.rule.alpha), std::to_string(scene.rule.alpha));
+    if (m.seed != scene.seed) differs("seed", std::to_string(m.seed), std::to_string(scene.seed));
+    if (m.frames >= scene.frames) {
+        throw Error(where + "but the scene has only " + std::to_string(scene.frames) + " frames");
+    }
+}
+
+// ---- memory estimate ------------------------------------------------------------------------------
+
+/// glibc's per-allocation overhead (chunk header, 16-byte rounding), counted once per node and
+/// once per leaf buffer.
+constexpr uint64_t kMallocOverhead = 16;
+
+using MassTreeT = openvdb::Int32Tree;
+using MaskTreeT = openvdb::MaskTree;
+using FloatTreeT = openvdb::FloatTree;
+
+/// Bytes of one leaf of tree type T: the node, and for value trees its separately allocated buffer.
+template<typename TreeT>
+constexpr uint64_t leafBytes()
+{
+    using Leaf = typename TreeT::LeafNodeType;
+    using V = typename TreeT::ValueType;
+    const bool separateBuffer = !std::is_same<V, bool>::value && !std::is_same<V, openvdb::ValueMask>::value;
+    return sizeof(Leaf) + kMallocOverhead + (separateBuffer ? Leaf::SIZE * sizeof(V) + kMallocOverhead : 0);
+}
+/// The two internal levels (16^3 children of 8^3 leaves: 128^3 voxels; 32^3 of those: 4096^3) and
+/// the root's map entry for each upper node.
+template<typename TreeT>
+constexpr uint64_t lowerNodeBytes()
+{
+    return sizeof(typename TreeT::RootNodeType::ChildNodeType::ChildNodeType) + kMallocOverhead;
+}
+template<typename TreeT>
+constexpr uint64_t upperNodeBytes()
+{
+    return sizeof(typename TreeT::RootNodeType::ChildNodeType) + kMallocOverhead + 64;
+}
+
+/// Per clay leaf, the automaton's lists (lib/src/Automaton.cc): the leaf in hotLeaves (a Coord, 12
+/// bytes), its changed-block masks of the last two steps (two Anchors of 24 bytes), up to 10
+/// candidate contributions (the leaf's own, 8 from dilating the other phase, an edited region) and
+/// one WorkItem (32 bytes); doubled for vector growth.
+constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 32);
+/// Per tool voxel: its cell in Sculptor's toolCells (12 bytes, doubled for growth) and, for clay
+/// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
+constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
+
+int64_t leafIndex(int32_t v, int log2) { return int64_t(v) >> log2; } // floor division
+
+/// Number of nodes of side 2^log2 voxels that @a b touches (2D boxes are clipped to z = 0 first).
+uint64_t nodesIn(const Box& b, int log2)
+{
+    if (b.empty()) return 0;
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a) n *= uint64_t(leafIndex(b.max[a], log2) - leafIndex(b.min[a], log2) + 1);
+    return n;
+}
+uint64_t voxelsIn(const Box& b)
+{
+    if (b.empty()) return 0;
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a) n *= uint64_t(int64_t(b.max[a]) - int64_t(b.min[a]) + 1);
+    return n;
+}
+Box clip2D(Box b, int dims)
+{
+    if (dims == 2) {
+        b.min[2] = std::max(b.min[2], 0);
+        b.max[2] = std::min(b.max[2], 0);
+    }
+    return b;
+}
+Box growBox(Box b, int by, int dims)
+{
+    if (b.empty()) return b;
+    for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
+        b.min[a] = int32_t(std::max<int64_t>(INT32_MIN, int64_t(b.min[a]) - by));
+        b.max[a] = int32_t(std::min<int64_t>(INT32_MAX, int64_t(b.max[a]) + by));
+    }
+    return b;
+}
+/// @a b (a shape's bounds) without the faces that hold no voxel centre inside @a shape: bounds()
+/// may be a voxel or two larger than the voxels inside, which at leaf boundaries counts whole extra
+/// layers of leaves. Spends at most @a budget distance evaluations (shared by all calls of one
+/// estimate, so that huge or many shapes cost well under a second); a face it cannot afford stays.
+Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
+{
+    auto anyInside = [&](const Box& face) {
+        for (int x = face.min[0]; x <= face.max[0]; ++x)
+            for (int y = face.min[1]; y <= face.max[1]; ++y)
+                for (int z = face.min[2]; z <= face.max[2]; ++z) {
+                    --budget;
+                    if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) return true;
+                }
+        return false;
+    };
+    for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
+        for (int side = 0; side < 2; ++side) {
+            for (int k = 0; k < 4 && b.min[a] < b.max[a]; ++k) {
+                Box face = b;
+                if (side == 0) face.max[a] = b.min[a];
+                else face.min[a] = b.max[a];
+                if (voxelsIn(face) > budget || anyInside(face)) break;
+                if (side == 0) ++b.min[a];
+                else --b.max[a];
+            }
+        }
+    }
+    return b;
+}
+
+/// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
+constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
+
+bool touches(const Box& a, const Box& b) { return !intersect(a, b).empty(); }
+
+/// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
+/// internal nodes).
+template<typename TreeT>
+uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes)
+{
+    uint64_t lower = 0, upper = 0;
+    for (const Box& b : boxes) {
+        lower += std::min(nodesIn(b, 7), std::max<uint64_t>(leaves, 1));
+        upper += std::min(nodesIn(b, 12), std::max<uint64_t>(leaves, 1));
+    }
+    return leaves * leafBytes<TreeT>() + lower * lowerNodeBytes<TreeT>() + upper * upperNodeBytes<TreeT>();
+}
+
+/// What a .vdb file's grid statistics (written by OpenVDB beside every grid) say about a grid,
+/// read without its voxels.
+struct FileGrid {
+    Box bounds;
+    uint64_t voxels = 0;
+    uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
+};
+FileGrid fileGridStats(const std::string& path, const std::string& gridName)
+{
+    FileGrid out;
+    openvdb::GridBase::Ptr g;
+    try {
+        openvdb::io::File file(path);
+        file.open(false);
+        g = file.readGridMetadata(gridName);
+        file.close();
+    } catch (const std::exception&) {
+        g.reset();
+    }
+    if (!g) {
+        // Let the reader say what is wrong with the file, in its words; if it can read it after
+        // all, measure the grid it read.
+        const ClayFile f = readClayFile(path, gridName);
+        const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
+        if (!bb.empty()) out.bounds = Box{{{bb.min().x(), bb.min().y(), bb.min().z()}}, {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        out.voxels = f.mass->activeVoxelCount();
+        out.memBytes = f.mass->memUsage();
+        return out;
+    }
+    const auto lo = g->getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MIN);
+    const auto hi = g->getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MAX);
+    const auto n = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_VOXEL_COUNT);
+    const auto mem = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES);
+    if (lo && hi) {
+        out.bounds = Box{{{lo->value()[0], lo->value()[1], lo->value()[2]}}, {{hi->value()[0], hi->value()[1], hi->value()[2]}}};
+    }
+    if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
+    if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
+    if (!lo || !hi || !n) {
+        // A file without statistics: read it (the estimate must not be a guess).
+        const ClayFile f = readClayFile(path, gridName);
+        const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
+        out.bounds = bb.empty() ? Box() : Box{{{bb.min().x(), bb.min().y(), bb.min().z()}}, {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        out.voxels = f.mass->activeVoxelCount();
+        out.memBytes = f.mass->memUsage();
+    }
+    return out;
+}
+
+/// Groups boxes that touch (directly or through others); returns each group's box indices.
+std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
+{
+    std::vector<size_t> parent(boxes.size());
+    for (size_t i = 0; i < parent.size(); ++i) parent[i] = i;
+    auto root = [&](size_t i) {
+        while (parent[i] != i) i = parent[i] = parent[parent[i]];
+        return i;
+    };
+    for (size_t i = 0; i < boxes.size(); ++i)
+        for (size_t j = i + 1; j < boxes.size(); ++j)
+            if (touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
+    std::vector<std::vector<size_t>> groups(boxes.size());
+    for (size_t i = 0; i < boxes.size(); ++i) groups[root(i)].push_back(i);
+    groups.erase(std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
+                 groups.end());
+    return groups;
+}
+
+/// Leaves (8^3 voxels) touched by the union of @a boxes, counted exactly on the grid the boxes'
+/// leaf-aligned faces cut (at most 40 boxes; more: the leaves of their bounding box).
+uint64_t unionLeaves(const std::vector<Box>& boxes)
+{
+    struct LeafBox {
+        int64_t lo[3], hi[3]; // half-open, in leaves
+    };
+    std::vector<LeafBox> lb;
+    Box all;
+    for (const Box& b : boxes) {
+        if (b.empty()) continue;
+        all = unite(all, b);
+        LeafBox l;
+        for (int a = 0; a < 3; ++a) {
+            l.lo[a] = leafIndex(b.min[a], 3);
+            l.hi[a] = leafIndex(b.max[a], 3) + 1;
+        }
+        lb.push_back(l);
+    }
+    if (lb.size() > 40) return nodesIn(all, 3);
+    std::vector<int64_t> cuts[3];
+    for (int a = 0; a < 3; ++a) {
+        for (const LeafBox& l : lb) {
+            cuts[a].push_back(l.lo[a]);
+            cuts[a].push_back(l.hi[a]);
+        }
+        std::sort(cuts[a].begin(), cuts[a].end());
+        cuts[a].erase(std::unique(cuts[a].begin(), cuts[a].end()), cuts[a].end());
+    }
+    uint64_t n = 0;
+    for (size_t i = 0; i + 1 < cuts[0].size(); ++i)
+        for (size_t j = 0; j + 1 < cuts[1].size(); ++j)
+            for (size_t k = 0; k + 1 < cuts[2].size(); ++k) {
+                const int64_t c[3] = {cuts[0][i], cuts[1][j], cuts[2][k]};
+                const bool in = std::any_of(lb.begin(), lb.end(), [&](const LeafBox& l) {
+                    return l.lo[0] <= c[0] && c[0] < l.hi[0] && l.lo[1] <= c[1] && c[1] < l.hi[1] &&
+                           l.lo[2] <= c[2] && c[2] < l.hi[2];
+                });
+                if (in) {
+                    n += uint64_t(cuts[0][i + 1] - c[0]) * uint64_t(cuts[1][j + 1] - c[1]) *
+                         uint64_t(cuts[2][k + 1] - c[2]);
+                }
+            }
+    return n;
+}
+
+/// The bounds of @a tool over frames 0..@a frames (every frame up to 100000 of them, else 100000
+/// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
+/// Each frame's bounds are tightened while @a budget lasts (tighten()).
+std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget)
+{
+    const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
+    Box all;
+    uint64_t most = 0;
+    auto at = [&](uint64_t f) {
+        const ShapePtr s = makeTransformed(tool.shape.shape, tool.poseAt(f));
+        Box b = clip2D(s->bounds(), dims);
+        b = tighten(*s, b, dims, budget);
+        all = unite(all, b);
+        most = std::max(most, voxelsIn(b));
+    };
+    const uint64_t stride = std::max<uint64_t>(1, end / 100000);
+    for (uint64_t f = 0; f <= end; f += stride) at(f);
+    if (stride > 1) {
+        uint64_t f = 0;
+        for (const PathSegment& seg : tool.path) {
+            f += seg.frames;
+            if (f <= end) at(f);
+        }
+        at(end);
+    }
+    return {all, most};
+}
+
 } // namespace
+
+uint64_t MemoryEstimate::total() const
+{
+    return clayBytes + obstacleBytes + toolBytes + automatonBytes + outputBytes;
+}
+
+std::string MemoryEstimate::describe() const
+{
+    return "about " + formatBytes(total()) + " (clay " + formatBytes(clayBytes) + " for up to " +
+           std::to_string(clayLeavesGrown) + " leaves of 8^3 voxels, " + std::to_string(clayLeaves) +
+           " at the start; obstacles " + formatBytes(obstacleBytes) + "; tools " + formatBytes(toolBytes) +
+           "; automaton " + formatBytes(automatonBytes) + "; output grids " + formatBytes(outputBytes) + ")";
+}
+
+MemoryEstimate estimateSceneMemory(const Scene& scene)
+{
+    openvdb::initialize();
+    const int dims = scene.dimensions;
+    MemoryEstimate e;
+    uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
+    std::vector<std::pair<Box, bool>> areas; // (box, holds clay)
+    uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
+    uint64_t fileTreeBytes = 0;
+    auto addFileClay = [&](const std::string& path, const std::string& grid) {
+        const FileGrid g = fileGridStats(path, grid);
+        const Box b = clip2D(g.bounds, dims);
+        const uint64_t leaves = std::min(nodesIn(b, 3), g.voxels);
+        e.clayLeaves += leaves;
+        fileTreeBytes += std::max(g.memBytes, treeBytes<MassTreeT>(leaves, {b}));
+        areas.push_back({b, true});
+        massBound = UINT64_MAX;
+    };
+    if (!scene.start.empty()) {
+        addFileClay(scene.start, "mass");
+    } else {
+        for (const ClaySpec& c : scene.clay) {
+            if (c.shape.kind == "vdb") {
+                addFileClay(c.shape.file, c.shape.grid);
+                continue;
+            }
+            const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
+            e.clayLeaves += nodesIn(b, 3);
+                areas.push_back({b, true});
+            const double m = double(c.mass) * double(voxelsIn(b));
+            if (massBound != UINT64_MAX) massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
+        }
+    }
+    uint64_t toolLeaves = 0;
+    std::vector<Box> toolBoxes;
+    for (const ToolSpec& t : scene.tools) {
+        const auto sw = sweep(t, scene.frames, dims, toolBudget);
+        areas.push_back({sw.first, false});
+        e.toolVoxels += sw.second;
+        toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
+        toolBoxes.push_back(sw.first);
+    }
+    // Clay spreads around itself and where tools push it: over the clay's boxes and the tools'
+    // sweeps that touch clay (directly or through other such boxes), each grown by one leaf.
+    uint64_t grown = 0;
+    std::vector<Box> boxes, grownBoxes;
+    for (const auto& a : areas) boxes.push_back(growBox(a.first, 8, dims));
+    for (const std::vector<size_t>& g : groupsOfTouching(boxes)) {
+        if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].second; })) continue;
+        std::vector<Box> members;
+        for (size_t i : g) members.push_back(boxes[i]);
+        grown += unionLeaves(members);
+        grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
+    }
+    e.clayLeavesGrown = std::max(e.clayLeaves, std::min(grown, massBound));
+    // A file's own figure (its tree's size when written) when that is more.
+    e.clayBytes = std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes), fileTreeBytes);
+
+    std::vector<Box> obsBoxes;
+    for (const ShapeSpec& o : scene.obstacles) {
+        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims, budget);
+        e.obstacleLeaves += nodesIn(b, 3);
+        obsBoxes.push_back(b);
+    }
+    // The static mask, and the automaton's copy, which also holds the tools' cells.
+    e.obstacleBytes = 2 * treeBytes<MaskTreeT>(e.obstacleLeaves, obsBoxes);
+    e.toolBytes = e.toolVoxels * kToolBytesPerVoxel + treeBytes<MaskTreeT>(toolLeaves, toolBoxes);
+    e.automatonBytes = e.clayLeavesGrown * kAutomatonBytesPerLeaf;
+    // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
+    // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
+    // over a band around the surface): counted as three float grids on the clay's leaves, plus
+    // the partial trees meshToVolume's worker threads build (each starts with its own upper nodes).
+    const uint64_t workers = std::max(1u, std::thread::hardware_concurrency());
+    e.outputBytes = 3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes) +
+                    workers * 2 * upperNodeBytes<FloatTreeT>() * std::max<uint64_t>(1, grownBoxes.size());
+    return e;
+}
+
+uint64_t defaultMemoryBudget()
+{
+    uint64_t avail = uint64_t(::sysconf(_SC_PHYS_PAGES)) * uint64_t(::sysconf(_SC_PAGE_SIZE));
+    // A container's limit (cgroup v2, then v1) where it is lower than the machine's memory.
+    for (const char* f : {"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"}) {
+        std::ifstream in(f);
+        uint64_t limit = 0;
+        if (in >> limit && limit > 0) avail = std::min(avail, limit);
+    }
+    if (avail == 0) avail = uint64_t(16) << 30; // sysconf failed: assume 16 GiB
+    return avail / 4 * 3;
+}
+
+void checkMemoryBudget(const Scene& scene)
+{
+    if (scene.memoryBudget == kNoMemoryBudget) return;
+    const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget();
+    const MemoryEstimate e = estimateSceneMemory(scene);
+    if (e.total() <= budget) return;
+    throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " + formatBytes(budget) +
+                (scene.memoryBudget ? "" : " (the default: 3/4 of this machine's memory)") +
+                "; shrink the scene or raise the budget (\"memory_budget\" in the scene, --memory-budget)");
+}
+
 
 struct Sculptor::Impl {
     Scene scene;
     MassGridPtr mass;
     openvdb::MaskGrid::Ptr obstacles; ///< static obstacles only
     std::unique_ptr<Automaton> automaton;
-    uint64_t frame = 0;
+    uint64_t frame = 0;                    ///< frames finished
+    bool open = false;                     ///< frame + 1 is pushed and partly settled
+    uint64_t openSteps = 0;                ///< its settling steps so far
     std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
     Box toolRegion;                        ///< bounds of the tools as placed now
+    /// Steps since the automaton last changed a cell or was edited: the automaton's own count of
+    /// quiet steps, which a resumed automaton restarts at 0. A checkpoint taken while it is not 0
+    /// would resume with a different count and settle at a different step, so none is taken then.
+    uint64_t quiet = 0;
+    std::function<bool()> stopPoll;
+    bool stopped = false;
+    ClayMeta startMeta;
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -68,9 +483,10 @@ struct Sculptor::Impl {
         return tools;
     }
 
-    /// While clay settles, the voxels a tool occupies are obstacles: otherwise clay would flow back
-    /// into the tool that just pushed it out. Moves those obstacle cells to @a tools' placement.
-    void placeTools(const std::vector<ShapePtr>& tools)
+    bool stopRequested() const { return stopPoll && stopPoll(); }
+
+    /// The voxels placeTools(@a tools) would edit: the tools' bounds (2D: only z = 0).
+    Box regionOf(const std::vector<ShapePtr>& tools) const
     {
         Box region;
         for (const ShapePtr& t : tools) region = unite(region, t->bounds());
@@ -78,8 +494,69 @@ struct Sculptor::Impl {
             region.min[2] = std::max(region.min[2], 0);
             region.max[2] = std::min(region.max[2], 0);
         }
+        return region;
+    }
+
+    /// Whether a checkpoint taken between frames resumes exactly: the automaton's quiet-step count
+    /// is 0 (as a resumed one's), or it cannot matter: nothing is overloaded, or the next frame
+    /// starts with an edit (placing the tools), which restarts the count in both runs.
+    bool boundaryResumesExactly() const
+    {
+        if (quiet == 0 || automaton->residualOverload() == 0) return true;
+        if (scene.tools.empty() || frame >= scene.frames) return false;
+        return !unite(regionOf(toolsAt(frame + 1)), toolRegion).empty();
+    }
+
+    /// Settles the open frame step by step, with the rest of its step budget, exactly as
+    /// Automaton::settle(maxSteps, tolerance) would, but returns after a step when the stop poll
+    /// asks (and the state resumes exactly). @a finished tells which.
+    StepReport settleOpenFrame(bool& finished)
+    {
+        StepReport total;
+        total.residualOverload = automaton->residualOverload();
+        total.settled = automaton->settled();
+        const uint64_t budget = scene.settle.maxSteps;
+        const int64_t tolerance = scene.settle.tolerance;
+        for (;;) {
+            const uint64_t left = openSteps >= budget ? 0 : budget - openSteps;
+            // The no-room check on Automaton::settle's own schedule (after kNoRoomCheckSteps steps
+            // of the frame, then at each doubling: powers of two), counted in frame steps so that a
+            // resumed frame checks exactly where an unbroken one does.
+            if (openSteps >= Automaton::kNoRoomCheckSteps && (openSteps & (openSteps - 1)) == 0 &&
+                !automaton->settled() && !(tolerance > 0 && automaton->residualOverload() <= tolerance) &&
+                automaton->overloadHasNoRoom()) {
+                total.reason = StopReason::NoRoom;
+                finished = true;
+                return total;
+            }
+            // settle(1) runs one step unless the automaton is settled or within tolerance;
+            // settle(0) once the budget is spent only tells why it stops: the checks and their
+            // order stay the automaton's.
+            const StepReport r = automaton->settle(left ? 1 : 0, tolerance);
+            total += r;
+            if (r.steps == 0) {
+                total.reason = r.reason;
+                finished = true;
+                return total;
+            }
+            ++openSteps;
+            quiet = r.blocksUpdated ? 0 : quiet + 1;
+            if (quiet == 0 && stopRequested()) {
+                total.reason = StopReason::StepBudget;
+                finished = false;
+                return total;
+            }
+        }
+    }
+
+    /// While clay settles, the voxels a tool occupies are obstacles: otherwise clay would flow back
+    /// into the tool that just pushed it out. Moves those obstacle cells to @a tools' placement.
+    void placeTools(const std::vector<ShapePtr>& tools)
+    {
+        const Box region = regionOf(tools);
         const Box both = unite(region, toolRegion);
         if (both.empty()) return;
+        quiet = 0; // editObstacles restarts the automaton's count
         automaton->editObstacles(both, [&](ObstacleGrid& grid) {
             auto acc = grid.getAccessor();
             auto fixed = obstacles->getConstAccessor();
@@ -111,6 +588,7 @@ struct Sculptor::Impl {
 Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Impl>())
 {
     openvdb::initialize();
+    checkMemoryBudget(scene);
     Impl& im = *mImpl;
     im.scene = scene;
     AutomatonOptions opt;
@@ -126,9 +604,13 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
             throw Error(scene.source + ": start: " + scene.start + " holds " + std::to_string(f.meta.dimensions) +
                         "D clay but the scene is " + std::to_string(scene.dimensions) + "D");
         }
+        if (f.meta.frameSteps > 0) checkResumable(scene, f.meta);
+        im.startMeta = f.meta;
         im.mass = f.mass;
         steps = f.meta.steps;
         im.frame = f.meta.frames;
+        im.open = f.meta.frameSteps > 0;
+        im.openSteps = f.meta.frameSteps;
     } else {
         im.mass = openvdb::Int32Grid::create(0);
         for (const ClaySpec& c : scene.clay) {
@@ -173,40 +655,84 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     // The automaton's obstacles: the static ones, plus the tools' voxels (placeTools).
     im.automaton = std::make_unique<Automaton>(im.mass, opt, im.obstacles->deepCopy());
     if (steps) im.automaton->setStepCount(steps);
-    if (!scene.tools.empty()) im.placeTools(im.toolsAt(im.frame));
+    // An open frame's tools are where its push left them; that push is not repeated.
+    if (!scene.tools.empty()) im.placeTools(im.toolsAt(im.open ? im.frame + 1 : im.frame));
+    im.quiet = 0; // the automaton was just (re)built: its quiet count is 0
 }
 
 Sculptor::~Sculptor() = default;
 
 bool Sculptor::done() const { return mImpl->frame >= mImpl->scene.frames; }
 uint64_t Sculptor::frame() const { return mImpl->frame; }
+bool Sculptor::frameOpen() const { return mImpl->open; }
 uint64_t Sculptor::totalFrames() const { return mImpl->scene.frames; }
 const Scene& Sculptor::scene() const { return mImpl->scene; }
 Automaton& Sculptor::automaton() { return *mImpl->automaton; }
 const MassGridPtr& Sculptor::mass() const { return mImpl->mass; }
+void Sculptor::setStopRequest(std::function<bool()> poll) { mImpl->stopPoll = std::move(poll); }
+bool Sculptor::stopped() const { return mImpl->stopped; }
+const ClayMeta& Sculptor::startMeta() const { return mImpl->startMeta; }
+
+ClayMeta Sculptor::checkpointMeta() const
+{
+    const Impl& im = *mImpl;
+    if (im.open && im.openSteps == 0) {
+        // Only an exception between a frame's push and its first step leaves this state.
+        throw Error("frame " + std::to_string(im.frame + 1) + " was pushed but not settled; it cannot be saved");
+    }
+    ClayMeta m;
+    m.dimensions = im.scene.dimensions;
+    m.rule = im.automaton->options().rule;
+    m.seed = im.automaton->options().seed;
+    m.steps = im.automaton->stepCount();
+    m.frames = im.frame;
+    m.frameSteps = im.open ? im.openSteps : 0;
+    m.voxelSize = im.scene.voxelSize;
+    return m;
+}
 
 FrameReport Sculptor::runFrame()
 {
     Impl& im = *mImpl;
     if (done()) throw Error("the scene has no frame left to run (" + std::to_string(im.scene.frames) + " run)");
+    im.stopped = false;
     FrameReport rep;
-    rep.frame = ++im.frame;
-    if (!im.scene.tools.empty()) {
-        const std::vector<ShapePtr> tools = im.toolsAt(im.frame);
-        im.placeTools(tools);
-        rep.push = push(*im.automaton, tools);
+    rep.frame = im.frame + 1;
+    if (!im.open) {
+        if (!im.scene.tools.empty()) {
+            const std::vector<ShapePtr> tools = im.toolsAt(rep.frame);
+            im.placeTools(tools);
+            rep.push = push(*im.automaton, tools);
+            if (!rep.push.region.empty()) im.quiet = 0; // push edited the clay
+        }
+        im.open = true;
+        im.openSteps = 0;
     }
-    rep.settle = im.automaton->settle(im.scene.settle.maxSteps, im.scene.settle.tolerance);
+    rep.settle = im.settleOpenFrame(rep.finished);
+    if (rep.finished) {
+        im.open = false;
+        im.openSteps = 0;
+        ++im.frame;
+    } else {
+        im.stopped = true;
+    }
     return rep;
 }
 
 RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const FrameReport&)>& onFrame)
 {
     using Clock = std::chrono::steady_clock;
+    Impl& im = *mImpl;
+    im.stopped = false;
     RunSummary s;
-    s.massInitial = mImpl->automaton->totalMass();
+    s.massInitial = im.automaton->totalMass();
     const auto t0 = Clock::now();
     while (!done() && (maxFrames == 0 || s.frames < maxFrames)) {
+        if (!im.open && im.stopRequested() && im.boundaryResumesExactly()) {
+            im.stopped = true;
+            break;
+        }
+        const bool resumedOpen = im.open; // its push happened before this call
         const auto tf = Clock::now();
         const FrameReport r = runFrame();
         const double frameSecs = std::chrono::duration<double>(Clock::now() - tf).count();
@@ -215,22 +741,23 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.steps += r.settle.steps;
         s.blocksVisited += r.settle.blocksVisited;
         s.blocksUpdated += r.settle.blocksUpdated;
-        s.massTrapped = r.push.massTrapped; // clay inside tools now (it is retried every frame)
-        if (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom) ++s.framesUnsettled;
-        if (r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
+        if (!resumedOpen) s.massTrapped = r.push.massTrapped; // clay inside tools now (retried every frame)
+        if (r.finished && (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom))
+            ++s.framesUnsettled;
+        if (r.finished && r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
         s.stages.gather += r.settle.seconds.gather;
         s.stages.repartition += r.settle.seconds.repartition;
         s.stages.grow += r.settle.seconds.grow;
         s.stages.bookkeeping += r.settle.seconds.bookkeeping;
         if (onFrame) onFrame(r);
+        if (!r.finished) break; // stopped() is set
     }
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    s.massFinal = totalMass(*mImpl->mass);
+    s.massFinal = totalMass(*im.mass);
     s.massDrift = s.massFinal - s.massInitial;
-    s.metrics = measureClay(*mImpl->mass, mImpl->scene.rule.threshold, mImpl->automaton->obstacles().get(),
-                            mImpl->scene.dimensions);
-    s.residualOverload = mImpl->automaton->residualOverload();
-    s.settled = mImpl->automaton->settled();
+    s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions);
+    s.residualOverload = im.automaton->residualOverload();
+    s.settled = im.automaton->settled();
     return s;
 }
 

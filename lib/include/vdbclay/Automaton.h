@@ -104,6 +104,14 @@ public:
     /// @a maxSteps steps have run, or the overload provably has no room (StopReason::NoRoom),
     /// whichever comes first.
     StepReport settle(uint64_t maxSteps, int64_t tolerance = 0);
+    /// settle() checks for StopReason::NoRoom once a call has run this many steps, then at each
+    /// doubling (a flood costs about as much as a few hundred steps of a large lump).
+    static constexpr uint64_t kNoRoomCheckSteps = 8192;
+    /// True when the overload provably cannot vanish: a flood from every over cell through the
+    /// non-obstacle cells closes on walled-in regions holding more than Tc per cell. Bounded by the
+    /// clay's volume. For callers that settle step by step (Sculptor, to stop between steps) and
+    /// want settle()'s NoRoom check on the same schedule.
+    bool overloadHasNoRoom();
 
     /// Lets @a fn change voxels of the mass grid inside @a region (inclusive), e.g. a tool pushing
     /// clay. The automaton rescans the region: it re-derives the overload there and wakes every

@@ -18,6 +18,9 @@ struct ClayMeta {
     uint64_t seed = 0;
     uint64_t steps = 0;   ///< automaton steps run so far
     uint64_t frames = 0;  ///< scene frames run so far
+    /// 0: written at a frame boundary. n > 0: a checkpoint written during frame frames + 1, after
+    /// its push and n steps of its settling (Sculptor resumes the frame there). Stored only when > 0.
+    uint64_t frameSteps = 0;
     double voxelSize = 1.0;
     std::string version;  ///< vdbclay version that wrote it (filled by writeClayFile)
 };

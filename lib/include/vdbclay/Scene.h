@@ -55,6 +55,9 @@ struct OutputSpec {
     std::string vdb, png, mesh, stats; ///< empty: not written
 };
 
+/// Scene::memoryBudget: no budget at all.
+constexpr uint64_t kNoMemoryBudget = UINT64_MAX;
+
 struct Scene {
     std::string source;  ///< the file (or "<built-in>") for messages
     int dimensions = 3;
@@ -68,7 +71,17 @@ struct Scene {
     uint64_t frames = 0; ///< frames to run (default: the longest tool path)
     std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty
     OutputSpec outputs;
+    /// Bytes the run may need (estimateSceneMemory in Sculpt.h); 0: defaultMemoryBudget();
+    /// kNoMemoryBudget: unlimited. Scene files: "memory_budget": "8G" (or a byte count, or "none").
+    uint64_t memoryBudget = 0;
 };
+
+/// Parses a size such as "8G", "512M", "1.5GiB", "64k", "1000000" (bytes; K, M, G, T are powers of
+/// 1024, with or without "i"/"B"), or "none"/"unlimited" (kNoMemoryBudget).
+/// @throw Error naming @a text if it is not such a size or is 0.
+uint64_t parseByteSize(const std::string& text);
+/// "1.5 GiB", "512 MiB", "900 B": a size for messages.
+std::string formatBytes(uint64_t bytes);
 
 /// Parses scene JSON. Relative file names inside the scene are resolved against @a baseDir.
 /// @throw Error "SOURCE: FIELD: what was wrong" on any malformed or inconsistent input.

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "vdbclay/Automaton.h"
+#include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Scene.h"
@@ -10,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 
 namespace vdbclay {
 
@@ -17,6 +19,10 @@ struct FrameReport {
     uint64_t frame = 0; ///< 1-based frame just run
     PushReport push;
     StepReport settle;
+    /// false when a stop request (Sculptor::setStopRequest) cut the frame's settling short: the
+    /// frame is still open, and the next runFrame() (or a Sculptor resumed from checkpointMeta())
+    /// finishes it exactly as an unbroken run would have.
+    bool finished = true;
 };
 
 /// Totals of a run, as the CLI prints them and writes to --stats.
@@ -39,21 +45,80 @@ struct RunSummary {
     ClayMetrics metrics;
 };
 
+/// What a scene's grids are expected to need, in bytes, before any of them is built
+/// (estimateSceneMemory). Node sizes are OpenVDB's own (sizeof), plus allocator overhead.
+struct MemoryEstimate {
+    uint64_t clayLeaves = 0;      ///< 8^3 leaves of the initial clay (an upper bound: shapes' bounds)
+    uint64_t clayLeavesGrown = 0; ///< leaves the clay may reach as it spreads (>= clayLeaves)
+    uint64_t obstacleLeaves = 0;  ///< leaves of the obstacle masks (static obstacles)
+    uint64_t toolVoxels = 0;      ///< voxels in the tools' bounds at once (the largest frame)
+    uint64_t clayBytes = 0;       ///< the Int32 mass grid, grown: leaves + internal nodes
+    uint64_t obstacleBytes = 0;   ///< two masks (static, and the automaton's copy with the tools)
+    uint64_t toolBytes = 0;       ///< the tools' voxels as obstacle cells and push scratch
+    uint64_t automatonBytes = 0;  ///< the automaton's per-leaf block masks and work lists
+    uint64_t outputBytes = 0;     ///< writing the result: density and surface grids
+    uint64_t total() const;
+    /// One line: "about 1.2 GiB (clay 800 MiB for up to 370000 leaves, obstacles ..., ...)".
+    std::string describe() const;
+};
+
+/// Estimates the memory a run of @a scene needs, from the clay shapes' bounds (clay from .vdb
+/// files and the start file: from the file's grid statistics, without reading the voxels), the
+/// obstacles' bounds and the tools' bounds along their paths. Growth: clay may spread over the
+/// bounding box of each cluster of clay and tool sweeps (boxes that touch are merged), grown by one
+/// leaf on every side, and over no more leaves than it has units of mass.
+/// @throw Error if a file the scene names cannot be read.
+MemoryEstimate estimateSceneMemory(const Scene& scene);
+
+/// The budget a scene gets when Scene::memoryBudget is 0: three quarters of the memory this process
+/// may use (physical memory, or the cgroup's memory.max where that is lower).
+uint64_t defaultMemoryBudget();
+
+/// @throw Error "SOURCE: needs about X ... more than the memory budget of Y ..." when
+///        estimateSceneMemory(scene) exceeds the scene's budget (Scene::memoryBudget; 0: the
+///        default). Does nothing when the budget is kNoMemoryBudget.
+void checkMemoryBudget(const Scene& scene);
+
 class Sculptor {
 public:
-    /// Builds the clay (or reads the scene's start file), rasterises obstacles, places the tools at
-    /// the frame the start file reached (0 without one).
-    /// @throw Error if clay overlaps an obstacle, masses overflow a cell, or a file is bad.
+    /// Checks the memory budget (checkMemoryBudget), builds the clay (or reads the scene's start
+    /// file), rasterises obstacles, places the tools at the frame the start file reached (0
+    /// without one). A start file written in the middle of a frame (ClayMeta::frameSteps > 0)
+    /// reopens that frame: its tools are placed, its push is not repeated, and its settling goes on
+    /// with the rest of its step budget.
+    /// @throw Error if the budget is exceeded, clay overlaps an obstacle, masses overflow a cell, a
+    ///        file is bad, or a mid-frame start file was written with another rule, Tc, alpha,
+    ///        seed or dimensions than the scene's.
     Sculptor(const Scene& scene, int threads = 0);
     ~Sculptor();
 
-    /// Runs the next frame. @throw Error if there is none left (done()).
+    /// Runs the next frame, or finishes the open one. @throw Error if there is none left (done()).
+    /// Returns early (report.finished false) when the stop request asks for it.
     FrameReport runFrame();
-    /// Runs up to @a maxFrames frames (all when 0), calling @a onFrame after each.
+    /// Runs up to @a maxFrames frames (all when 0), calling @a onFrame after each. Returns early,
+    /// with stopped() true, when the stop request asks for it.
     RunSummary run(uint64_t maxFrames = 0, const std::function<void(const FrameReport&)>& onFrame = {});
 
+    /// Lets a caller stop a run early, e.g. on SIGINT: @a poll is called after every automaton step
+    /// and between frames; once it returns true, runFrame() and run() return at the next point from
+    /// which checkpointMeta() resumes exactly: after the current step if that step changed the clay
+    /// (almost always), else after the next such step or at the next frame boundary. Pass an empty
+    /// function to remove it. @a poll must be cheap (it runs between steps).
+    void setStopRequest(std::function<bool()> poll);
+    /// True when the last run() or runFrame() returned early on the stop request.
+    bool stopped() const;
+    /// Metadata for writing the current state with writeClayFile() as a file a scene's "start"
+    /// continues from exactly (same clay, same step count, same content hash as an unbroken run):
+    /// the scene's rule, seed, dimensions and voxel size, the step count, the frames finished, and
+    /// the steps already settled in an open frame.
+    ClayMeta checkpointMeta() const;
+
+    /// The metadata of the scene's start file (defaults when there is none or it has none).
+    const ClayMeta& startMeta() const;
+
     bool done() const;
-    uint64_t frame() const;       ///< frames run so far (including those of the start file)
+    uint64_t frame() const;       ///< frames finished so far (including those of the start file)
+    bool frameOpen() const;       ///< a frame was cut short by a stop request and is not finished
     uint64_t totalFrames() const;
     const Scene& scene() const;
     Automaton& automaton();
