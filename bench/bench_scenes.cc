@@ -302,13 +302,44 @@ MassGridPtr fromDense(const Dense& d)
 
 inline int64_t over(int64_t m, int64_t tc) { return m > tc ? m - tc : 0; }
 
+/// What one step (or one row of a step) did.
+struct LayerStats {
+    uint64_t changed = 0, visited = 0;
+    int64_t overloadDelta = 0;
+};
+
+/// DENSE's unit of work: the block at local (x, y, z) of @a step, updated in place.
+inline void denseBlock(Dense& d, const CompiledRule& rule, int x, int y, int z, uint64_t step, uint64_t seed,
+                       const size_t* off, LayerStats& st)
+{
+    const size_t base = d.idx(x, y, z);
+    int32_t m[8];
+    uint32_t valid = 0;
+    for (int i = 0; i < 8; ++i) {
+        m[i] = d.m[base + off[i]];
+        valid |= uint32_t(!d.obs[base + off[i]]) << i;
+    }
+    ++st.visited;
+    const BlockKey key{d.x0 + x, d.y0 + y, d.z0 + z, step, seed};
+    int64_t out[8];
+    const uint32_t ch = rules_internal::repartition(rule, 8, m, valid, key, out);
+    if (!ch) return;
+    ++st.changed;
+    const int64_t tc = rule.threshold;
+    for (int i = 0; i < 8; ++i) {
+        if (!((ch >> i) & 1u)) continue;
+        if (out[i] > INT32_MAX) throw Error("dense: overflow");
+        if ((valid >> i) & 1u) st.overloadDelta += over(out[i], tc) - over(m[i], tc);
+        d.m[base + off[i]] = int32_t(out[i]);
+    }
+}
+
 /// Runs steps until the overload is 0 or two steps in a row change nothing (vdbclay's "settled"),
 /// or the projected time exceeds @a limit (then the time is extrapolated to @a refSteps steps).
 Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit, uint64_t maxSteps)
 {
     Dense d = toDense(st, bounds);
     const CompiledRule rule = compileRule(st.options.rule);
-    const int64_t tc = rule.threshold;
     int64_t overload = residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get());
     uint64_t step = st.step0, steps = 0, updated = 0, visited = 0;
     int quiet = 0;
@@ -318,32 +349,13 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
     const auto t0 = Clock::now();
     while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
         const int p = int(step & 1);
-        uint64_t changedBlocks = 0;
+        LayerStats ls;
         for (int z = p; z + 1 < d.nz; z += 2)
-            for (int y = p; y + 1 < d.ny; y += 2) {
-                const size_t row = d.idx(0, y, z);
-                for (int x = p; x + 1 < d.nx; x += 2) {
-                    const size_t base = row + size_t(x);
-                    int32_t m[8];
-                    uint32_t valid = 0;
-                    for (int i = 0; i < 8; ++i) {
-                        m[i] = d.m[base + off[i]];
-                        valid |= uint32_t(!d.obs[base + off[i]]) << i;
-                    }
-                    ++visited;
-                    const BlockKey key{d.x0 + x, d.y0 + y, d.z0 + z, step, st.options.seed};
-                    int64_t out[8];
-                    const uint32_t ch = rules_internal::repartition(rule, 8, m, valid, key, out);
-                    if (!ch) continue;
-                    ++changedBlocks;
-                    for (int i = 0; i < 8; ++i) {
-                        if (!((ch >> i) & 1u)) continue;
-                        if (out[i] > INT32_MAX) throw Error("dense: overflow");
-                        if ((valid >> i) & 1u) overload += over(out[i], tc) - over(m[i], tc);
-                        d.m[base + off[i]] = int32_t(out[i]);
-                    }
-                }
-            }
+            for (int y = p; y + 1 < d.ny; y += 2)
+                for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, y, z, step, st.options.seed, off, ls);
+        const uint64_t changedBlocks = ls.changed;
+        visited += ls.visited;
+        overload += ls.overloadDelta;
         updated += changedBlocks;
         quiet = changedBlocks ? 0 : quiet + 1;
         ++step;
@@ -376,11 +388,6 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
 // of two steps that change nothing. A step begun past that point changes nothing either (a block
 // with a cell over Tc and a cell under it always changes, whatever its key), so stopping late gives
 // the identical grid; the reported step count is where the stop condition first held.
-struct LayerStats {
-    uint64_t changed = 0, visited = 0;
-    int64_t overloadDelta = 0;
-};
-
 int layerRows(const Dense& d, int phase) { return std::max(0, (d.ny - phase) / 2); }
 
 /// The rows of the previous step (phase 1 - p) that must be done before row j of phase p runs.
@@ -394,32 +401,8 @@ void denseRow(Dense& d, const CompiledRule& rule, uint64_t step, uint64_t seed, 
               LayerStats& st)
 {
     const int p = int(step & 1);
-    const int y = p + 2 * j;
-    const int64_t tc = rule.threshold;
-    for (int z = p; z + 1 < d.nz; z += 2) {
-        const size_t row = d.idx(0, y, z);
-        for (int x = p; x + 1 < d.nx; x += 2) {
-            const size_t base = row + size_t(x);
-            int32_t m[8];
-            uint32_t valid = 0;
-            for (int i = 0; i < 8; ++i) {
-                m[i] = d.m[base + off[i]];
-                valid |= uint32_t(!d.obs[base + off[i]]) << i;
-            }
-            ++st.visited;
-            const BlockKey key{d.x0 + x, d.y0 + y, d.z0 + z, step, seed};
-            int64_t out[8];
-            const uint32_t ch = rules_internal::repartition(rule, 8, m, valid, key, out);
-            if (!ch) continue;
-            ++st.changed;
-            for (int i = 0; i < 8; ++i) {
-                if (!((ch >> i) & 1u)) continue;
-                if (out[i] > INT32_MAX) throw Error("dense: overflow");
-                if ((valid >> i) & 1u) st.overloadDelta += over(out[i], tc) - over(m[i], tc);
-                d.m[base + off[i]] = int32_t(out[i]);
-            }
-        }
-    }
+    for (int z = p; z + 1 < d.nz; z += 2)
+        for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, p + 2 * j, z, step, seed, off, st);
 }
 
 /// Folds step stats in order; returns the number of steps after which the run stops (0: not yet).
