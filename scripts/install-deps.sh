@@ -6,6 +6,8 @@
 #   libpng-dev:             PNG output for `vdbclay render`.
 #   libcli11-dev:           header-only command-line parsing for the CLI (subcommands, --help).
 #   libopenvdb-tools:       vdb_print, used by the tests to check our .vdb files open in OpenVDB's tools.
+#   clang, libclang-rt-dev: the sanitizer and fuzzing build (scripts/test-sanitizers.sh): libFuzzer
+#                           and the sanitizer runtimes come with clang's runtime libraries.
 set -euo pipefail
 
 PKGS=(
@@ -13,6 +15,7 @@ PKGS=(
   libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
   libgtest-dev googletest
   nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
+  clang libclang-rt-dev
 )
 
 missing=()

@@ -7,6 +7,8 @@
 
 #include "vdbclay/Shapes.h"
 
+#include "VdbCheck.h"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>
 #include <openvdb/tools/Interpolation.h>
@@ -677,6 +679,12 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
     requireVoxelSize(voxelSize, "loadLevelSet(" + path + ")");
     requireFile(path);
     openvdb::initialize();
+    // OpenVDB trusts the sizes a file records: check them first (VdbCheck.h).
+    try {
+        io_internal::checkVdbLayout(path);
+    } catch (const Error& e) {
+        throw Error("cannot read level set from " + path + ": " + e.what());
+    }
     openvdb::FloatGrid::Ptr grid;
     try {
         openvdb::io::File file(path);
