@@ -26,7 +26,7 @@ for target in scene vdb; do
     grep -v '^#[0-9]' "$BUILD_DIR/fuzz-$target.log" | tail -60 >&2
     status=1
   else
-    grep -E '^#[0-9]+ *DONE|stat::(number_of_executed_units|average_exec_per_sec|peak_rss_mb)' \
+    grep -E '^#[0-9]+[[:space:]]+DONE|stat::(number_of_executed_units|average_exec_per_sec|peak_rss_mb)' \
       "$BUILD_DIR/fuzz-$target.log" || true
   fi
 done
