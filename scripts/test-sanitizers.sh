@@ -1,14 +1,22 @@
 #!/usr/bin/env bash
-# Builds vdbclay with AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/ and runs the
-# test suite there; any sanitizer report fails the run. (ThreadSanitizer needs a TSan-instrumented
-# oneTBB, which Debian does not ship: see docs/ROBUSTNESS.md.)
+# Builds vdbclay with clang, AddressSanitizer + UndefinedBehaviorSanitizer and the libFuzzer targets
+# in build-asan/, then runs the test suite there (any sanitizer report fails the run). The same
+# build serves scripts/test-fuzz.sh. (ThreadSanitizer needs a TSan-instrumented oneTBB, which
+# Debian does not ship: see docs/ROBUSTNESS.md.) Uses ccache when it is installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export BUILD_DIR=${ASAN_BUILD_DIR:-build-asan}
-bash scripts/build.sh -DVDBCLAY_SANITIZE=address,undefined -DCMAKE_BUILD_TYPE=RelWithDebInfo
-export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
-export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
-export LSAN_OPTIONS=suppressions=$PWD/tests/sanitizers/lsan.supp
+# A build-asan/ configured by an earlier gcc build of this script cannot switch compilers in place.
+if [ -f "$BUILD_DIR/CMakeCache.txt" ] &&
+   ! grep -q '^CMAKE_CXX_COMPILER:[A-Z]*=.*clang++' "$BUILD_DIR/CMakeCache.txt"; then
+  echo "test-sanitizers: $BUILD_DIR was configured with another compiler; starting it afresh" >&2
+  rm -rf "$BUILD_DIR"
+fi
+launcher=()
+if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+bash scripts/build.sh -DCMAKE_CXX_COMPILER=clang++ "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DVDBCLAY_SANITIZE=address,undefined -DVDBCLAY_BUILD_FUZZERS=ON
+source scripts/sanitizer-env.sh
 cd "$BUILD_DIR"
 # The install/find_package tests check packaging, not memory: the main run covers them.
 ctest --output-on-failure --parallel "${JOBS:-2}" --timeout 1800 -E '^package_'

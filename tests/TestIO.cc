@@ -461,6 +461,89 @@ TEST_F(IOTest, NegativeMassIsRefused)
         << msg;
 }
 
+// Found by tests/fuzz/fuzz_vdb: OpenVDB trusts a block's recorded size and copies that many bytes
+// into the node's buffer (a heap overflow), or allocates whatever a length asks for. The layout
+// check refuses both before OpenVDB reads the file.
+namespace {
+/// One leaf of 6 active voxels, zip-compressed: its 24 bytes of values do not shrink, so they are
+/// stored raw, as the last 8 + 24 bytes of the file (size -24, then the values).
+std::string oneLeafZipFile(const std::string& path)
+{
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    for (int x = 0; x < 3; ++x) {
+        for (int y = 0; y < 2; ++y) g->tree().setValueOn(Coord(x, y, 0), 40 + 10 * x + y);
+    }
+    openvdb::io::File f(path);
+    f.setCompression(openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK);
+    f.write({g});
+    f.close();
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+void patchInt64(std::string& bytes, size_t at, int64_t v) { std::memcpy(&bytes[at], &v, 8); }
+int64_t int64At(const std::string& bytes, size_t at)
+{
+    int64_t v = 0;
+    std::memcpy(&v, &bytes[at], 8);
+    return v;
+}
+} // namespace
+
+TEST_F(IOTest, DamagedBlockSizesAreRefusedBeforeOpenVDBReads)
+{
+    const std::string good = file("leaf.vdb");
+    std::string bytes = oneLeafZipFile(good);
+    ASSERT_EQ(readClayFile(good).mass->activeVoxelCount(), 6);
+    const size_t sizeAt = bytes.size() - 32;
+    ASSERT_EQ(int64At(bytes, sizeAt), -24); // the layout this test relies on
+
+    const std::string bad = file("bad.vdb");
+    patchInt64(bytes, sizeAt, -4096); // "4096 raw bytes follow": OpenVDB would copy them into 24
+    spit(bad, bytes);
+    std::string msg = errorOf([&] { readClayFile(bad); });
+    EXPECT_TRUE(contains(msg, bad) && contains(msg, "an uncompressed block of 4096 bytes where 24 belong"))
+        << msg;
+    EXPECT_TRUE(contains(errorOf([&] { describeVdb(bad); }), "where 24 belong"));
+
+    patchInt64(bytes, sizeAt, int64_t(1) << 40); // "a terabyte of zip data follows"
+    spit(bad, bytes);
+    msg = errorOf([&] { readClayFile(bad); });
+    EXPECT_TRUE(contains(msg, "needs 1099511627776 bytes but the file ends 24 bytes later")) << msg;
+}
+
+TEST_F(IOTest, DamagedLengthsAreRefusedBeforeOpenVDBAllocates)
+{
+    const std::string good = file("leaf.vdb");
+    std::string bytes = oneLeafZipFile(good);
+    // Header (57 bytes), file metadata count (0), grid count (1), then the first grid's name.
+    uint32_t count = 0, nameLength = 0;
+    std::memcpy(&count, &bytes[57], 4);
+    std::memcpy(&nameLength, &bytes[65], 4);
+    ASSERT_EQ(count, 0u);
+    ASSERT_EQ(nameLength, 4u); // "mass"
+    const uint32_t huge = 0xfffffff0u; // OpenVDB would allocate and fill 4 GB for the name
+    std::memcpy(&bytes[65], &huge, 4);
+    const std::string bad = file("bad.vdb");
+    spit(bad, bytes);
+    const std::string msg = errorOf([&] { describeVdb(bad); });
+    EXPECT_TRUE(contains(msg, "grid 1's name (4294967280 bytes long) needs 4294967280 bytes")) << msg;
+}
+
+TEST_F(IOTest, TotalMassThatOverflowsIsAnError)
+{
+    // A file can hold a tile of 4096^3 voxels of 2^31 - 1 each: about 2^67 in all.
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    g->tree().addTile(3, Coord(0), 2147483647, true);
+    EXPECT_TRUE(contains(errorOf([&] { totalMass(*g); }), "the total mass exceeds"));
+    const std::string path = file("tile.vdb");
+    openvdb::io::File(path).write({g});
+    const std::string text = describeVdb(path);
+    EXPECT_TRUE(contains(text, "total mass: more than 64 bits count")) << text;
+    EXPECT_TRUE(contains(text, "content hash: none (the grid holds tiles")) << text;
+}
+
 TEST_F(IOTest, DescribeNamesGridsAndTotalMass)
 {
     auto clay = sampleClay();

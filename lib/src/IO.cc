@@ -10,6 +10,7 @@
 
 #include "AtomicFile.h"
 #include "Surface.h"
+#include "VdbCheck.h"
 
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/File.h>
@@ -23,6 +24,7 @@
 #include <cstring>
 #include <fstream>
 #include <memory>
+#include <new>
 #include <algorithm>
 #include <cstdio>
 #include <iomanip>
@@ -55,8 +57,11 @@ void initOpenVDB() { openvdb::initialize(); }
 /// An exception's text fit for a message: OpenVDB's errors on damaged files quote whatever bytes
 /// it read (a "grid type" of garbage and kilobytes of blanks), so keep printable characters,
 /// collapse runs of blanks and cut it short.
+std::string reason(const std::bad_alloc&);
+
 std::string reason(const std::exception& e)
 {
+    if (const auto* b = dynamic_cast<const std::bad_alloc*>(&e)) return reason(*b);
     std::string out;
     const char* p = e.what();
     for (; *p && out.size() < 200; ++p) {
@@ -68,6 +73,11 @@ std::string reason(const std::exception& e)
     while (!out.empty() && out.back() == ' ') out.pop_back();
     if (*p) out += "...";
     return out.empty() ? "unreadable data" : out;
+}
+
+std::string reason(const std::bad_alloc&)
+{
+    return "it records a size larger than the memory available";
 }
 
 const char* kMetaThreshold = "vdbclay_threshold";
@@ -97,66 +107,43 @@ void validateMeta(const ClayMeta& meta, const std::string& path)
     }
 }
 
-/// Walks a .vdb file's structure (header, file metadata, grid descriptors) the way
-/// openvdb::io::File::open does, and checks that every grid the descriptors record ends within
-/// the file. io::File itself does not notice a file cut short inside or after its first grid.
-class StructureCheck : public openvdb::io::Archive {
-public:
-    /// An empty string if the structure is whole, else what is wrong.
-    std::string check(const std::string& path, uint64_t fileSize)
-    {
-        std::ifstream is(path, std::ios::in | std::ios::binary);
-        if (!is) return "cannot open it";
-        const bool hasOffsets = readHeader(is);
-        if (!is) return "the header is cut short";
-        auto streamMeta = std::make_shared<openvdb::io::StreamMetadata>();
-        streamMeta->setSeekable(true);
-        openvdb::io::setStreamMetadataPtr(is, streamMeta, /*transfer=*/false);
-        setFormatVersion(is);
-        setLibraryVersion(is);
-        setDataCompression(is);
-        openvdb::MetaMap meta;
-        meta.readMeta(is);
-        if (!is) return "the file metadata is cut short";
-        if (!hasOffsets) return ""; // a streamed file records no grid ends
-        const int32_t count = readGridCount(is);
-        if (!is || count < 0) return "the grid count is cut short";
-        int64_t end = 0;
-        for (int32_t i = 0; i < count; ++i) {
-            openvdb::io::GridDescriptor gd;
-            gd.read(is);
-            if (!is) return "grid descriptor " + std::to_string(i + 1) + " is cut short";
-            end = std::max(end, gd.getEndPos());
-            gd.seekToEnd(is);
-        }
-        if (uint64_t(end) > fileSize) {
-            return "its grids end at byte " + std::to_string(end) + " but it holds only " +
-                   std::to_string(fileSize) + " bytes";
-        }
-        return "";
-    }
-};
+/// The grid name OpenVDB looks grids up by: a descriptor's unique name up to its "\x1e" suffix.
+std::string baseName(const std::string& uniqueName)
+{
+    return uniqueName.substr(0, uniqueName.find('\x1e'));
+}
+
+/// "int32" for "Tree_int32_5_4_3": the value type, as openvdb::GridBase::valueType() names it.
+std::string valueTypeOf(const std::string& treeType)
+{
+    std::string t = treeType;
+    if (t.rfind("Tree_", 0) == 0) t = t.substr(5);
+    const auto cut = t.find("_5_4_3");
+    return cut == std::string::npos ? t : t.substr(0, cut);
+}
 
 /// Opens @a path for reading with every check readClayFile promises; grids are read in full
-/// (no delayed loading), so the file may be replaced afterwards.
-void openChecked(openvdb::io::File& file, const std::string& path)
+/// (no delayed loading), so the file may be replaced afterwards. OpenVDB trusts the sizes a file
+/// records (a damaged one makes it allocate gigabytes or overrun a buffer), so the layout is
+/// checked byte by byte first (VdbCheck.h). @return the grids the check found.
+std::vector<io_internal::VdbGridLayout> openChecked(openvdb::io::File& file, const std::string& path)
 {
     struct stat st;
     if (::stat(path.c_str(), &st) != 0) throw Error(path + ": no such file");
     if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
-    const std::string prefix = path + " is not a .vdb file or is truncated: ";
+    const std::string prefix = path + " is not a .vdb file or is truncated or damaged: ";
+    std::vector<io_internal::VdbGridLayout> grids;
+    try {
+        grids = io_internal::checkVdbLayout(path);
+    } catch (const Error& e) {
+        throw Error(prefix + e.what());
+    }
     try {
         file.open(/*delayLoad=*/false);
     } catch (const std::exception& e) {
         throw Error(prefix + reason(e));
     }
-    std::string problem;
-    try {
-        problem = StructureCheck().check(path, uint64_t(st.st_size));
-    } catch (const std::exception& e) {
-        problem = reason(e);
-    }
-    if (!problem.empty()) throw Error(prefix + problem);
+    return grids;
 }
 
 std::string gridNames(openvdb::io::File& file)
@@ -175,7 +162,7 @@ openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& 
     try {
         return file.getGrids();
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
+        throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
     }
 }
 
@@ -272,17 +259,24 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
 {
     initOpenVDB();
     openvdb::io::File file(path);
-    openChecked(file, path);
+    const auto layout = openChecked(file, path);
 
     if (!file.hasGrid(gridName)) {
         const std::string names = gridNames(file);
         throw Error(path + " has no grid named \"" + gridName + "\" (grids: " + names + ")");
     }
+    // Refused before reading: only Int32 trees are read (and only checked trees are ever read).
+    for (const auto& g : layout) {
+        if (baseName(g.name) == gridName && g.type != "Tree_int32_5_4_3") {
+            throw Error("grid \"" + gridName + "\" in " + path + " is a " + valueTypeOf(g.type) +
+                        " grid, expected an Int32Grid");
+        }
+    }
     openvdb::GridBase::Ptr base;
     try {
         base = file.readGrid(gridName);
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated: " + reason(e));
+        throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
     }
     if (!base) throw Error(path + ": grid \"" + gridName + "\" could not be read");
     file.close();
@@ -372,15 +366,35 @@ std::string describeVdb(const std::string& path)
 {
     initOpenVDB();
     openvdb::io::File file(path);
-    openChecked(file, path);
-    openvdb::GridPtrVecPtr grids = readAllGrids(file, path);
+    const auto layout = openChecked(file, path);
+    // Grids of types whose trees vdbclay cannot check first are listed, not read.
+    std::vector<std::string> unread;
+    openvdb::GridPtrVecPtr grids;
+    if (std::all_of(layout.begin(), layout.end(), [](const auto& g) { return g.treeChecked; })) {
+        grids = readAllGrids(file, path);
+    } else {
+        grids = std::make_shared<openvdb::GridPtrVec>();
+        for (const auto& g : layout) {
+            if (!g.treeChecked) {
+                unread.push_back("grid \"" + baseName(g.name) + "\": type " + g.type +
+                                 ", not read (vdbclay reads int32, int64, float, double and vec3 "
+                                 "grids)\n");
+                continue;
+            }
+            try {
+                grids->push_back(file.readGrid(baseName(g.name)));
+            } catch (const std::exception& e) {
+                throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
+            }
+        }
+    }
     openvdb::MetaMap::Ptr fileMeta = file.getMetadata();
     const std::string version = file.version();
     file.close();
 
     std::ostringstream s;
-    s << path << ": OpenVDB file (format " << version << "), " << grids->size()
-      << (grids->size() == 1 ? " grid" : " grids") << "\n";
+    s << path << ": OpenVDB file (format " << version << "), " << layout.size()
+      << (layout.size() == 1 ? " grid" : " grids") << "\n";
     auto printMeta = [&s](const openvdb::MetaMap& meta, const char* indent) {
         for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
             if (it->first == openvdb::GridBase::META_GRID_NAME) continue;
@@ -410,10 +424,21 @@ std::string describeVdb(const std::string& path)
         if (vs[1] != vs[0] || vs[2] != vs[0]) s << " x " << vs[1] << " x " << vs[2];
         s << "\n";
         if (auto ig = openvdb::gridConstPtrCast<openvdb::Int32Grid>(g)) {
-            s << "  total mass: " << totalMass(*ig) << "\n";
-            char hash[32];
-            std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)contentHash(*ig));
-            s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
+            // A damaged or foreign file may hold tiles, or more mass than 64 bits count: say so.
+            try {
+                const int64_t total = totalMass(*ig);
+                s << "  total mass: " << total << "\n";
+            } catch (const Error&) {
+                s << "  total mass: more than 64 bits count\n";
+            }
+            try {
+                const uint64_t h = contentHash(*ig);
+                char hash[32];
+                std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
+                s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
+            } catch (const Error&) {
+                s << "  content hash: none (the grid holds tiles of clay, not voxels)\n";
+            }
             describeClayMetrics(s, *ig, path);
         }
         if (g->metaCount() > 1) {
@@ -421,6 +446,7 @@ std::string describeVdb(const std::string& path)
             printMeta(*g, "    ");
         }
     }
+    for (const std::string& u : unread) s << u;
     return s.str();
 }
 

@@ -24,7 +24,13 @@ int64_t totalMass(const MassGrid& mass)
     int64_t sum = 0;
     for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
         if (*it == 0) continue;
-        sum += int64_t(*it) * int64_t(it.getVoxelCount());
+        // A tile of 4096^3 voxels holding 2^31 each is ~2^67: a file can ask for that.
+        int64_t part = 0;
+        if (__builtin_mul_overflow(int64_t(*it), int64_t(it.getVoxelCount()), &part) ||
+            __builtin_add_overflow(sum, part, &sum)) {
+            throw Error("totalMass: the total mass exceeds " +
+                        std::to_string(std::numeric_limits<int64_t>::max()));
+        }
     }
     return sum;
 }

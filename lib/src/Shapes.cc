@@ -7,6 +7,8 @@
 
 #include "vdbclay/Shapes.h"
 
+#include "VdbCheck.h"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>
 #include <openvdb/tools/Interpolation.h>
@@ -677,6 +679,21 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
     requireVoxelSize(voxelSize, "loadLevelSet(" + path + ")");
     requireFile(path);
     openvdb::initialize();
+    // OpenVDB trusts the sizes a file records: check them first (VdbCheck.h).
+    std::vector<io_internal::VdbGridLayout> layout;
+    try {
+        layout = io_internal::checkVdbLayout(path);
+    } catch (const Error& e) {
+        throw Error("cannot read level set from " + path + ": " + e.what());
+    }
+    // Only trees the check walked are read (a float level set always is).
+    for (const auto& g : layout) {
+        if (!gridName.empty() && g.name.substr(0, g.name.find('\x1e')) == gridName &&
+            g.type != "Tree_float_5_4_3") {
+            throw Error(path + ": grid \"" + gridName + "\" is not a FloatGrid level set (type " +
+                        g.type + ")");
+        }
+    }
     openvdb::FloatGrid::Ptr grid;
     try {
         openvdb::io::File file(path);

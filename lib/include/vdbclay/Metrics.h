@@ -25,6 +25,7 @@ namespace vdbclay {
 class Shape;
 
 /// Sum of all voxel values (active or not), in 64 bits.
+/// @throw Error if it does not fit (a grid read from a damaged file can hold such tiles).
 int64_t totalMass(const MassGrid& mass);
 
 /// Sum over cells not in @a obstacles (may be null) of max(0, m - threshold).
