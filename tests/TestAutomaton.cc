@@ -269,12 +269,10 @@ TEST_F(AutomatonTest, MassIsExactOverHundredThousandStepsWithObstacles)
         const int64_t m0 = totalMass(*mass);
         ASSERT_GT(m0, 0);
         ASSERT_EQ(a.totalMass(), m0);
-        uint64_t updated = 0;
         uint64_t activeSteps = 0;
         for (uint64_t done = 0; done < kSteps; done += 10) {
             for (int i = 0; i < 10; ++i) {
                 const StepReport r = a.step();
-                updated += r.blocksUpdated;
                 activeSteps += r.blocksUpdated ? 1 : 0;
             }
             if (done % 1000 == 0) {
