@@ -17,7 +17,7 @@ inline uint64_t mix64(uint64_t z)
     return z ^ (z >> 31);
 }
 
-inline uint64_t hashKey(const BlockKey& k)
+__attribute__((always_inline)) inline uint64_t hashKey(const BlockKey& k)
 {
     uint64_t h = mix64(k.seed + 0x9E3779B97F4A7C15ull);
     h = mix64(h ^ (k.step * 0xD1B54A32D192ED03ull));
@@ -28,7 +28,7 @@ inline uint64_t hashKey(const BlockKey& k)
 
 /// Gives one unit to each of r distinct cells of @a under, visiting cells in a rotation that starts
 /// at hash % n: first the cells whose new mass is still below Tc, then the others.
-inline void giveRemainder(int64_t r, uint32_t under, int n, int64_t tc, uint64_t hash, int64_t* out)
+__attribute__((always_inline)) inline void giveRemainder(int64_t r, uint32_t under, int n, int64_t tc, uint64_t hash, int64_t* out)
 {
     if (r <= 0) return;
     const int start = int(hash % uint64_t(n));
@@ -55,7 +55,7 @@ inline int64_t divide(int64_t a, int64_t b)
 }
 
 /// Shares @a amount equally among the cells of @a under (nu of them), remainder by hash.
-inline void shareEqually(int64_t amount, uint32_t under, int nu, int n, int64_t tc,
+__attribute__((always_inline)) inline void shareEqually(int64_t amount, uint32_t under, int nu, int n, int64_t tc,
                          const BlockKey& key, int64_t* out)
 {
     const int64_t share = divide(amount, nu);
