@@ -334,35 +334,51 @@ inline void denseBlock(Dense& d, const CompiledRule& rule, int x, int y, int z, 
     }
 }
 
+/// Folds step stats in step order and says when a run stops: the overload is 0, two steps in a row
+/// changed nothing (vdbclay's "settled"), or @a cap steps have run.
+struct StopTracker {
+    int64_t overload;
+    uint64_t cap;     ///< steps allowed (the budget or a safety cap)
+    uint64_t done = 0, updated = 0, visited = 0;
+    int quiet = 0;
+    bool stopped;
+    StopTracker(int64_t overload0, uint64_t cap0) : overload(overload0), cap(cap0), stopped(overload0 <= 0) {}
+    void add(const LayerStats& s)
+    {
+        if (stopped) return;
+        ++done;
+        updated += s.changed;
+        visited += s.visited;
+        overload += s.overloadDelta;
+        quiet = s.changed ? 0 : quiet + 1;
+        if (overload <= 0 || quiet >= 2 || done >= cap) stopped = true;
+    }
+};
+
 /// Runs steps until the overload is 0 or two steps in a row change nothing (vdbclay's "settled"),
 /// or the projected time exceeds @a limit (then the time is extrapolated to @a refSteps steps).
 Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit, uint64_t maxSteps)
 {
     Dense d = toDense(st, bounds);
     const CompiledRule rule = compileRule(st.options.rule);
-    int64_t overload = residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get());
-    uint64_t step = st.step0, steps = 0, updated = 0, visited = 0;
-    int quiet = 0;
+    StopTracker track(residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()),
+                      maxSteps ? maxSteps : UINT64_MAX);
+    uint64_t step = st.step0;
     size_t off[8];
     for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
     Result res;
     const auto t0 = Clock::now();
-    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
+    while (!track.stopped) {
         const int p = int(step & 1);
         LayerStats ls;
         for (int z = p; z + 1 < d.nz; z += 2)
             for (int y = p; y + 1 < d.ny; y += 2)
                 for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, y, z, step, st.options.seed, off, ls);
-        const uint64_t changedBlocks = ls.changed;
-        visited += ls.visited;
-        overload += ls.overloadDelta;
-        updated += changedBlocks;
-        quiet = changedBlocks ? 0 : quiet + 1;
+        track.add(ls);
         ++step;
-        ++steps;
-        if (baselineMustStop(res, steps, refSteps, since(t0), limit)) break;
+        if (baselineMustStop(res, track.done, refSteps, since(t0), limit)) break;
     }
-    finishBaseline(res, "dense", since(t0), steps, visited, updated, refSteps);
+    finishBaseline(res, "dense", since(t0), track.done, track.visited, track.updated, refSteps);
     if (res.complete) {
         res.grid = fromDense(d);
         res.row.hash = contentHash(*res.grid);
@@ -405,25 +421,6 @@ void denseRow(Dense& d, const CompiledRule& rule, uint64_t step, uint64_t seed, 
         for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, p + 2 * j, z, step, seed, off, st);
 }
 
-/// Folds step stats in order; returns the number of steps after which the run stops (0: not yet).
-struct StopTracker {
-    int64_t overload;
-    uint64_t cap;     ///< steps allowed (the budget or a safety cap)
-    uint64_t done = 0, updated = 0, visited = 0;
-    int quiet = 0;
-    bool stopped = false;
-    void add(const LayerStats& s)
-    {
-        if (stopped) return;
-        ++done;
-        updated += s.changed;
-        visited += s.visited;
-        overload += s.overloadDelta;
-        quiet = s.changed ? 0 : quiet + 1;
-        if (overload <= 0 || quiet >= 2 || done >= cap) stopped = true;
-    }
-};
-
 enum class Schedule { Layers, ForkJoin, Pipe, TBlock };
 
 Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_t cap, Schedule sched, int width)
@@ -433,10 +430,9 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
     const uint64_t seed = st.options.seed, s0 = st.step0;
     size_t off[8];
     for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
-    StopTracker track{residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()), cap};
+    StopTracker track(residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()), cap);
     Result res;
     const auto t0 = Clock::now();
-    if (track.overload <= 0) track.stopped = true;
 
     if (sched == Schedule::Layers || (sched == Schedule::TBlock && width <= 1)) {
         for (uint64_t s = s0; !track.stopped; ++s) {
@@ -551,13 +547,13 @@ Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSt
     MassGridPtr g = st.mass->deepCopy();
     const CompiledRule rule = compileRule(st.options.rule);
     const int64_t tc = rule.threshold;
-    int64_t overload = residualOverload(*g, st.options.rule.threshold, st.obstacles.get());
+    StopTracker track(residualOverload(*g, st.options.rule.threshold, st.obstacles.get()),
+                      maxSteps ? maxSteps : UINT64_MAX);
     auto obs = st.obstacles->getConstAccessor();
-    uint64_t step = st.step0, steps = 0, updated = 0, visited = 0;
-    int quiet = 0;
+    uint64_t step = st.step0;
     std::vector<Coord> blocks;
     const auto t0 = Clock::now();
-    while (overload > 0 && quiet < 2 && !(maxSteps && steps >= maxSteps)) {
+    while (!track.stopped) {
         const int p = int(step & 1);
         blocks.clear();
         for (auto leaf = g->tree().cbeginLeaf(); leaf; ++leaf)
@@ -568,7 +564,7 @@ Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSt
         std::sort(blocks.begin(), blocks.end());
         blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
         auto acc = g->getAccessor();
-        uint64_t changedBlocks = 0;
+        LayerStats ls;
         for (const Coord& b : blocks) {
             int32_t m[8];
             uint32_t valid = 0;
@@ -578,26 +574,24 @@ Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSt
                 m[i] = acc.getValue(c[i]);
                 if (!obs.isValueOn(c[i])) valid |= 1u << i;
             }
-            ++visited;
+            ++ls.visited;
             const BlockKey key{b.x(), b.y(), b.z(), step, st.options.seed};
             int64_t out[8];
             const uint32_t ch = repartitionBlock(rule, 8, m, valid, key, out);
             if (!ch) continue;
-            ++changedBlocks;
+            ++ls.changed;
             for (int i = 0; i < 8; ++i) {
                 if (!((ch >> i) & 1u)) continue;
                 if (out[i] > INT32_MAX) throw Error("naive: overflow");
-                if ((valid >> i) & 1u) overload += over(out[i], tc) - over(m[i], tc);
+                if ((valid >> i) & 1u) ls.overloadDelta += over(out[i], tc) - over(m[i], tc);
                 acc.setValue(c[i], int32_t(out[i]));
             }
         }
-        updated += changedBlocks;
-        quiet = changedBlocks ? 0 : quiet + 1;
+        track.add(ls);
         ++step;
-        ++steps;
-        if (baselineMustStop(res, steps, refSteps, since(t0), limit)) break;
+        if (baselineMustStop(res, track.done, refSteps, since(t0), limit)) break;
     }
-    finishBaseline(res, "naive", since(t0), steps, visited, updated, refSteps);
+    finishBaseline(res, "naive", since(t0), track.done, track.visited, track.updated, refSteps);
     if (res.complete) {
         res.grid = g;
         res.row.hash = contentHash(*res.grid);
