@@ -21,8 +21,9 @@
 // examined at all. The cost of a step follows the blocks that changed recently, not the volume.
 //
 // Stages of step(), each timed into StageSeconds:
-//   gather       candidates from the last two steps' changes, sorted by anchor (y, z, x) and merged:
-//                the sorted list is a sequence of horizontal layers, y up, as in the paper's p layers.
+//   gather       candidates from the last two steps' changes, in order of anchor (y, z, x), one entry
+//                per anchor: a sequence of horizontal layers, y up, as in the paper's p layers. The
+//                inputs are already sorted runs, so they are merged, not sorted.
 //   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks).
 //                Blocks of one phase are disjoint, so tasks write disjoint voxels; they write values
 //                only into leaves that exist, and read missing leaves as background 0. The only
@@ -108,15 +109,16 @@ inline bool layerLess(const Coord& a, const Coord& b)
     return a.x() < b.x();
 }
 
-/// Appends to @a out the blocks of the other phase that overlap the blocks in @a a, which belong to
-/// phase @a fromPhase. Even block b overlaps odd blocks b and b+1 along each axis (b+1 = 4 is block
-/// 0 of the +axis neighbour); odd block c overlaps even blocks c-1 and c (c-1 = -1 is block 3 of the
-/// -axis neighbour).
-void dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, std::vector<Anchor>& out)
+/// The blocks of the other phase that overlap the blocks in @a a, which belong to phase
+/// @a fromPhase. Even block b overlaps odd blocks b and b+1 along each axis (b+1 = 4 is block 0 of
+/// the +axis neighbour); odd block c overlaps even blocks c-1 and c (c-1 = -1 is block 3 of the
+/// -axis neighbour). Writes up to 8 anchors to @a buf, and to @a shift[i] which neighbour leaf
+/// buf[i] is (bit 0 = x, 1 = y, 2 = z; 0 = a's own leaf). Returns how many.
+int dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, Anchor buf[8], int shift[8])
 {
-    Anchor buf[8];
     int n = 1;
     buf[0] = a;
+    shift[0] = 0;
     const uint64_t lo[3] = {kX0, kY0, kZ0}, hi[3] = {kX3, kY3, kZ3};
     const int unit[3] = {1, 4, 16};
     const int axes = is3D ? 3 : 2;
@@ -136,10 +138,31 @@ void dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, std::vector<An
                 nb[ax] -= 8;
             }
             buf[i].mask = within;
-            if (spill) buf[n++] = Anchor{nb, spill};
+            if (spill) {
+                shift[n] = shift[i] | (1 << ax);
+                buf[n++] = Anchor{nb, spill};
+            }
         }
     }
-    for (int i = 0; i < n; ++i) out.push_back(buf[i]);
+    return n;
+}
+
+/// Appends to @a out the merge of two runs sorted by layerLess with distinct origins; anchors with
+/// the same origin in both become one, their masks ORed. The result has distinct origins too.
+void mergeOr(const Anchor* a, const Anchor* ae, const Anchor* b, const Anchor* be, std::vector<Anchor>& out)
+{
+    while (a != ae && b != be) {
+        if (layerLess(a->origin, b->origin)) {
+            out.push_back(*a++);
+        } else if (layerLess(b->origin, a->origin)) {
+            out.push_back(*b++);
+        } else {
+            out.push_back(Anchor{a->origin, a->mask | b->mask});
+            ++a, ++b;
+        }
+    }
+    out.insert(out.end(), a, ae);
+    out.insert(out.end(), b, be);
 }
 
 // ---- Per-block addressing tables ---------------------------------------------------------------
@@ -283,7 +306,6 @@ struct Automaton::Impl {
     std::vector<Anchor> changedPrev2; // blocks changed at t-2 (phase of t)
 
     // scratch, reused between steps
-    std::vector<Anchor> contrib;
     std::vector<WorkItem> work;
 
     bool is3D() const { return opts.dimensions == 3; }
@@ -399,10 +421,25 @@ struct Automaton::Impl {
     }
 
     // ---- gather ----
-    void addCandidates(const Anchor& a, int anchorPhase, int phase)
+    // The candidates come as sorted runs with distinct origins, merged instead of sorted:
+    // changedPrev2 (in layer order, as every work list), and changedPrev dilated across the phase,
+    // which splits into one run per neighbour shift (streams[w]): each is changedPrev moved by one
+    // constant vector, so still in layer order. Only the rare extras (hot leaves after resync(),
+    // edited regions) need a sort.
+    std::vector<Anchor> streams[8];
+    std::vector<Anchor> extras;
+    std::vector<Anchor> mergeBuf[2];
+
+    void addExtra(const Anchor& a, int anchorPhase, int phase)
     {
-        if (anchorPhase == phase) contrib.push_back(a);
-        else dilateAcrossPhase(a, anchorPhase, is3D(), contrib);
+        if (anchorPhase == phase) {
+            extras.push_back(a);
+            return;
+        }
+        Anchor buf[8];
+        int shift[8];
+        const int n = dilateAcrossPhase(a, anchorPhase, is3D(), buf, shift);
+        extras.insert(extras.end(), buf, buf + n);
     }
 
     /// Every block overlapping an edited region (grown by one voxel).
@@ -413,32 +450,70 @@ struct Automaton::Impl {
         const int zmax = is3D() ? p.box.max[2] + 1 : 0;
         for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8) {
             for (int y = lo.y(); y <= p.box.max[1] + 1; y += 8) {
-                for (int z = lo.z(); z <= zmax; z += 8) addCandidates(Anchor{Coord(x, y, z), full}, 0, phase);
+                for (int z = lo.z(); z <= zmax; z += 8) addExtra(Anchor{Coord(x, y, z), full}, 0, phase);
             }
         }
     }
 
     void gather(int phase)
     {
-        contrib.clear();
+        struct Run {
+            const Anchor *b, *e;
+        };
+        std::vector<Run> runs;
+        for (auto& st : streams) st.clear();
+        extras.clear();
         const uint64_t full = fullMask(is3D());
         if (fullScanSteps > 0) {
             // After resync() only blocks holding an over cell can change, and those cells lie in
             // hotLeaves (an over cell that moved at the first step is followed by changedPrev).
-            for (const Coord& o : hotLeaves) addCandidates(Anchor{o, full}, 0, phase);
-            for (const Anchor& a : changedPrev) addCandidates(a, 1 - phase, phase);
-            for (const Pending& p : pending) addPending(p, phase);
+            for (const Coord& o : hotLeaves) addExtra(Anchor{o, full}, 0, phase);
         } else {
-            for (const Anchor& a : changedPrev2) contrib.push_back(a);
-            for (const Anchor& a : changedPrev) addCandidates(a, 1 - phase, phase);
-            for (const Pending& p : pending) addPending(p, phase);
+            runs.push_back(Run{changedPrev2.data(), changedPrev2.data() + changedPrev2.size()});
         }
-        std::sort(contrib.begin(), contrib.end(),
-                  [](const Anchor& a, const Anchor& b) { return layerLess(a.origin, b.origin); });
+        for (const Pending& p : pending) addPending(p, phase);
+        Anchor buf[8];
+        int shift[8];
+        for (const Anchor& a : changedPrev) {
+            const int n = dilateAcrossPhase(a, 1 - phase, is3D(), buf, shift);
+            for (int i = 0; i < n; ++i) streams[shift[i]].push_back(buf[i]);
+        }
+        for (const auto& st : streams) runs.push_back(Run{st.data(), st.data() + st.size()});
+        if (!extras.empty()) {
+            std::sort(extras.begin(), extras.end(),
+                      [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });
+            size_t k = 0; // fold equal origins
+            for (size_t i = 1; i < extras.size(); ++i) {
+                if (extras[i].origin == extras[k].origin) extras[k].mask |= extras[i].mask;
+                else extras[++k] = extras[i];
+            }
+            extras.resize(k + 1);
+            runs.push_back(Run{extras.data(), extras.data() + extras.size()});
+        }
+        runs.erase(std::remove_if(runs.begin(), runs.end(), [](const Run& r) { return r.b == r.e; }),
+                   runs.end());
+
+        // Merge pairwise, level by level, ping-ponging between two buffers.
+        size_t total = 0;
+        for (const Run& r : runs) total += size_t(r.e - r.b);
+        for (int level = 0; runs.size() > 1; ++level) {
+            std::vector<Anchor>& out = mergeBuf[level & 1];
+            out.clear();
+            out.reserve(total); // no reallocation below: the offsets stay valid
+            std::vector<std::pair<size_t, size_t>> spans;
+            for (size_t i = 0; i < runs.size(); i += 2) {
+                const size_t start = out.size();
+                if (i + 1 < runs.size()) mergeOr(runs[i].b, runs[i].e, runs[i + 1].b, runs[i + 1].e, out);
+                else out.insert(out.end(), runs[i].b, runs[i].e);
+                spans.emplace_back(start, out.size());
+            }
+            runs.clear();
+            for (const auto& sp : spans) runs.push_back(Run{out.data() + sp.first, out.data() + sp.second});
+        }
         work.clear();
-        for (const Anchor& a : contrib) {
-            if (!work.empty() && work.back().anchor == a.origin) work.back().mask |= a.mask;
-            else work.push_back(WorkItem{a.origin, a.mask, 0});
+        if (!runs.empty()) {
+            work.reserve(size_t(runs[0].e - runs[0].b));
+            for (const Anchor* a = runs[0].b; a != runs[0].e; ++a) work.push_back(WorkItem{a->origin, a->mask, 0});
         }
     }
 
