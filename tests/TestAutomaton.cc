@@ -467,6 +467,49 @@ TEST_F(AutomatonTest, EditWakesTheRegionAndTracksMass)
     EXPECT_EQ(a.totalMass(), totalMass(*mass));
 }
 
+TEST_F(AutomatonTest, QuietStepsCountStepsThatChangeNothingAndEditsRestartThem)
+{
+    // A 4^3 lump, every cell over Tc, walled in by obstacles: no block has an under cell, so no
+    // step changes anything although the overload stays.
+    auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(3, 3, 3)), 150);
+    auto obs = openvdb::MaskGrid::create(false);
+    obs->tree().fill(CoordBBox(Coord(-2, -2, -2), Coord(5, 5, 5)), true);
+    obs->tree().fill(CoordBBox(Coord(0, 0, 0), Coord(3, 3, 3)), false);
+    Automaton a(mass, options(Rule::Prorata, 3, 100), obs);
+    EXPECT_EQ(a.quietSteps(), 0);
+    EXPECT_EQ(a.residualOverload(), 64 * 50);
+    a.step();
+    EXPECT_EQ(a.quietSteps(), 1);
+    EXPECT_FALSE(a.settled());
+    a.step();
+    EXPECT_EQ(a.quietSteps(), 2);
+    EXPECT_TRUE(a.settled());
+    // Emptying one corner cell gives the lump room: the edit restarts the count, and the next step
+    // (step 2, even) has the block [0,1]^3: that cell and seven over cells, which changes.
+    a.edit(Box{{{0, 0, 0}}, {{0, 0, 0}}}, [](MassGrid& g) { g.tree().setValue(Coord(0, 0, 0), 0); });
+    EXPECT_EQ(a.quietSteps(), 0);
+    EXPECT_FALSE(a.settled());
+    const StepReport r = a.step();
+    EXPECT_GT(r.blocksUpdated, 0u);
+    EXPECT_EQ(a.quietSteps(), 0);
+    // 63 x 150 cannot fit in 64 x 100, and the rule sets over cells to Tc and gives the surplus to
+    // the others: the surplus keeps hopping between cells, with a quiet step now and then (a phase
+    // whose every block is all over Tc). The count follows the step reports exactly.
+    int expect = 0, quietSeen = 0;
+    for (int i = 0; i < 200; ++i) {
+        const StepReport ri = a.step();
+        expect = ri.blocksUpdated ? 0 : expect + 1;
+        quietSeen += ri.blocksUpdated ? 0 : 1;
+        ASSERT_EQ(a.quietSteps(), expect) << "step " << a.stepCount();
+        if (a.settled()) break;
+    }
+    EXPECT_GT(quietSeen, 0);
+    EXPECT_EQ(a.totalMass(), 63 * 150);
+    EXPECT_TRUE(a.overloadHasNoRoom());
+    a.resync();
+    EXPECT_EQ(a.quietSteps(), 0);
+}
+
 // ---- refusals ---------------------------------------------------------------------------------------
 
 TEST_F(AutomatonTest, OverflowIsRefusedBeforeAnythingIsWritten)

@@ -954,6 +954,7 @@ uint64_t Automaton::stepCount() const { return mImpl->stepCount; }
 int64_t Automaton::totalMass() const { return mImpl->totalMass; }
 int64_t Automaton::residualOverload() const { return mImpl->overload; }
 bool Automaton::settled() const { return mImpl->settled(); }
+int Automaton::quietSteps() const { return mImpl->quietSteps; }
 const MassGridPtr& Automaton::mass() const { return mImpl->massGrid; }
 const ObstacleGridPtr& Automaton::obstacles() const { return mImpl->obsGrid; }
 

@@ -468,10 +468,6 @@ struct Sculptor::Impl {
     uint64_t openSteps = 0;                ///< its settling steps so far
     std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
     Box toolRegion;                        ///< bounds of the tools as placed now
-    /// Steps since the automaton last changed a cell or was edited: the automaton's own count of
-    /// quiet steps, which a resumed automaton restarts at 0. A checkpoint taken while it is not 0
-    /// would resume with a different count and settle at a different step, so none is taken then.
-    uint64_t quiet = 0;
     std::function<bool()> stopPoll;
     bool stopped = false;
     ClayMeta startMeta;
@@ -498,11 +494,12 @@ struct Sculptor::Impl {
     }
 
     /// Whether a checkpoint taken between frames resumes exactly: the automaton's quiet-step count
-    /// is 0 (as a resumed one's), or it cannot matter: nothing is overloaded, or the next frame
-    /// starts with an edit (placing the tools), which restarts the count in both runs.
+    /// is 0 (as a resumed one's, which restarts at 0), or it cannot matter: nothing is overloaded,
+    /// or the next frame starts with an edit (placing the tools), which restarts the count in both
+    /// runs. Otherwise the resumed run would settle at a different step, so no checkpoint is taken.
     bool boundaryResumesExactly() const
     {
-        if (quiet == 0 || automaton->residualOverload() == 0) return true;
+        if (automaton->quietSteps() == 0 || automaton->residualOverload() == 0) return true;
         if (scene.tools.empty() || frame >= scene.frames) return false;
         return !unite(regionOf(toolsAt(frame + 1)), toolRegion).empty();
     }
@@ -540,8 +537,7 @@ struct Sculptor::Impl {
                 return total;
             }
             ++openSteps;
-            quiet = r.blocksUpdated ? 0 : quiet + 1;
-            if (quiet == 0 && stopRequested()) {
+            if (automaton->quietSteps() == 0 && stopRequested()) {
                 total.reason = StopReason::StepBudget;
                 finished = false;
                 return total;
@@ -556,7 +552,6 @@ struct Sculptor::Impl {
         const Box region = regionOf(tools);
         const Box both = unite(region, toolRegion);
         if (both.empty()) return;
-        quiet = 0; // editObstacles restarts the automaton's count
         automaton->editObstacles(both, [&](ObstacleGrid& grid) {
             auto acc = grid.getAccessor();
             auto fixed = obstacles->getConstAccessor();
@@ -657,7 +652,6 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     if (steps) im.automaton->setStepCount(steps);
     // An open frame's tools are where its push left them; that push is not repeated.
     if (!scene.tools.empty()) im.placeTools(im.toolsAt(im.open ? im.frame + 1 : im.frame));
-    im.quiet = 0; // the automaton was just (re)built: its quiet count is 0
 }
 
 Sculptor::~Sculptor() = default;
@@ -703,7 +697,6 @@ FrameReport Sculptor::runFrame()
             const std::vector<ShapePtr> tools = im.toolsAt(rep.frame);
             im.placeTools(tools);
             rep.push = push(*im.automaton, tools);
-            if (!rep.push.region.empty()) im.quiet = 0; // push edited the clay
         }
         im.open = true;
         im.openSteps = 0;

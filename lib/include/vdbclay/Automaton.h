@@ -142,6 +142,9 @@ public:
     int64_t totalMass() const;       ///< tracked exactly; equals sum of the grid at every step
     int64_t residualOverload() const;
     bool settled() const;
+    /// Consecutive steps that changed no cell; construction, resync(), edit(), editObstacles(),
+    /// setRule() and setStepCount() restart it at 0. settled() is true once it reaches 2.
+    int quietSteps() const;
     const MassGridPtr& mass() const;
     const ObstacleGridPtr& obstacles() const;
 
