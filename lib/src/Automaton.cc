@@ -216,9 +216,15 @@ inline Coord leafOrigin(const Coord& anchor, int which)
 struct LeafSet {
     MassLeaf* leaf[8] = {};
     int32_t* data[8] = {};
+    const int32_t* read[8] = {}; // data, or zeros for a missing leaf: reads need no null test
     const ObsLeaf* obs[8] = {};
     bool obsTile[8] = {}; // obstacle state of the whole region when obs[i] is null
+    bool anyMissing = false; // a leaf the mask's blocks touch does not exist
+    bool anyObs = false;     // a leaf they touch holds obstacles or lies in an obstacle tile
 };
+
+/// What a missing leaf reads as: background 0.
+alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
 
 template<typename MassAcc>
 void fetchLeaves(LeafSet& ls, const Coord& anchor, uint64_t mask, int phase, bool is3D,
@@ -226,18 +232,23 @@ void fetchLeaves(LeafSet& ls, const Coord& anchor, uint64_t mask, int phase, boo
 {
     const Tables& t = tables();
     const int count = (phase == 1) ? (is3D ? 8 : 4) : 1;
+    ls.anyMissing = false;
+    ls.anyObs = false;
     for (int w = 0; w < count; ++w) {
         ls.leaf[w] = nullptr;
         ls.data[w] = nullptr;
+        ls.read[w] = kZeroLeaf;
         ls.obs[w] = nullptr;
         ls.obsTile[w] = false;
         if (w && !(mask & t.needLeaf[is3D][w])) continue;
         const Coord o = leafOrigin(anchor, w);
         ls.leaf[w] = acc.probeLeaf(o);
-        if (ls.leaf[w]) ls.data[w] = ls.leaf[w]->buffer().data();
+        if (ls.leaf[w]) ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
+        else ls.anyMissing = true;
         if (obsTree) {
             ls.obs[w] = obsTree->probeConstLeaf(o);
             if (!ls.obs[w]) ls.obsTile[w] = obsTree->isValueOn(o);
+            ls.anyObs |= ls.obs[w] || ls.obsTile[w];
         }
     }
 }
@@ -526,8 +537,12 @@ struct Automaton::Impl {
         const int n = cells();
         const int64_t tc = rule.threshold;
         const ObsTree* ot = obsTree();
+        const bool mayOverflow = maxBound > INT32_MAX / 8;
         openvdb::tree::ValueAccessor<MassTree, false> acc(tree());
         LeafSet ls;
+        // Totals in locals (registers), added to tot once at the end.
+        uint64_t visited = 0, updated = 0;
+        int64_t overloadDelta = 0, maxWritten = 0;
         for (size_t wi = begin; wi < end; ++wi) {
             WorkItem& w = work[wi];
             w.changed = 0;
@@ -543,19 +558,18 @@ struct Automaton::Impl {
                 int32_t m[8];
                 bool anyOver = false;
                 for (int c = 0; c < n; ++c) {
-                    const int32_t* d = ls.data[lf[c]];
-                    m[c] = d ? d[off[c]] : 0;
+                    m[c] = ls.read[lf[c]][off[c]];
                     anyOver |= (m[c] > tc);
                 }
                 if (!anyOver) continue;
                 uint32_t valid = (1u << n) - 1;
-                if (ot) {
+                if (ls.anyObs) {
                     for (int c = 0; c < n; ++c) {
                         const ObsLeaf* ol = ls.obs[lf[c]];
                         if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
                     }
                 }
-                ++tot.visited;
+                ++visited;
                 BlockKey key;
                 key.x = w.anchor.x() + 2 * (b & 3) - odd;
                 key.y = w.anchor.y() + 2 * ((b >> 2) & 3) - odd;
@@ -565,11 +579,15 @@ struct Automaton::Impl {
                 int64_t out[8];
                 const uint32_t changed = rules_internal::repartition(rule, n, m, valid, key, out);
                 if (!changed) continue;
+                // Both checks are rare: a result over INT32_MAX needs a cell over INT32_MAX / 8
+                // somewhere (maxBound), and a missing leaf, clay flowing out of the grown grid.
                 bool fits = true, missing = false;
-                for (int c = 0; c < n; ++c) {
-                    if (!((changed >> c) & 1u)) continue;
-                    if (out[c] > INT32_MAX) fits = false;
-                    if (!ls.data[lf[c]]) missing = true;
+                if (mayOverflow || ls.anyMissing) {
+                    for (int c = 0; c < n; ++c) {
+                        if (!((changed >> c) & 1u)) continue;
+                        if (out[c] > INT32_MAX) fits = false;
+                        if (!ls.data[lf[c]]) missing = true;
+                    }
                 }
                 if (!fits) {
                     if (!tot.overflow || wi < tot.overflowItem) {
@@ -584,14 +602,12 @@ struct Automaton::Impl {
                     tot.deferred.push_back(PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(changed)});
                     continue;
                 }
-                int64_t before = 0, after = 0;
                 for (int c = 0; c < n; ++c) {
                     if (!((valid >> c) & 1u)) continue;
-                    if (m[c] > tc) before += m[c] - tc;
-                    if (out[c] > tc) after += out[c] - tc;
+                    overloadDelta += std::max<int64_t>(out[c] - tc, 0) - std::max<int64_t>(m[c] - tc, 0);
                     if (!((changed >> c) & 1u)) continue;
                     ls.data[lf[c]][off[c]] = int32_t(out[c]);
-                    tot.maxWritten = std::max(tot.maxWritten, out[c]);
+                    maxWritten = std::max(maxWritten, out[c]);
                     if (m[c] == 0) {
                         // 0 -> positive: the voxel becomes active. Other tasks may set bits in the
                         // same mask word (straddling blocks), hence the atomic OR.
@@ -599,11 +615,14 @@ struct Automaton::Impl {
                         __atomic_fetch_or(&word, uint64_t(1) << (off[c] & 63), __ATOMIC_RELAXED);
                     }
                 }
-                tot.overloadDelta += after - before;
-                ++tot.updated;
+                ++updated;
                 w.changed |= uint64_t(1) << b;
             }
         }
+        tot.visited += visited;
+        tot.updated += updated;
+        tot.overloadDelta += overloadDelta;
+        tot.maxWritten = std::max(tot.maxWritten, maxWritten);
     }
 
     PassTotals runPass(int phase, bool dryRun)
