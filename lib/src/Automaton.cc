@@ -437,9 +437,15 @@ struct Automaton::Impl {
     // which splits into one run per neighbour shift (streams[w]): each is changedPrev moved by one
     // constant vector, so still in layer order. Only the rare extras (hot leaves after resync(),
     // edited regions) need a sort.
+    // All scratch, members so that a step allocates nothing once the buffers have grown.
+    struct Run {
+        const Anchor *b, *e;
+    };
     std::vector<Anchor> streams[8];
     std::vector<Anchor> extras;
     std::vector<Anchor> mergeBuf[2];
+    std::vector<Run> runs;
+    std::vector<std::pair<size_t, size_t>> spans;
 
     void addExtra(const Anchor& a, int anchorPhase, int phase)
     {
@@ -468,10 +474,7 @@ struct Automaton::Impl {
 
     void gather(int phase)
     {
-        struct Run {
-            const Anchor *b, *e;
-        };
-        std::vector<Run> runs;
+        runs.clear();
         for (auto& st : streams) st.clear();
         extras.clear();
         const uint64_t full = fullMask(is3D());
@@ -511,7 +514,7 @@ struct Automaton::Impl {
             std::vector<Anchor>& out = mergeBuf[level & 1];
             out.clear();
             out.reserve(total); // no reallocation below: the offsets stay valid
-            std::vector<std::pair<size_t, size_t>> spans;
+            spans.clear();
             for (size_t i = 0; i < runs.size(); i += 2) {
                 const size_t start = out.size();
                 if (i + 1 < runs.size()) mergeOr(runs[i].b, runs[i].e, runs[i + 1].b, runs[i + 1].e, out);
