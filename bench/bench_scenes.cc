@@ -20,9 +20,10 @@
 //           blocking (D steps as a wavefront); all bit-identical to DENSE.
 //   stroke  A sphere of clay of diameter D (mass 950) and a sphere tool of radius 6 that dips 2
 //           voxels into its top and then slides along the surface (rotating about the sphere's
-//           centre, 2 voxels per frame) for 10 frames in all, each settled fully. Time per frame
-//           (median, p95), grid memory per clay voxel and peak RSS; each (D, threads) in a child
-//           process so ru_maxrss is its own.
+//           centre, 2 voxels per frame) for 10 frames in all, each settled fully; run --repeats
+//           times from scratch. Time per frame (median, p95 of the 10 x repeats frames), grid
+//           memory per clay voxel and peak RSS; each (D, threads) in a child process so ru_maxrss
+//           is its own.
 //
 // Output: CSV (one header, one row per measurement) to stdout or --csv FILE; a readable summary
 // with the ratios on stderr. See docs/PERFORMANCE.md.
@@ -715,26 +716,45 @@ std::string strokeJson(int dia)
     return js.str();
 }
 
-std::vector<Row> strokeChild(int dia, int threads)
+/// The stroke, @a repeats times from scratch (a new Sculptor each time): frame times are pooled over
+/// the repeats (median and p95 of 10 x repeats frames: single 10-frame runs of ~2 ms frames move by
+/// 0.5-1 ms), counts and stages are the first run's, and every run must end with the same hash.
+std::vector<Row> strokeChild(int dia, int threads, int repeats)
 {
-    const auto tSetup = Clock::now();
     const Scene scene = parseScene(strokeJson(dia), "<stroke " + std::to_string(dia) + ">", ".");
-    Sculptor s(scene, threads);
-    const double setup = since(tSetup);
-    std::vector<double> ms;
+    std::vector<double> ms, firstMs;
     uint64_t steps = 0, updated = 0, visited = 0;
     StageSeconds stages;
-    while (!s.done()) {
-        const auto t0 = Clock::now();
-        const FrameReport fr = s.runFrame();
-        ms.push_back(1e3 * since(t0));
-        steps += fr.settle.steps;
-        updated += fr.settle.blocksUpdated;
-        visited += fr.settle.blocksVisited;
-        stages.gather += fr.settle.seconds.gather;
-        stages.repartition += fr.settle.seconds.repartition;
-        stages.grow += fr.settle.seconds.grow;
-        stages.bookkeeping += fr.settle.seconds.bookkeeping;
+    double setup = 0;
+    uint64_t hash = 0;
+    uint64_t clayVoxels = 0, gridBytes = 0;
+    for (int rep = 0; rep < repeats; ++rep) {
+        const auto tSetup = Clock::now();
+        Sculptor s(scene, threads);
+        if (rep == 0) setup = since(tSetup);
+        while (!s.done()) {
+            const auto t0 = Clock::now();
+            const FrameReport fr = s.runFrame();
+            ms.push_back(1e3 * since(t0));
+            if (rep) continue;
+            firstMs.push_back(ms.back());
+            steps += fr.settle.steps;
+            updated += fr.settle.blocksUpdated;
+            visited += fr.settle.blocksVisited;
+            stages.gather += fr.settle.seconds.gather;
+            stages.repartition += fr.settle.seconds.repartition;
+            stages.grow += fr.settle.seconds.grow;
+            stages.bookkeeping += fr.settle.seconds.bookkeeping;
+        }
+        const uint64_t h = contentHash(*s.mass());
+        if (rep == 0) {
+            hash = h;
+            clayVoxels = clayVoxelCount(*s.mass());
+            gridBytes = s.mass()->memUsage();
+        } else if (h != hash) {
+            throw Error("stroke D=" + std::to_string(dia) + ": repeat " + std::to_string(rep + 1) +
+                        " ended with a different hash");
+        }
     }
     std::vector<double> sorted = ms;
     std::sort(sorted.begin(), sorted.end());
@@ -748,7 +768,7 @@ std::vector<Row> strokeChild(int dia, int threads)
     r.size = dia;
     r.impl = "vdbclay";
     r.threads = threads;
-    for (double v : ms) r.seconds += v / 1e3;
+    for (double v : firstMs) r.seconds += v / 1e3;
     r.steps = steps;
     r.visited = visited;
     r.updated = updated;
@@ -757,12 +777,13 @@ std::vector<Row> strokeChild(int dia, int threads)
                                    : 0.5 * (sorted[sorted.size() / 2 - 1] + sorted[sorted.size() / 2]);
     r.p95Ms = pct(0.95);
     r.maxMs = sorted.back();
-    r.clayVoxels = clayVoxelCount(*s.mass());
-    r.gridBytes = s.mass()->memUsage();
+    r.clayVoxels = clayVoxels;
+    r.gridBytes = gridBytes;
     r.maxrssMb = maxrssMb();
-    r.hash = contentHash(*s.mass());
-    r.note = "setup " + std::to_string(setup) + " s; frames ms:";
-    for (double v : ms) r.note += " " + std::to_string(int(std::lround(v)));
+    r.hash = hash;
+    r.note = "setup " + std::to_string(setup) + " s; " + std::to_string(repeats) +
+             " run(s) pooled; first run's frames ms:";
+    for (double v : firstMs) r.note += " " + std::to_string(int(std::lround(v)));
     return {r};
 }
 
@@ -851,7 +872,7 @@ void stroke(const Options& opt, std::vector<Row>& rows)
         std::vector<Row> mine;
         for (int t : opt.threads) {
             bool ok = false;
-            std::vector<Row> got = inChild([&] { return strokeChild(dia, t); }, ok);
+            std::vector<Row> got = inChild([&] { return strokeChild(dia, t, opt.repeats); }, ok);
             if (!ok || got.empty()) {
                 std::fprintf(stderr, "  D=%d threads=%d: failed (see above)\n", dia, t);
                 continue;
