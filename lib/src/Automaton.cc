@@ -582,8 +582,9 @@ struct Automaton::Impl {
                 int64_t out[8];
                 const uint32_t changed = rules_internal::repartition(rule, n, m, valid, key, out);
                 if (!changed) continue;
-                // Both checks are rare: a result over INT32_MAX needs a cell over INT32_MAX / 8
-                // somewhere (maxBound), and a missing leaf, clay flowing out of the grown grid.
+                // Both checks can only fire rarely: a result over INT32_MAX needs a cell over
+                // INT32_MAX / 8 somewhere (maxBound), and a write into a missing leaf needs one of
+                // the fetched leaves to be missing (clay flowing into space the grid has not grown).
                 bool fits = true, missing = false;
                 if (mayOverflow || ls.anyMissing) {
                     for (int c = 0; c < n; ++c) {
