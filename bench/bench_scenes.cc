@@ -741,10 +741,7 @@ std::vector<Row> strokeChild(int dia, int threads, int repeats)
             steps += fr.settle.steps;
             updated += fr.settle.blocksUpdated;
             visited += fr.settle.blocksVisited;
-            stages.gather += fr.settle.seconds.gather;
-            stages.repartition += fr.settle.seconds.repartition;
-            stages.grow += fr.settle.seconds.grow;
-            stages.bookkeeping += fr.settle.seconds.bookkeeping;
+            stages += fr.settle.seconds;
         }
         const uint64_t h = contentHash(*s.mass());
         if (rep == 0) {

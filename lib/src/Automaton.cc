@@ -836,10 +836,7 @@ StepReport& StepReport::operator+=(const StepReport& o)
     leavesCreated += o.leavesCreated;
     residualOverload = o.residualOverload;
     settled = o.settled;
-    seconds.gather += o.seconds.gather;
-    seconds.repartition += o.seconds.repartition;
-    seconds.grow += o.seconds.grow;
-    seconds.bookkeeping += o.seconds.bookkeeping;
+    seconds += o.seconds;
     return *this;
 }
 

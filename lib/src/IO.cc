@@ -57,11 +57,9 @@ void initOpenVDB() { openvdb::initialize(); }
 /// An exception's text fit for a message: OpenVDB's errors on damaged files quote whatever bytes
 /// it read (a "grid type" of garbage and kilobytes of blanks), so keep printable characters,
 /// collapse runs of blanks and cut it short.
-std::string reason(const std::bad_alloc&);
-
 std::string reason(const std::exception& e)
 {
-    if (const auto* b = dynamic_cast<const std::bad_alloc*>(&e)) return reason(*b);
+    if (dynamic_cast<const std::bad_alloc*>(&e)) return "it records a size larger than the memory available";
     std::string out;
     const char* p = e.what();
     for (; *p && out.size() < 200; ++p) {
@@ -75,10 +73,8 @@ std::string reason(const std::exception& e)
     return out.empty() ? "unreadable data" : out;
 }
 
-std::string reason(const std::bad_alloc&)
-{
-    return "it records a size larger than the memory available";
-}
+/// The start of every message about a file OpenVDB could not read.
+std::string damaged(const std::string& path) { return path + " is not a .vdb file or is truncated or damaged: "; }
 
 const char* kMetaThreshold = "vdbclay_threshold";
 const char* kMetaRule = "vdbclay_rule";
@@ -107,12 +103,6 @@ void validateMeta(const ClayMeta& meta, const std::string& path)
     }
 }
 
-/// The grid name OpenVDB looks grids up by: a descriptor's unique name up to its "\x1e" suffix.
-std::string baseName(const std::string& uniqueName)
-{
-    return uniqueName.substr(0, uniqueName.find('\x1e'));
-}
-
 /// "int32" for "Tree_int32_5_4_3": the value type, as openvdb::GridBase::valueType() names it.
 std::string valueTypeOf(const std::string& treeType)
 {
@@ -131,7 +121,7 @@ std::vector<io_internal::VdbGridLayout> openChecked(openvdb::io::File& file, con
     struct stat st;
     if (::stat(path.c_str(), &st) != 0) throw Error(path + ": no such file");
     if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
-    const std::string prefix = path + " is not a .vdb file or is truncated or damaged: ";
+    const std::string prefix = damaged(path);
     std::vector<io_internal::VdbGridLayout> grids;
     try {
         grids = io_internal::checkVdbLayout(path);
@@ -162,7 +152,7 @@ openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& 
     try {
         return file.getGrids();
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
+        throw Error(damaged(path) + reason(e));
     }
 }
 
@@ -267,7 +257,7 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     }
     // Refused before reading: only Int32 trees are read (and only checked trees are ever read).
     for (const auto& g : layout) {
-        if (baseName(g.name) == gridName && g.type != "Tree_int32_5_4_3") {
+        if (g.baseName() == gridName && g.type != "Tree_int32_5_4_3") {
             throw Error("grid \"" + gridName + "\" in " + path + " is a " + valueTypeOf(g.type) +
                         " grid, expected an Int32Grid");
         }
@@ -276,7 +266,7 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     try {
         base = file.readGrid(gridName);
     } catch (const std::exception& e) {
-        throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
+        throw Error(damaged(path) + reason(e));
     }
     if (!base) throw Error(path + ": grid \"" + gridName + "\" could not be read");
     file.close();
@@ -376,15 +366,15 @@ std::string describeVdb(const std::string& path)
         grids = std::make_shared<openvdb::GridPtrVec>();
         for (const auto& g : layout) {
             if (!g.treeChecked) {
-                unread.push_back("grid \"" + baseName(g.name) + "\": type " + g.type +
+                unread.push_back("grid \"" + g.baseName() + "\": type " + g.type +
                                  ", not read (vdbclay reads int32, int64, float, double and vec3 "
                                  "grids)\n");
                 continue;
             }
             try {
-                grids->push_back(file.readGrid(baseName(g.name)));
+                grids->push_back(file.readGrid(g.baseName()));
             } catch (const std::exception& e) {
-                throw Error(path + " is not a .vdb file or is truncated or damaged: " + reason(e));
+                throw Error(damaged(path) + reason(e));
             }
         }
     }

@@ -738,10 +738,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         if (r.finished && (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom))
             ++s.framesUnsettled;
         if (r.finished && r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
-        s.stages.gather += r.settle.seconds.gather;
-        s.stages.repartition += r.settle.seconds.repartition;
-        s.stages.grow += r.settle.seconds.grow;
-        s.stages.bookkeeping += r.settle.seconds.bookkeeping;
+        s.stages += r.settle.seconds;
         if (onFrame) onFrame(r);
         if (!r.finished) break; // stopped() is set
     }

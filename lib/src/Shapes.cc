@@ -688,7 +688,7 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
     }
     // Only trees the check walked are read (a float level set always is).
     for (const auto& g : layout) {
-        if (!gridName.empty() && g.name.substr(0, g.name.find('\x1e')) == gridName &&
+        if (!gridName.empty() && g.baseName() == gridName &&
             g.type != "Tree_float_5_4_3") {
             throw Error(path + ": grid \"" + gridName + "\" is not a FloatGrid level set (type " +
                         g.type + ")");

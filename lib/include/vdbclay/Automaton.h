@@ -49,6 +49,14 @@ struct StageSeconds {
     double grow = 0;        ///< blocks that flow into new leaves: create the leaves, then update
     double bookkeeping = 0; ///< collect changed blocks for the next steps, overflow checks
     double total() const { return gather + repartition + grow + bookkeeping; }
+    StageSeconds& operator+=(const StageSeconds& o)
+    {
+        gather += o.gather;
+        repartition += o.repartition;
+        grow += o.grow;
+        bookkeeping += o.bookkeeping;
+        return *this;
+    }
 };
 
 /// Why settle() stopped.
