@@ -7,8 +7,10 @@ bash scripts/install-deps.sh
 BUILD_DIR=${BUILD_DIR:-build}
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
+launcher=() # ccache when installed (install-deps.sh does not require it)
+if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
-  cmake -S . -B "$BUILD_DIR" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
+  cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
 elif [ $# -gt 0 ]; then
   cmake "$BUILD_DIR" "$@" >/dev/null
 fi

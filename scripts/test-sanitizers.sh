@@ -2,7 +2,7 @@
 # Builds vdbclay with clang, AddressSanitizer + UndefinedBehaviorSanitizer and the libFuzzer targets
 # in build-asan/, then runs the test suite there (any sanitizer report fails the run). The same
 # build serves scripts/test-fuzz.sh. (ThreadSanitizer needs a TSan-instrumented oneTBB, which
-# Debian does not ship: see docs/ROBUSTNESS.md.) Uses ccache when it is installed.
+# Debian does not ship: see docs/ROBUSTNESS.md.) scripts/build.sh uses ccache when it is installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export BUILD_DIR=${ASAN_BUILD_DIR:-build-asan}
@@ -12,9 +12,7 @@ if [ -f "$BUILD_DIR/CMakeCache.txt" ] &&
   echo "test-sanitizers: $BUILD_DIR was configured with another compiler; starting it afresh" >&2
   rm -rf "$BUILD_DIR"
 fi
-launcher=()
-if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
-bash scripts/build.sh -DCMAKE_CXX_COMPILER=clang++ "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+bash scripts/build.sh -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DVDBCLAY_SANITIZE=address,undefined -DVDBCLAY_BUILD_FUZZERS=ON
 source scripts/sanitizer-env.sh
 cd "$BUILD_DIR"
