@@ -7,6 +7,7 @@
 #   libcli11-dev:           header-only command-line parsing for the CLI (subcommands, --help).
 #   libopenvdb-tools:       vdb_print, used by the tests to check our .vdb files open in OpenVDB's tools.
 #   curl, xz-utils:         scripts/test-tsan.sh fetches Debian's oneTBB source to build it with TSan.
+#   ccache:                 compiler cache for every build script (clean clones share its hits).
 #   clang, libclang-rt-dev: the sanitizer and fuzzing build (scripts/test-sanitizers.sh): libFuzzer
 #                           and the sanitizer runtimes come with clang's runtime libraries.
 set -euo pipefail
@@ -17,7 +18,7 @@ PKGS=(
   libgtest-dev googletest
   nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
   curl ca-certificates xz-utils
-  clang libclang-rt-dev
+  clang libclang-rt-dev ccache
 )
 
 missing=()
