@@ -24,7 +24,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <iostream>
+#include <memory>
 #include <string>
 
 namespace {
@@ -168,6 +170,34 @@ void catchStopSignals()
     }
 }
 
+/// For tests that must interrupt a run at a known point, not after a guessed delay:
+/// VDBCLAY_TEST_RAISE=SIGNAL@STEP (SIGNAL INT or TERM) makes the run send itself that signal, through
+/// the same handler as a real one, once the automaton's step count (counted from the run's first
+/// step, resumed runs included) reaches STEP. Returns a poll that does so; an empty one when unset.
+/// @throw Error if the variable is set but malformed.
+std::function<void(uint64_t)> testSignalAtStep()
+{
+    const char* spec = std::getenv("VDBCLAY_TEST_RAISE");
+    if (!spec || !*spec) return {};
+    const std::string s(spec);
+    const size_t at = s.find('@');
+    const std::string name = s.substr(0, at);
+    const int sig = name == "INT" ? SIGINT : (name == "TERM" ? SIGTERM : 0);
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long step = at == std::string::npos ? 0 : std::strtoull(s.c_str() + at + 1, &end, 10);
+    if (sig == 0 || at == std::string::npos || at + 1 == s.size() || *end != '\0' || errno != 0 ||
+        s[at + 1] == '-') {
+        throw vdbclay::Error("VDBCLAY_TEST_RAISE: expected SIGNAL@STEP with SIGNAL INT or TERM, e.g. INT@1000");
+    }
+    auto raised = std::make_shared<bool>(false);
+    return [sig, step, raised](uint64_t steps) {
+        if (*raised || steps < step) return;
+        *raised = true;
+        ::raise(sig);
+    };
+}
+
 /// "out.vdb" -> "out.checkpoint.vdb": where an interrupted run saves itself by default.
 std::string defaultCheckpointPath(const std::string& outVdb)
 {
@@ -289,7 +319,12 @@ int runScene(const RunArgs& a)
         }
     };
     const uint64_t frame0 = sculptor.frame(), steps0 = sculptor.automaton().stepCount();
-    sculptor.setStopRequest([] { return gStopSignal.load(std::memory_order_relaxed) != 0; });
+    const std::function<void(uint64_t)> testSignal = testSignalAtStep();
+    vdbclay::Automaton& automaton = sculptor.automaton();
+    sculptor.setStopRequest([&testSignal, &automaton] {
+        if (testSignal) testSignal(automaton.stepCount());
+        return gStopSignal.load(std::memory_order_relaxed) != 0;
+    });
     const vdbclay::RunSummary s = sculptor.run(a.frames, onFrame);
     sculptor.setStopRequest({});
     if (sculptor.stopped()) return finishInterrupted(sculptor, a, checkpoint, frame0, steps0, tty);

@@ -10,9 +10,15 @@
 
 #include <openvdb/openvdb.h>
 
+#include "AllocationCounter.h"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <climits>
+#include <cstdlib>
+#include <new>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -348,17 +354,6 @@ Lone settleLoneCell(int32_t m, int32_t tc, Rule rule, int dims, uint64_t budget,
     l.report = a.settle(budget);
     l.metrics = measureClay(*l.grid, tc, nullptr, dims);
     return l;
-}
-
-/// Resident set size of this process in pages (/proc/self/statm).
-long residentPages()
-{
-    long size = 0, resident = -1;
-    if (FILE* f = std::fopen("/proc/self/statm", "r")) {
-        if (std::fscanf(f, "%ld %ld", &size, &resident) != 2) resident = -1;
-        std::fclose(f);
-    }
-    return resident;
 }
 
 } // namespace
@@ -707,8 +702,10 @@ TEST_F(Accuracy, HardTcOneSingleVoxelAndEmptyScene)
 
 // A long run: 10^6 steps of a scene that never comes to rest (a closed 2D box full to Tc plus 5
 // units that wander for ever), then 600 frames of a tool going up and down in a lump. Expected:
-// mass exact throughout, blocks still changing at the end, the leaf count constant, and the
-// process's resident memory the same after 10^6 steps as after 10^5 (within 1 MiB; measured: 0).
+// mass exact throughout, blocks still changing at the end, the leaf count and the grid's bytes
+// constant, no heap allocation at all in the automaton's steps once its buffers have grown (the
+// first 10^5 steps), and, over the 600 frames, no more live heap blocks after each later 6-frame
+// cycle of the tool than at the end of the first 50 cycles: nothing accumulates.
 TEST_F(Accuracy, HardLongRunKeepsMassExactAndMemoryFlat)
 {
     auto g = openvdb::Int32Grid::create(0);
@@ -726,19 +723,21 @@ TEST_F(Accuracy, HardLongRunKeepsMassExactAndMemoryFlat)
     Automaton a(g, o, walls);
     const int64_t m0 = 36 * 100 + 5;
     const size_t leaves = g->tree().leafCount();
-    long pagesAt1e5 = 0;
+    const openvdb::Index64 bytes = g->tree().memUsage();
+    int64_t allocationsInSteps = 0; // in the steps after the first 10^5
     for (int chunk = 1; chunk <= 10; ++chunk) {
+        const int64_t before = alloc_counter::newCalls.load();
         const StepReport r = a.run(100000);
+        if (chunk > 1) allocationsInSteps += alloc_counter::newCalls.load() - before;
         ASSERT_GT(r.blocksUpdated, 0u) << "the scene came to rest at chunk " << chunk;
         ASSERT_EQ(a.totalMass(), m0);
         ASSERT_EQ(totalMass(*g), m0);
         ASSERT_EQ(r.residualOverload, 5);
         ASSERT_EQ(g->tree().leafCount(), leaves);
-        if (chunk == 1) pagesAt1e5 = residentPages();
+        ASSERT_EQ(g->tree().memUsage(), bytes);
     }
     EXPECT_EQ(a.stepCount(), 1000000u);
-    const long growth = residentPages() - pagesAt1e5;
-    EXPECT_LE(growth * 4096, 1 << 20) << "resident memory grew by " << growth << " pages";
+    EXPECT_EQ(allocationsInSteps, 0) << "heap allocations in 9 x 10^5 steps";
 
     std::string path;
     for (int i = 0; i < 100; ++i) path += std::string(i ? "," : "") + R"({"translate": [0,-1], "frames": 3}, {"translate": [0,1], "frames": 3})";
@@ -747,13 +746,14 @@ TEST_F(Accuracy, HardLongRunKeepsMassExactAndMemoryFlat)
         "tools": [{"shape": "sphere", "center": [7.5,9], "radius": 2.5, "path": [)" + path + R"(]}],
         "obstacles": [{"shape": "box", "min": [-40,-3], "max": [60,-1]}]})", "o.json", ""), 1);
     const int64_t lump = 16 * 8 * 100;
-    long pagesAt100 = 0;
+    int64_t liveAt300 = 0, liveMaxAfter = 0;
     while (!sc.done()) {
         const FrameReport f = sc.runFrame();
         ASSERT_EQ(totalMass(*sc.mass()), lump) << "frame " << f.frame;
         ASSERT_EQ(f.settle.reason, StopReason::Settled) << "frame " << f.frame;
-        if (f.frame == 100) pagesAt100 = residentPages();
+        if (f.frame == 300) liveAt300 = alloc_counter::liveBlocks.load();
+        if (f.frame > 300 && f.frame % 6 == 0) liveMaxAfter = std::max(liveMaxAfter, alloc_counter::liveBlocks.load());
     }
     EXPECT_EQ(sc.frame(), 600u);
-    EXPECT_LE((residentPages() - pagesAt100) * 4096, 1 << 20);
+    EXPECT_LE(liveMaxAfter, liveAt300) << "live heap blocks grew over frames 301..600";
 }
