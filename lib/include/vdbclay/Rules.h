@@ -13,8 +13,10 @@
 /// - prorata: E, A as for sorted. E <= A: m_j += floor(E (Tc - m_j) / A).
 ///            E >  A (A may be 0): fill every room to Tc, then share E - A equally, as sorted does.
 /// - Equal shares leave a remainder r < n (or, for prorata, the rounding loss R). It goes one unit
-///   per cell to r distinct under cells chosen from a rotation of the block's cells that starts at a
-///   counter-based hash of (block origin, step, seed): cells that still have room (m < Tc) first.
+///   at a time to under cells in a rotation of the block's cells that starts at a counter-based hash
+///   of (block origin, step, seed): a first pass over the cells that still have room (m < Tc), then a
+///   second over the others. Room is judged as each unit is given, so a cell that a unit of the first
+///   pass filled to Tc belongs to the second pass and may take a second unit (tests/TestOracle.cc).
 ///   The choice changes every step, so a remainder never cycles between the same cells, and it is
 ///   reproducible on any thread count.
 /// - Sums and products are 64-bit. E * room never exceeds 1.2 * 2^62 for int32 masses (E <= A, see
