@@ -17,4 +17,7 @@ bash scripts/build.sh -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=RelWithDeb
 source scripts/sanitizer-env.sh
 cd "$BUILD_DIR"
 # The install/find_package tests check packaging, not memory: the main run covers them.
-ctest --output-on-failure --parallel "${JOBS:-2}" --timeout 1800 -E '^package_'
+# The long runs (10^5 and 10^6 steps) stay in the normal stage: under ASan they cost minutes and
+# fill its quarantine, and they test conservation and flat memory, which the normal build checks.
+ctest --output-on-failure --parallel "${JOBS:-2}" --timeout 1800 \
+  -E '^package_|^Accuracy.HardLongRunKeepsMassExactAndMemoryFlat$|^AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles$'
