@@ -2,10 +2,15 @@
 
 #include "vdbclay/Types.h"
 
-#include <openvdb/tools/LevelSetRebuild.h>
+#include <openvdb/tools/ChangeBackground.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tree/LeafManager.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <cmath>
+#include <memory>
 #include <utility>
 
 namespace vdbclay {
@@ -17,39 +22,74 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
     if (!(voxelSize > 0) || !std::isfinite(voxelSize)) {
         throw Error("density: the voxel size must be positive and finite");
     }
-    auto density = openvdb::FloatGrid::create(0.f);
+    const double tc = double(threshold);
+    // The mass tree's topology (every leaf and tile), then each leaf's 512 values in parallel: a
+    // leaf is written by one task only, and no topology changes in the pass.
+    auto tree = std::make_shared<openvdb::FloatTree>(mass.tree(), 0.f, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(*tree);
+    leaves.foreach([&mass, tc](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+        const MassGrid::TreeType::LeafNodeType* in = mass.tree().probeConstLeaf(leaf.origin());
+        for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
+            const int32_t m = in->getValue(i);
+            if (m == 0) {
+                leaf.setValueOff(i, 0.f);
+            } else {
+                leaf.setValueOn(i, float(double(m) / tc));
+            }
+        }
+    });
+    // Tiles (the automaton voxelizes them; a file may hold some): their density, or nothing.
+    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
+        if (it.isVoxelValue()) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        if (*it == 0) {
+            tree->fill(box, 0.f, /*active=*/false);
+        } else {
+            tree->fill(box, float(double(*it) / tc), /*active=*/true);
+        }
+    }
+    auto density = openvdb::FloatGrid::create(tree);
     density->setName("density");
     density->setGridClass(openvdb::GRID_FOG_VOLUME);
     density->setTransform(openvdb::math::Transform::createLinearTransform(voxelSize));
-    auto acc = density->getAccessor();
-    const double tc = double(threshold);
-    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
-        const int32_t m = *it;
-        if (m == 0) continue;
-        const float d = float(double(m) / tc);
-        if (it.isVoxelValue()) {
-            acc.setValueOn(it.getCoord(), d);
-        } else {
-            openvdb::CoordBBox box;
-            it.getBoundingBox(box);
-            density->tree().fill(box, d, /*active=*/true);
-        }
-    }
     return density;
 }
 
 openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue)
 {
+    constexpr int kHalfWidth = 3; // voxels on each side of the surface
+    const float background = float(kHalfWidth * density.voxelSize()[0]);
+    bool anyInside = false;
+    for (auto it = density.tree().cbeginValueOn(); it && !anyInside; ++it) anyInside = *it > isovalue;
     openvdb::FloatGrid::Ptr surface;
-    if (density.tree().activeVoxelCount() == 0) {
-        surface = openvdb::FloatGrid::create(float(3 * density.voxelSize()[0]));
+    if (!anyInside) {
+        surface = openvdb::FloatGrid::create(background);
         surface->setTransform(density.transform().copy());
     } else {
-        // levelSetRebuild meshes the fog volume (outward faces: volumeToMesh knows fog volumes
-        // are inside above the isovalue) and converts the closed mesh back; meshToVolume decides
-        // the sign by flood fill, so it is negative inside whatever the face orientation.
-        surface = openvdb::tools::levelSetRebuild(density, float(isovalue), 3.f, 3.f,
-                                                  &density.transform());
+        // Directly from the fog, no mesh round trip: the density's topology grown by the band (the
+        // new voxels hold 0, outside), then the fast sweeping method solves the eikonal equation
+        // from the isosurface over those voxels. The cost follows the clay's voxels, not the span
+        // of its bounding box (far-apart lumps cost what each lump costs).
+        openvdb::FloatGrid::Ptr fog = density.deepCopy();
+        openvdb::tools::dilateActiveValues(fog->tree(), kHalfWidth + 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                           openvdb::tools::IGNORE_TILES);
+        surface = openvdb::tools::fogToSdf(*fog, float(isovalue));
+        // A narrow band: values beyond the half width become inactive, signed background values.
+        openvdb::tree::LeafManager<openvdb::FloatTree> leaves(surface->tree());
+        leaves.foreach([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+            for (auto v = leaf.beginValueOn(); v; ++v) {
+                if (*v >= background) {
+                    v.setValueOff();
+                    v.setValue(background);
+                } else if (*v <= -background) {
+                    v.setValueOff();
+                    v.setValue(-background);
+                }
+            }
+        });
+        openvdb::tools::changeLevelSetBackground(surface->tree(), background);
+        openvdb::tools::pruneLevelSet(surface->tree());
     }
     surface->setName("surface");
     surface->setGridClass(openvdb::GRID_LEVEL_SET);

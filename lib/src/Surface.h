@@ -13,15 +13,16 @@ namespace vdbclay {
 namespace io_internal {
 
 /// The density m / Tc of every voxel holding nonzero mass (active there, background 0), a
-/// GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize.
+/// GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize. Built leaf by leaf in
+/// parallel on the mass tree's topology.
 /// @throw Error if threshold <= 0 or voxelSize is not positive and finite.
 openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize);
 
 /// The surface of @a density at @a isovalue as a narrow-band level set (GRID_LEVEL_SET, named
 /// "surface", same transform): negative inside (density > isovalue), positive outside, half band
-/// width 3 voxels each side. Built by meshing the density (volumeToMesh) and converting the mesh
-/// back (meshToVolume), i.e. openvdb::tools::levelSetRebuild. Empty (no active voxels) if no cell
-/// reaches the isovalue.
+/// width 3 voxels each side. Built directly from the density by the fast sweeping method
+/// (openvdb::tools::fogToSdf) over the density's voxels grown by the band, in parallel; its cost
+/// follows the clay's voxels. Empty (no active voxels) if no cell exceeds the isovalue.
 openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue);
 
 /// The surface of @a density at @a isovalue as polygons in index space (the density's voxel
