@@ -31,23 +31,21 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
         const MassGrid::TreeType::LeafNodeType* in = mass.tree().probeConstLeaf(leaf.origin());
         for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
             const int32_t m = in->getValue(i);
-            if (m == 0) {
+            if (m == 0 || !in->isValueOn(i)) {
                 leaf.setValueOff(i, 0.f);
             } else {
                 leaf.setValueOn(i, float(double(m) / tc));
             }
         }
     });
-    // Tiles (the automaton voxelizes them; a file may hold some): their density, or nothing.
-    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
-        if (it.isVoxelValue()) continue;
+    // Active tiles (the automaton voxelizes them; a file may hold some): their density. Only the
+    // levels above the leaves, and only active values: inactive tiles are background already.
+    auto it = mass.tree().cbeginValueOn();
+    it.setMaxDepth(it.getLeafDepth() - 1); // tiles only: the voxels were done above
+    for (; it; ++it) {
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
-        if (*it == 0) {
-            tree->fill(box, 0.f, /*active=*/false);
-        } else {
-            tree->fill(box, float(double(*it) / tc), /*active=*/true);
-        }
+        tree->fill(box, *it == 0 ? 0.f : float(double(*it) / tc), /*active=*/*it != 0);
     }
     auto density = openvdb::FloatGrid::create(tree);
     density->setName("density");

@@ -12,7 +12,7 @@
 namespace vdbclay {
 namespace io_internal {
 
-/// The density m / Tc of every voxel holding nonzero mass (active there, background 0), a
+/// The density m / Tc of every active voxel or tile holding nonzero mass (active there, background 0), a
 /// GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize. Built leaf by leaf in
 /// parallel on the mass tree's topology.
 /// @throw Error if threshold <= 0 or voxelSize is not positive and finite.
