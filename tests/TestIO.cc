@@ -815,3 +815,31 @@ TEST_F(IOTest, RenderRefusesBadInput)
 }
 
 } // namespace
+
+TEST_F(IOTest, OutputGridsFollowTheClayNotTheSpanBetweenLumps)
+{
+    // Two 4^3 lumps 1e9 voxels apart: the density and surface grids hold exactly twice the voxels
+    // and leaves of one lump's (the output is built from the clay's leaves, not over the span), and
+    // an inactive voxel holding mass is not clay (background), as for the automaton.
+    auto one = openvdb::Int32Grid::create(0);
+    one->tree().fill(openvdb::CoordBBox(Coord(0), Coord(3)), 1000, true);
+    one->tree().voxelizeActiveTiles();
+    auto two = one->deepCopy();
+    two->tree().fill(openvdb::CoordBBox(Coord(1000000000, 0, 0), Coord(1000000003, 3, 3)), 1000, true);
+    two->tree().voxelizeActiveTiles();
+    two->tree().setValueOff(Coord(-500000000, 7, 7), 400);
+    const std::string p1 = file("one.vdb"), p2 = file("two.vdb");
+    writeClayFile(p1, *one, sampleMeta());
+    writeClayFile(p2, *two, sampleMeta());
+    for (const char* name : {"density", "surface"}) {
+        auto g1 = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(p1, name));
+        auto g2 = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(p2, name));
+        ASSERT_TRUE(g1 && g2) << name;
+        EXPECT_GT(g1->tree().activeVoxelCount(), 0u) << name;
+        EXPECT_EQ(g2->tree().activeVoxelCount(), 2 * g1->tree().activeVoxelCount()) << name;
+        EXPECT_EQ(g2->tree().leafCount(), 2 * g1->tree().leafCount()) << name;
+    }
+    auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(p2, "density"));
+    EXPECT_EQ(density->tree().activeVoxelCount(), 128u);
+    EXPECT_FALSE(density->tree().isValueOn(Coord(-500000000, 7, 7)));
+}

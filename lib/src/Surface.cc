@@ -47,6 +47,7 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
         it.getBoundingBox(box);
         tree->fill(box, *it == 0 ? 0.f : float(double(*it) / tc), /*active=*/*it != 0);
     }
+    openvdb::tools::pruneInactive(*tree); // leaves that held no clay (inactive or zero values only)
     auto density = openvdb::FloatGrid::create(tree);
     density->setName("density");
     density->setGridClass(openvdb::GRID_FOG_VOLUME);
