@@ -138,7 +138,7 @@ int runDemo(const DemoArgs& a)
 
 
 struct RunArgs {
-    std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget;
+    std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget, push, transport, sweep;
     int threads = 0;
     int64_t seed = -1;
     uint64_t frames = 0;
@@ -265,6 +265,26 @@ int runScene(const RunArgs& a)
     vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene);
     if (!a.rule.empty()) scene.rule.rule = vdbclay::parseRule(a.rule);
     if (a.seed >= 0) scene.seed = uint64_t(a.seed);
+    if (!a.push.empty()) {
+        try {
+            scene.push = vdbclay::parsePushMode(a.push);
+        } catch (const vdbclay::Error& e) {
+            throw vdbclay::Error(std::string("--push: ") + e.what());
+        }
+    }
+    if (!a.transport.empty()) {
+        try {
+            scene.transport = vdbclay::parseTransport(a.transport);
+        } catch (const vdbclay::Error& e) {
+            throw vdbclay::Error(std::string("--transport: ") + e.what());
+        }
+    }
+    if (!a.sweep.empty()) {
+        if (a.sweep != "on" && a.sweep != "off") {
+            throw vdbclay::Error("--sweep: expected on or off, got \"" + a.sweep + "\"");
+        }
+        scene.sweep = a.sweep == "on";
+    }
     if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
     if (!a.memoryBudget.empty()) {
         try {
@@ -290,6 +310,9 @@ int runScene(const RunArgs& a)
               << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
               << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
               << sculptor.frame() + 1 << ".." << sculptor.totalFrames() << "\n";
+    if (!a.quiet && (scene.push != vdbclay::PushMode::Surface || scene.transport != vdbclay::Transport::Local || scene.sweep))
+        std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "") << ", transport "
+                  << vdbclay::transportName(scene.transport) << "\n";
     if (!a.quiet) {
         const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
         std::cout << "memory: " << vdbclay::estimateSceneMemory(scene).describe() << "; budget "
@@ -341,6 +364,12 @@ int runScene(const RunArgs& a)
     if (s.framesNoRoom) std::printf(" (%llu frames had no room for their overload)", (unsigned long long)s.framesNoRoom);
     if (s.massTrapped) std::printf("; %lld clay trapped in tools", (long long)s.massTrapped);
     std::printf("\n");
+    if (scene.transport == vdbclay::Transport::Global) {
+        std::printf("global transport: %s, %llu solves, %llu CG iterations, %lld clay routed%s\n",
+                    fmtSeconds(s.transportSeconds).c_str(), (unsigned long long)s.transportSolves,
+                    (unsigned long long)s.transportIterations, (long long)s.transportMassMoved,
+                    s.framesTransportNoRoom ? " (some clay walled in with no room)" : "");
+    }
     std::printf("clay %llu voxels, %llu interior (mean density %.4f, heterogeneity CV %.4f), compaction %.4f\n",
                 (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,
                 s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
@@ -367,6 +396,14 @@ int runScene(const RunArgs& a)
         j["steps"] = s.steps;
         j["seconds"] = s.seconds;
         j["push_seconds"] = s.pushSeconds;
+        j["push"] = vdbclay::pushModeName(scene.push);
+        j["sweep"] = scene.sweep;
+        j["transport"] = vdbclay::transportName(scene.transport);
+        j["transport_seconds"] = s.transportSeconds;
+        j["transport_solves"] = s.transportSolves;
+        j["transport_iterations"] = s.transportIterations;
+        j["transport_mass_moved"] = s.transportMassMoved;
+        j["frames_transport_no_room"] = s.framesTransportNoRoom;
         j["stage_seconds"] = {{"gather", s.stages.gather}, {"repartition", s.stages.repartition},
                               {"grow", s.stages.grow}, {"bookkeeping", s.stages.bookkeeping}};
         j["mass_initial"] = s.massInitial;
@@ -431,6 +468,9 @@ int main(int argc, char** argv)
     run->add_option("--checkpoint", ra.checkpoint,
                     "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
     run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
+    run->add_option("--push", ra.push, "override the scene's push: surface (the paper's) or compress");
+    run->add_option("--transport", ra.transport, "override the scene's transport: local (the paper's automaton) or global");
+    run->add_option("--sweep", ra.sweep, "override the scene's sweep: on (push over the volume a tool sweeps) or off");
     run->add_option("--memory-budget", ra.memoryBudget,
                     "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)");
 

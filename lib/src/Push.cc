@@ -18,6 +18,17 @@
 //    throws, and the automaton rescans and wakes exactly that region.
 // Sources are inside a tool and targets outside all tools, so no voxel is both; the plan depends only
 // on the grid, the tools and the source order: deterministic.
+//
+// The compress push (PushMode::Compress) changes step 3 only. When the march's target is full clay
+// (m * 10 >= 9 Tc, in the grid before the push), the march goes on along the normal, collecting the
+// contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact depth:
+// round(sqrt(voxels that tool entered this push)) in 3D, their number in 2D, at least 1. The
+// source's clay m is shared over those k voxels: m / k each, the remainder m % k as +1 to the
+// first voxels (nearest the tool). So a plate wider than the clay compresses every column of it
+// uniformly (the study's push T: straight sides), while a small tool poking a large block spreads
+// its clay only as deep as it is wide (a local rim, the far faces untouched). The full test reads
+// the grid as it was before this push, so the plan does not depend on the order of the sources.
+// A source whose target is not full, or was found by the flood, is pushed as by the surface push.
 
 #include "vdbclay/Push.h"
 #include "vdbclay/Automaton.h"
@@ -146,10 +157,14 @@ public:
             if (c == s.c) continue;
             if (isFree(c, s.mass)) {
                 out = c;
+                mLastNormal = n;
+                mLastT = t;
+                mLastByMarch = true;
                 return true;
             }
             if (isWall(c)) break; // clay does not pass through obstacles
         }
+        mLastByMarch = false;
         // Breadth-first flood from the source through passable voxels (inside a tool, or not an
         // obstacle), 6-connected (4 in 2D), within Chebyshev distance maxSearch: the first free
         // voxel reached. Neighbours are visited in a fixed order, so the choice is deterministic,
@@ -180,6 +195,34 @@ public:
             }
         }
         return false;
+    }
+
+    /// Compress push: after target() found @a first by the march, the contiguous full voxels along
+    /// the same normal starting at @a first, at most @a depth of them (empty if @a first is not full
+    /// or was found by the flood).
+    std::vector<Coord> fullChain(const Source& s, const Coord& first, int depth, int32_t threshold) const
+    {
+        std::vector<Coord> chain;
+        if (!mLastByMarch || !isFull(first, threshold)) return chain;
+        chain.push_back(first);
+        const Vec3 p = centre(s.c);
+        const Vec3& n = mLastNormal;
+        // March on in half-voxel steps; at most 2 depth + 2 more points reach depth voxels.
+        for (int k = 1; int(chain.size()) < depth && k <= 2 * depth + 2; ++k) {
+            const double t = mLastT + 0.5 * k;
+            const Coord c = rounded({{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}});
+            if (c == chain.back()) continue;
+            const int32_t share = s.mass / int32_t(chain.size() + 1) + 1;
+            if (!isFree(c, share) || !isFull(c, threshold)) break;
+            chain.push_back(c);
+        }
+        // The shares must fit every voxel of the chain (isFree checked the first with all of m).
+        return chain;
+    }
+
+    bool isFull(const Coord& c, int32_t threshold) const
+    {
+        return int64_t(mMass.getValue(c)) * kCompressFullDen >= int64_t(threshold) * kCompressFullNum;
     }
 
     void add(const Coord& c, int32_t m) { mAdded[c] += m; }
@@ -231,12 +274,37 @@ private:
     const openvdb::MaskTree* mObs;
     Box mRegion;
     std::map<Coord, int64_t> mAdded;
+    // What the last successful target() found: by the march (normal, parameter) or by the flood.
+    mutable Vec3 mLastNormal{{0, 1, 0}};
+    mutable double mLastT = 0;
+    mutable bool mLastByMarch = false;
 };
 
 } // namespace
 
+const char* pushModeName(PushMode mode)
+{
+    return mode == PushMode::Compress ? "compress" : "surface";
+}
+
+PushMode parsePushMode(const std::string& name)
+{
+    if (name == "surface") return PushMode::Surface;
+    if (name == "compress") return PushMode::Compress;
+    throw Error("unknown push \"" + name + "\" (expected one of: surface, compress)");
+}
+
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch)
 {
+    PushOptions o;
+    o.maxSearch = maxSearch;
+    return push(automaton, tools, o);
+}
+
+PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const PushOptions& options)
+{
+    const int maxSearch = options.maxSearch;
+    const int32_t threshold = options.threshold > 0 ? options.threshold : automaton.options().rule.threshold;
     if (maxSearch < 0 || maxSearch > kMaxSearchLimit) {
         throw Error("push: maxSearch must lie in [0, " + std::to_string(kMaxSearchLimit) + "], got " +
                     std::to_string(maxSearch));
@@ -259,11 +327,34 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int ma
         int32_t mass;
     };
     std::vector<Move> moves;
-    for (const Source& s : pusher.sources(u)) {
+    const std::vector<Source> sources = pusher.sources(u);
+    // Voxels each tool entered: the contact size (and the compress push's depth).
+    std::vector<uint64_t> entered(tools.size(), 0);
+    for (const Source& s : sources) ++entered[s.tool];
+    std::vector<int> depth(tools.size(), 1);
+    for (size_t t = 0; t < tools.size(); ++t) {
+        const double size = is2D ? double(entered[t]) : std::sqrt(double(entered[t]));
+        report.contactSize = std::max(report.contactSize, size);
+        depth[t] = std::max(1, int(std::lround(std::min(size, double(kMaxSearchLimit)))));
+    }
+    for (const Source& s : sources) {
         Coord to;
         if (pusher.target(s, to)) {
-            pusher.add(to, s.mass);
-            moves.push_back(Move{s.c, to, s.mass});
+            std::vector<Coord> chain;
+            if (options.mode == PushMode::Compress) chain = pusher.fullChain(s, to, depth[s.tool], threshold);
+            if (chain.size() > 1) {
+                const int32_t k = int32_t(chain.size());
+                const int32_t q = s.mass / k, r = s.mass % k;
+                for (int32_t i = 0; i < k; ++i) {
+                    const int32_t share = q + (i < r ? 1 : 0);
+                    if (share) pusher.add(chain[size_t(i)], share);
+                }
+                moves.push_back(Move{s.c, to, 0}); // the source is emptied below; its clay is added above
+                ++report.voxelsCompressed;
+            } else {
+                pusher.add(to, s.mass);
+                moves.push_back(Move{s.c, to, s.mass});
+            }
             ++report.voxelsPushed;
             report.massMoved += s.mass;
         } else {

@@ -258,7 +258,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     }
     cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
                        "obstacles", "settle", "frames", "start", "outputs", "memory_budget", "description",
-                       "comment"});
+                       "comment", "push", "transport", "sweep"});
     Scene sc;
     sc.source = source;
     if (const json* v = cx.find(root, "dimensions")) {
@@ -288,6 +288,24 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         }
     }
     if (const json* v = cx.find(root, "seed")) sc.seed = uint64_t(cx.integer(*v, "seed", 0, INT64_MAX));
+    if (const json* v = cx.find(root, "push")) {
+        try {
+            sc.push = parsePushMode(cx.string(*v, "push"));
+        } catch (const Error& e) {
+            cx.fail("push", e.what());
+        }
+    }
+    if (const json* v = cx.find(root, "transport")) {
+        try {
+            sc.transport = parseTransport(cx.string(*v, "transport"));
+        } catch (const Error& e) {
+            cx.fail("transport", e.what());
+        }
+    }
+    if (const json* v = cx.find(root, "sweep")) {
+        if (!v->is_boolean()) cx.fail("sweep", std::string("expected true or false, got ") + v->type_name());
+        sc.sweep = v->get<bool>();
+    }
 
     auto list = [&](const char* key) -> const json* {
         const json* v = cx.find(root, key);

@@ -116,6 +116,13 @@ constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 32);
 /// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
+/// Scene::sweep: at most this many sub-steps per frame.
+constexpr int kMaxSweepSubsteps = 256;
+/// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
+constexpr double kReachPerContact = 2.0;
+
+constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88;
+
 int64_t leafIndex(int32_t v, int log2) { return int64_t(v) >> log2; } // floor division
 
 /// Number of nodes of side 2^log2 voxels that @a b touches (2D boxes are clipped to z = 0 first).
@@ -344,7 +351,7 @@ std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, 
 
 uint64_t MemoryEstimate::total() const
 {
-    return clayBytes + obstacleBytes + toolBytes + automatonBytes + outputBytes;
+    return clayBytes + obstacleBytes + toolBytes + automatonBytes + outputBytes + transportBytes;
 }
 
 std::string MemoryEstimate::describe() const
@@ -352,7 +359,8 @@ std::string MemoryEstimate::describe() const
     return "about " + formatBytes(total()) + " (clay " + formatBytes(clayBytes) + " for up to " +
            std::to_string(clayLeavesGrown) + " leaves of 8^3 voxels, " + std::to_string(clayLeaves) +
            " at the start; obstacles " + formatBytes(obstacleBytes) + "; tools " + formatBytes(toolBytes) +
-           "; automaton " + formatBytes(automatonBytes) + "; output grids " + formatBytes(outputBytes) + ")";
+           "; automaton " + formatBytes(automatonBytes) + "; output grids " + formatBytes(outputBytes) +
+           (transportBytes ? "; global transport " + formatBytes(transportBytes) : std::string()) + ")";
 }
 
 MemoryEstimate estimateSceneMemory(const Scene& scene)
@@ -423,6 +431,11 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.obstacleBytes = 2 * treeBytes<MaskTreeT>(e.obstacleLeaves, obsBoxes);
     e.toolBytes = e.toolVoxels * kToolBytesPerVoxel + treeBytes<MaskTreeT>(toolLeaves, toolBoxes);
     e.automatonBytes = e.clayLeavesGrown * kAutomatonBytesPerLeaf;
+    // The global layer (lib/src/Transport.cc) holds, per full clay cell of the body: its coordinate,
+    // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
+    // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
+    // (~88 bytes). The full cells are at most the clay's leaves' voxels.
+    if (scene.transport == Transport::Global) e.transportBytes = e.clayLeavesGrown * 512 * kTransportBytesPerCell;
     // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
     // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
     // over a band around the surface): counted as three float grids on the clay's leaves, plus
@@ -543,6 +556,64 @@ struct Sculptor::Impl {
                 return total;
             }
         }
+    }
+
+    /// Places the tools at frame @a f and pushes clay out of them. With Scene::sweep, the move from
+    /// frame f - 1 is split into sub-steps of at most a quarter voxel (the largest displacement of
+    /// a corner of any tool's bounds), each placed and pushed in turn, so the push acts on the
+    /// volume the tools sweep and clay never passes through a thin or fast tool.
+    PushReport pushTools(uint64_t f)
+    {
+        PushOptions po;
+        po.mode = scene.push;
+        const std::vector<ShapePtr> tools = toolsAt(f);
+        int substeps = 1;
+        if (scene.sweep && f > 0) {
+            double most = 0;
+            for (const ToolSpec& t : scene.tools) {
+                const Pose a = t.poseAt(f - 1), b = t.poseAt(f);
+                const Box bb = t.shape.shape->bounds();
+                if (bb.empty()) continue;
+                for (int corner = 0; corner < 8; ++corner) {
+                    const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]), double(corner & 2 ? bb.max[1] : bb.min[1]),
+                                  double(corner & 4 ? bb.max[2] : bb.min[2])}};
+                    const Vec3 pa = a.apply(p), pb = b.apply(p);
+                    const double d = std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
+                                               (pa[2] - pb[2]) * (pa[2] - pb[2]));
+                    most = std::max(most, d);
+                }
+            }
+            substeps = int(std::min(std::ceil(most * 4), double(kMaxSweepSubsteps)));
+            substeps = std::max(substeps, 1);
+        }
+        PushReport total;
+        for (int k = 1; k <= substeps; ++k) {
+            std::vector<ShapePtr> sub;
+            if (k == substeps) {
+                sub = tools;
+            } else {
+                const double w = double(k) / double(substeps);
+                for (const ToolSpec& t : scene.tools) {
+                    const Pose a = t.poseAt(f - 1), b = t.poseAt(f);
+                    Pose p = b;
+                    for (int i = 0; i < 3; ++i) {
+                        p.translation[i] = a.translation[i] + w * (b.translation[i] - a.translation[i]);
+                        p.rotationDeg[i] = a.rotationDeg[i] + w * (b.rotationDeg[i] - a.rotationDeg[i]);
+                    }
+                    sub.push_back(makeTransformed(t.shape.shape, p));
+                }
+            }
+            placeTools(sub);
+            const PushReport r = push(*automaton, sub, po);
+            total.voxelsPushed += r.voxelsPushed;
+            total.massMoved += r.massMoved;
+            total.voxelsTrapped = r.voxelsTrapped; // clay inside the tools as they end
+            total.massTrapped = r.massTrapped;
+            total.region = unite(total.region, r.region);
+            total.contactSize = std::max(total.contactSize, r.contactSize);
+            total.voxelsCompressed += r.voxelsCompressed;
+        }
+        return total;
     }
 
     /// While clay settles, the voxels a tool occupies are obstacles: otherwise clay would flow back
@@ -693,10 +764,16 @@ FrameReport Sculptor::runFrame()
     FrameReport rep;
     rep.frame = im.frame + 1;
     if (!im.open) {
-        if (!im.scene.tools.empty()) {
-            const std::vector<ShapePtr> tools = im.toolsAt(rep.frame);
-            im.placeTools(tools);
-            rep.push = push(*im.automaton, tools);
+        // The push and the global layer run once, when the frame opens: a frame resumed from a
+        // checkpoint (im.open) goes straight on settling.
+        if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
+        if (im.scene.transport == Transport::Global) {
+            GlobalTransportOptions go;
+            go.threads = im.automaton->options().threads;
+            // The plastic zone: a few contact sizes around the over cells; the whole body when no
+            // tool touched clay this frame.
+            go.reach = rep.push.contactSize > 0 ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2 : 0;
+            rep.transport = transportGlobally(*im.automaton, go);
         }
         im.open = true;
         im.openSteps = 0;
@@ -739,6 +816,11 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
             ++s.framesUnsettled;
         if (r.finished && r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
         s.stages += r.settle.seconds;
+        s.transportSeconds += r.transport.seconds;
+        s.transportSolves += r.transport.solves;
+        s.transportIterations += r.transport.iterations;
+        s.transportMassMoved += r.transport.massMoved;
+        if (r.transport.noRoom) ++s.framesTransportNoRoom;
         if (onFrame) onFrame(r);
         if (!r.finished) break; // stopped() is set
     }

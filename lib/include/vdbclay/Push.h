@@ -6,6 +6,7 @@
 #include "vdbclay/Types.h"
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace vdbclay {
@@ -19,6 +20,36 @@ struct PushReport {
     uint64_t voxelsTrapped = 0; ///< clay voxels inside a tool with no free voxel to go to
     int64_t massTrapped = 0;   ///< their clay, left where it was (conserved, reported)
     Box region;                ///< voxels the push read or wrote (empty when nothing moved)
+    /// The largest tool contact this push saw: sqrt of the voxels one tool entered (3D), or their
+    /// number (2D), i.e. about the width of the contact. 0 when no tool entered clay. The compress
+    /// push limits its depth to it; the global transport limits its reach to a multiple of it.
+    double contactSize = 0;
+    uint64_t voxelsCompressed = 0; ///< compress: sources spread over full clay ahead (not surface-pushed)
+};
+
+/// Where a push puts the clay of a voxel a tool enters.
+enum class PushMode {
+    /// The paper's push: into the nearest free voxel just past the tool's surface, along its normal.
+    Surface,
+    /// A compressing push: spread evenly over the contiguous full clay (m >= kCompressFullFraction
+    /// Tc) ahead of the tool along its normal, at most the tool's contact size deep (so a small tool
+    /// makes a local rim and a plate wider than the clay compresses it uniformly); the remainder of
+    /// the integer division goes +1 to the voxels nearest the tool. With no full voxel just past
+    /// the surface, the surface push.
+    Compress
+};
+const char* pushModeName(PushMode mode);
+/// "surface" or "compress". @throw Error naming @a name otherwise.
+PushMode parsePushMode(const std::string& name);
+
+/// A voxel counts as full clay for the compress push when m * 10 >= 9 * Tc.
+constexpr int kCompressFullNum = 9, kCompressFullDen = 10;
+
+struct PushOptions {
+    PushMode mode = PushMode::Surface;
+    int maxSearch = 16;
+    /// Tc, for the compress push's full test (read from the automaton when 0).
+    int32_t threshold = 0;
 };
 
 /// Pushes the clay of every voxel whose centre lies inside one of @a tools along that tool's
@@ -35,5 +66,7 @@ struct PushReport {
 /// that are not part of a tool.
 /// @throw Error if @a maxSearch is outside [0, 1024] or a tool is null; nothing is changed then.
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch = 16);
+/// The same, with the push mode chosen (PushMode::Surface gives exactly the push above).
+PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const PushOptions& options);
 
 } // namespace vdbclay

@@ -6,7 +6,9 @@
 /// (as a path such as tools[0].path[1].frames) and what was expected.
 #pragma once
 
+#include "vdbclay/Push.h"
 #include "vdbclay/Shapes.h"
+#include "vdbclay/Transport.h"
 #include "vdbclay/Types.h"
 
 #include <cstdint>
@@ -68,6 +70,13 @@ struct Scene {
     std::vector<ToolSpec> tools;
     std::vector<ShapeSpec> obstacles;
     SettleSpec settle;
+    /// "push": where a tool's push puts the clay it displaces (default: the paper's surface push).
+    PushMode push = PushMode::Surface;
+    /// "transport": how displaced clay travels (default: the paper's local automaton).
+    Transport transport = Transport::Local;
+    /// "sweep": the push acts on the volume each tool sweeps between two frames (the move split into
+    /// sub-steps of at most half a voxel), so clay never passes through a thin or fast tool.
+    bool sweep = false;
     uint64_t frames = 0; ///< frames to run (default: the longest tool path)
     std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty
     OutputSpec outputs;

@@ -7,6 +7,7 @@
 #include "vdbclay/Metrics.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Scene.h"
+#include "vdbclay/Transport.h"
 
 #include <cstdint>
 #include <functional>
@@ -18,6 +19,9 @@ namespace vdbclay {
 struct FrameReport {
     uint64_t frame = 0; ///< 1-based frame just run
     PushReport push;
+    /// Scene::transport global: what the global layer did right after the push (once per frame; a
+    /// resumed open frame does not repeat it).
+    GlobalTransportReport transport;
     StepReport settle;
     /// false when a stop request (Sculptor::setStopRequest) cut the frame's settling short: the
     /// frame is still open, and the next runFrame() (or a Sculptor resumed from checkpointMeta())
@@ -39,7 +43,11 @@ struct RunSummary {
     uint64_t framesNoRoom = 0;  ///< of those, frames stopped because the overload had no room (NoRoom)
     int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
     uint64_t blocksVisited = 0, blocksUpdated = 0;
-    double pushSeconds = 0;
+    double pushSeconds = 0;     ///< everything but the automaton's steps: push and global transport
+    double transportSeconds = 0; ///< of that, the global layer (Scene::transport global)
+    uint64_t transportSolves = 0, transportIterations = 0;
+    int64_t transportMassMoved = 0;
+    uint64_t framesTransportNoRoom = 0; ///< frames whose global layer found walled-in clay
     StageSeconds stages;
     /// The final clay measured by measureClay() with the automaton's obstacles (tools included).
     ClayMetrics metrics;
@@ -57,6 +65,7 @@ struct MemoryEstimate {
     uint64_t toolBytes = 0;       ///< the tools' voxels as obstacle cells and push scratch
     uint64_t automatonBytes = 0;  ///< the automaton's per-leaf block masks and work lists
     uint64_t outputBytes = 0;     ///< writing the result: density and surface grids
+    uint64_t transportBytes = 0;  ///< Scene::transport global: the solver's cells and vectors
     uint64_t total() const;
     /// One line: "about 1.2 GiB (clay 800 MiB for up to 370000 leaves, obstacles ..., ...)".
     std::string describe() const;

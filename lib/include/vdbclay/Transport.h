@@ -1,0 +1,66 @@
+/// @file Transport.h
+/// @brief Global transport: displaced clay moved through the body to where there is room, in one
+///        pass per frame, before the paper's automaton cleans up locally (lib/src/Transport.cc).
+#pragma once
+
+#include "vdbclay/Types.h"
+
+#include <cstdint>
+#include <string>
+
+namespace vdbclay {
+
+class Automaton;
+
+/// How a Sculptor moves the clay a push displaced.
+enum class Transport {
+    Local, ///< the paper's automaton alone (settled every frame)
+    Global ///< transportGlobally() right after the push, then the automaton as cleanup
+};
+const char* transportName(Transport transport);
+/// "local" or "global". @throw Error naming @a name otherwise.
+Transport parseTransport(const std::string& name);
+
+struct GlobalTransportOptions {
+    /// How far (face steps through full clay) from the over cells the layer may move clay: the
+    /// plastic zone. 0: the whole connected body. When a region within the reach has no room, the
+    /// reach is doubled until it has, or the whole body is reached (then NoRoom).
+    int64_t reach = 0;
+    /// Active-set rounds (each one Poisson solve) at most.
+    int maxRounds = 12;
+    /// Conjugate gradients stop at this residual, relative to the right-hand side.
+    double tolerance = 1e-5;
+    /// Worker threads for the solver's vector operations: 0 all cores, 1 serial. The result does
+    /// not depend on it (fixed chunks, partial sums added in chunk order).
+    int threads = 0;
+};
+
+struct GlobalTransportReport {
+    int64_t overloadBefore = 0; ///< sum of max(0, m - Tc) over non-obstacle cells, before
+    int64_t overloadAfter = 0;  ///< and after
+    int64_t massMoved = 0;      ///< clay routed from cell to cell (sum of the integer face flows)
+    uint64_t unknowns = 0;      ///< cells of the last solve
+    uint64_t solves = 0;        ///< Poisson solves (active-set rounds, over every reach tried)
+    uint64_t iterations = 0;    ///< conjugate-gradient iterations, all solves
+    int64_t reach = 0;          ///< the reach finally used (0: the whole body)
+    /// Some over clay is walled in (obstacles, tools) with no room in its connected body: its
+    /// Poisson problem is singular. That clay is left where it is (the automaton reports NoRoom).
+    bool noRoom = false;
+    int64_t massNoRoom = 0; ///< the overload of those walled-in regions
+    double seconds = 0;
+    Box region; ///< the voxels written (empty when nothing moved)
+};
+
+/// Moves the overload (m - Tc of cells over Tc) of @a automaton's clay through the full clay
+/// (m >= Tc, connected by faces, not obstacles) to cells with room, in integers: a pressure p
+/// solves the obstacle problem (Laplace p = m - Tc on the full cells and on every cell that would
+/// receive more than its room; p = 0 on the others; no flux into obstacles), by active-set rounds
+/// of Jacobi-preconditioned conjugate gradients; then every solved cell, in order of decreasing p,
+/// sends its integer excess to its lower-p face neighbours pro rata of the drop (largest-remainder
+/// rounding). Every solved cell that had excess ends at exactly Tc; mass is exact by construction;
+/// obstacles are never entered or crossed. Deterministic for any thread count. Written through
+/// Automaton::edit(), so the automaton wakes the region for its cleanup.
+/// @throw Error if options are invalid; nothing is changed then.
+GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& options = {});
+
+} // namespace vdbclay

@@ -1,0 +1,525 @@
+// Global transport: the overload moved through the full clay to where there is room, in integers.
+//
+// Why. In clay at m0 = Tc the paper's automaton moves displaced clay by a random walk through
+// saturated cells: steps grow as N^2 and work as N^5-N^6, and the clay exits where the walk
+// happens to reach open space. A pressure projection solved as an obstacle problem moves it in one
+// pass (docs/TRANSPORT.md, and the prototype study it follows).
+//
+// 1. Domain. Seeds: every non-obstacle cell over Tc, in tree order. A breadth-first flood through
+//    face neighbours that are full (m >= Tc) and not obstacles, at most `reach` steps from a seed
+//    (the plastic zone: a small tool moves clay near itself, a plate covering the body moves the
+//    whole body), gives the unknown cells D. Their face neighbours with room (m < Tc, not an
+//    obstacle) are Dirichlet cells B (p = 0). Obstacles, and full cells beyond the reach, are
+//    walls: their faces are left out of the Laplacian (no flux).
+// 2. Singular parts. A connected part of D with no face on B has no room: its Poisson problem is
+//    singular. If it was cut by the reach, the reach doubles and the domain is rebuilt (up to the
+//    whole body); otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
+// 3. Active set. Solve L p = m - Tc on D (L: for each non-wall face, p_i - p_j; p_j = 0 on B) by
+//    Jacobi-preconditioned conjugate gradients, warm-started from the previous round. A B cell whose
+//    inflow (the sum of p over its D faces) exceeds its room joins D (its right-hand side is then
+//    negative: it absorbs its room); a joined cell with p < 0 leaves again. Repeat until nothing
+//    changes (or maxRounds): the cells of D end exactly full.
+// 4. Routing, exact. Cells of D in order of decreasing p (ties: coordinate order) send their
+//    current integer excess (their own plus what higher cells sent them) to their lower-p non-wall
+//    face neighbours, pro rata of the drop p_i - p_j, largest remainder first. So every D cell with
+//    excess ends at exactly Tc, B cells receive, mass is exact by construction, walls are never
+//    crossed. Cells with no lower neighbour (only from solver error) keep their excess for the
+//    automaton's cleanup.
+// 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
+//
+// Determinism. The flood, the cell numbering and the routing are serial and ordered. The solver's
+// vector operations run over fixed chunks of rows; dot products add per-chunk partial sums in chunk
+// order. Every floating-point operation is therefore the same on any thread count, and so is the
+// potential, the routing and the result.
+//
+// Cost. The flood and the solve touch the full cells within the reach and their faces, never the
+// bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
+
+#include "vdbclay/Transport.h"
+#include "vdbclay/Automaton.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/ValueAccessor.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cmath>
+#include <deque>
+#include <numeric>
+
+namespace vdbclay {
+
+const char* transportName(Transport transport)
+{
+    return transport == Transport::Global ? "global" : "local";
+}
+
+Transport parseTransport(const std::string& name)
+{
+    if (name == "local") return Transport::Local;
+    if (name == "global") return Transport::Global;
+    throw Error("unknown transport \"" + name + "\" (expected one of: local, global)");
+}
+
+namespace {
+
+using openvdb::Coord;
+
+constexpr int kDir[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+constexpr size_t kChunk = 4096;
+
+/// Runs @a fn(begin, end) over fixed chunks of [0, n), in parallel unless serial.
+template <typename Fn> void forChunks(size_t n, bool serial, const Fn& fn)
+{
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    if (serial || chunks < 2) {
+        for (size_t c = 0; c < chunks; ++c)
+            fn(c * kChunk, std::min(n, (c + 1) * kChunk));
+        return;
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, chunks, 1), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t c = r.begin(); c != r.end(); ++c)
+            fn(c * kChunk, std::min(n, (c + 1) * kChunk));
+    });
+}
+
+/// sum_i f(i) over [0, n): per-chunk partial sums, added in chunk order (thread-count independent).
+template <typename Fn> double chunkedSum(size_t n, bool serial, std::vector<double>& partial, const Fn& f)
+{
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    partial.assign(chunks, 0.0);
+    forChunks(n, serial, [&](size_t b, size_t e) {
+        double s = 0;
+        for (size_t i = b; i < e; ++i)
+            s += f(i);
+        partial[b / kChunk] = s;
+    });
+    double s = 0;
+    for (double v : partial)
+        s += v;
+    return s;
+}
+
+enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
+
+class Solver {
+public:
+    Solver(Automaton& a, const GlobalTransportOptions& o)
+        : mA(a), mOpt(o), mTc(a.options().rule.threshold), mDirs(a.options().dimensions == 2 ? 4 : 6),
+          mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr),
+          mSerial(o.threads == 1)
+    {
+    }
+
+    GlobalTransportReport run()
+    {
+        GlobalTransportReport rep;
+        std::vector<Coord> seeds;
+        for (auto it = mMass.cbeginValueOn(); it; ++it) {
+            if (*it > mTc && !isObstacle(it.getCoord())) {
+                seeds.push_back(it.getCoord());
+                rep.overloadBefore += int64_t(*it) - mTc;
+            }
+        }
+        rep.overloadAfter = rep.overloadBefore;
+        if (seeds.empty()) return rep;
+
+        int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;
+        for (;;) {
+            bool cut = false;
+            build(seeds, reach, cut);
+            rep.reach = reach;
+            bool grow = false;
+            freezeSingular(cut, grow, rep);
+            if (grow) {
+                reach = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
+                continue;
+            }
+            break;
+        }
+        activeSet(rep);
+        route(rep);
+        return rep;
+    }
+
+private:
+    bool isObstacle(const Coord& c) const { return mObs && mObs->isValueOn(c); }
+    bool inPlane(const Coord& c) const { return mDirs == 6 || c.z() == 0; }
+
+    int32_t indexOf(const Coord& c) const
+    {
+        const int32_t v = mIndexAcc->getValue(c);
+        return v;
+    }
+    int32_t addCell(const Coord& c, uint8_t kind)
+    {
+        const int32_t i = int32_t(mCells.size());
+        mCells.push_back(c);
+        mM0.push_back(mMass.getValue(c));
+        mKind.push_back(kind);
+        mNb.insert(mNb.end(), 6, -1);
+        mHasNb.push_back(0);
+        mIndexAcc->setValue(c, i);
+        return i;
+    }
+
+    /// Links cell @a i to its face neighbours, creating Dirichlet cells for neighbours with room.
+    /// Returns true if a full non-obstacle neighbour is not a cell (cut by the reach).
+    bool link(int32_t i)
+    {
+        bool cut = false;
+        const Coord c = mCells[size_t(i)];
+        for (int d = 0; d < mDirs; ++d) {
+            const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+            int32_t j = indexOf(q);
+            if (j < 0) {
+                if (isObstacle(q)) continue;
+                if (mMass.getValue(q) >= mTc) {
+                    cut = true; // beyond the reach: a wall for this solve
+                    continue;
+                }
+                j = addCell(q, kDirichlet);
+            }
+            mNb[size_t(i) * 6 + size_t(d)] = j;
+        }
+        mHasNb[size_t(i)] = 1;
+        return cut;
+    }
+
+    void build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
+    {
+        mCells.clear();
+        mM0.clear();
+        mKind.clear();
+        mNb.clear();
+        mHasNb.clear();
+        mDist.clear();
+        mIndex = std::make_unique<openvdb::Int32Tree>(-1);
+        mIndexAcc = std::make_unique<openvdb::tree::ValueAccessor<openvdb::Int32Tree>>(*mIndex);
+        std::deque<int32_t> queue;
+        for (const Coord& s : seeds) {
+            if (indexOf(s) >= 0) continue;
+            queue.push_back(addCell(s, kUnknown));
+            mDist.push_back(0);
+        }
+        cut = false;
+        while (!queue.empty()) {
+            const int32_t i = queue.front();
+            queue.pop_front();
+            const Coord c = mCells[size_t(i)];
+            const int64_t di = mDist[size_t(i)];
+            for (int d = 0; d < mDirs; ++d) {
+                const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                if (indexOf(q) >= 0 || isObstacle(q) || mMass.getValue(q) < mTc) continue;
+                if (reach > 0 && di >= reach) continue; // linking below marks the cut
+                const int32_t j = addCell(q, kUnknown);
+                mDist.resize(mCells.size(), 0);
+                mDist[size_t(j)] = di + 1;
+                queue.push_back(j);
+            }
+        }
+        // Link every unknown cell (Dirichlet cells appear here, after the unknowns).
+        const size_t unknowns = mCells.size();
+        for (size_t i = 0; i < unknowns; ++i)
+            cut |= link(int32_t(i));
+    }
+
+    /// Finds connected parts of the unknowns with no Dirichlet face. @a grow: one was cut by the
+    /// reach (rebuild with a larger one); otherwise they are walled in: frozen, reported.
+    void freezeSingular(bool cut, bool& grow, GlobalTransportReport& rep)
+    {
+        grow = false;
+        std::vector<uint8_t> seen(mCells.size(), 0);
+        std::vector<int32_t> part;
+        for (size_t s = 0; s < mCells.size(); ++s) {
+            if (mKind[s] != kUnknown || seen[s]) continue;
+            part.clear();
+            part.push_back(int32_t(s));
+            seen[s] = 1;
+            bool room = false, partCut = false;
+            for (size_t k = 0; k < part.size(); ++k) {
+                const size_t i = size_t(part[k]);
+                const Coord c = mCells[i];
+                for (int d = 0; d < mDirs; ++d) {
+                    const int32_t j = mNb[i * 6 + size_t(d)];
+                    if (j < 0) {
+                        const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                        if (!isObstacle(q)) partCut = true; // a full cell beyond the reach
+                        continue;
+                    }
+                    if (mKind[size_t(j)] == kDirichlet)
+                        room = true;
+                    else if (mKind[size_t(j)] == kUnknown && !seen[size_t(j)]) {
+                        seen[size_t(j)] = 1;
+                        part.push_back(j);
+                    }
+                }
+            }
+            if (room) continue;
+            if (partCut && cut) {
+                grow = true;
+                return;
+            }
+            rep.noRoom = true;
+            for (int32_t i : part) {
+                mKind[size_t(i)] = kFrozen;
+                rep.massNoRoom += std::max<int64_t>(0, mM0[size_t(i)] - mTc);
+            }
+        }
+    }
+
+    /// Conjugate gradients (Jacobi) on the unknown cells, warm-started from mP.
+    void solve(GlobalTransportReport& rep)
+    {
+        // Rows: the unknown cells in cell order.
+        mRow.assign(mCells.size(), -1);
+        mRowCell.clear();
+        for (size_t i = 0; i < mCells.size(); ++i)
+            if (mKind[i] == kUnknown) {
+                mRow[i] = int32_t(mRowCell.size());
+                mRowCell.push_back(int32_t(i));
+            }
+        const size_t n = mRowCell.size();
+        rep.unknowns = n;
+        ++rep.solves;
+        if (n == 0) return;
+        std::vector<int32_t> nb(n * 6, -1);
+        std::vector<double> diag(n, 0), b(n), x(n), r(n), z(n), p(n), q(n);
+        for (size_t k = 0; k < n; ++k) {
+            const size_t i = size_t(mRowCell[k]);
+            for (int d = 0; d < mDirs; ++d) {
+                const int32_t j = mNb[i * 6 + size_t(d)];
+                if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
+                diag[k] += 1;
+                if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+            }
+            b[k] = double(mM0[i] - mTc);
+            x[k] = mP[i];
+        }
+        auto apply = [&](const std::vector<double>& v, std::vector<double>& out) {
+            forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k) {
+                    double s = diag[k] * v[k];
+                    for (int d = 0; d < 6; ++d) {
+                        const int32_t j = nb[k * 6 + size_t(d)];
+                        if (j >= 0) s -= v[size_t(j)];
+                    }
+                    out[k] = s;
+                }
+            });
+        };
+        std::vector<double> partial;
+        apply(x, q);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                r[k] = b[k] - q[k];
+                z[k] = r[k] / diag[k];
+                p[k] = z[k];
+            }
+        });
+        const double bnorm =
+            std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
+        const double stop = mOpt.tolerance * std::max(bnorm, 1e-300);
+        double rz = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * z[k]; });
+        const uint64_t maxIt = 20000;
+        for (uint64_t it = 0; it < maxIt; ++it) {
+            const double rnorm =
+                std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * r[k]; }));
+            if (rnorm <= stop) break;
+            apply(p, q);
+            const double pq = chunkedSum(n, mSerial, partial, [&](size_t k) { return p[k] * q[k]; });
+            if (!(pq > 0)) break;
+            const double alpha = rz / pq;
+            forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k) {
+                    x[k] += alpha * p[k];
+                    r[k] -= alpha * q[k];
+                    z[k] = r[k] / diag[k];
+                }
+            });
+            const double rzNew = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * z[k]; });
+            const double beta = rzNew / rz;
+            rz = rzNew;
+            forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k)
+                    p[k] = z[k] + beta * p[k];
+            });
+            ++rep.iterations;
+        }
+        for (size_t k = 0; k < n; ++k)
+            mP[size_t(mRowCell[k])] = x[k];
+    }
+
+    void activeSet(GlobalTransportReport& rep)
+    {
+        mP.assign(mCells.size(), 0.0);
+        for (int round = 0; round < mOpt.maxRounds; ++round) {
+            solve(rep);
+            bool changed = false;
+            // Inflow of each Dirichlet cell: sum of p over its unknown faces.
+            const size_t cells = mCells.size();
+            std::vector<double> inflow(cells, 0.0);
+            for (size_t i = 0; i < cells; ++i) {
+                if (mKind[i] != kUnknown) continue;
+                for (int d = 0; d < mDirs; ++d) {
+                    const int32_t j = mNb[i * 6 + size_t(d)];
+                    if (j >= 0 && mKind[size_t(j)] == kDirichlet) inflow[size_t(j)] += mP[i];
+                }
+            }
+            for (size_t i = 0; i < cells; ++i) {
+                if (mKind[i] == kDirichlet && inflow[i] > double(mTc - mM0[i]) + 0.5) {
+                    mKind[i] = kUnknown;
+                    changed = true;
+                } else if (mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0) {
+                    mKind[i] = kDirichlet;
+                    mP[i] = 0;
+                    changed = true;
+                }
+            }
+            if (!changed) break;
+            // Newly joined cells need their neighbours (new Dirichlet cells).
+            for (size_t i = 0; i < mCells.size(); ++i)
+                if (mKind[i] == kUnknown && !mHasNb[i]) link(int32_t(i));
+            mP.resize(mCells.size(), 0.0);
+            bool grow = false;
+            freezeSingular(false, grow, rep);
+        }
+    }
+
+    void route(GlobalTransportReport& rep)
+    {
+        std::vector<int32_t> order;
+        for (size_t i = 0; i < mCells.size(); ++i)
+            if (mKind[i] == kUnknown) order.push_back(int32_t(i));
+        std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+            if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
+            return mCells[size_t(a)] < mCells[size_t(b)];
+        });
+        std::vector<int64_t> cur(mM0.begin(), mM0.end());
+        struct Out {
+            int32_t j;
+            double w;
+            int64_t share;
+            double frac;
+            int d;
+        };
+        std::vector<Out> outs;
+        for (int32_t ii : order) {
+            const size_t i = size_t(ii);
+            const int64_t x = cur[i] - mTc;
+            if (x <= 0) continue;
+            const double pi = mP[i];
+            outs.clear();
+            double W = 0;
+            for (int d = 0; d < mDirs; ++d) {
+                const int32_t j = mNb[i * 6 + size_t(d)];
+                if (j < 0) continue;
+                const uint8_t k = mKind[size_t(j)];
+                if (k == kFrozen) continue;
+                const double pj = k == kUnknown ? mP[size_t(j)] : 0.0;
+                if (!(pj < pi)) continue;
+                outs.push_back(Out{j, pi - pj, 0, 0, d});
+                W += pi - pj;
+            }
+            if (outs.empty() || !(W > 0)) continue;
+            int64_t given = 0;
+            for (Out& o : outs) {
+                const double exact = double(x) * (o.w / W);
+                o.share = int64_t(std::floor(exact));
+                o.frac = exact - double(o.share);
+                given += o.share;
+            }
+            std::sort(outs.begin(), outs.end(), [](const Out& a, const Out& b) {
+                if (a.frac != b.frac) return a.frac > b.frac;
+                return a.d < b.d;
+            });
+            int64_t left = x - given;
+            for (size_t k = 0; left != 0 && !outs.empty(); k = (k + 1) % outs.size()) {
+                if (left > 0) {
+                    ++outs[k].share;
+                    --left;
+                } else if (outs[k].share > 0) {
+                    --outs[k].share;
+                    ++left;
+                }
+            }
+            for (const Out& o : outs) {
+                cur[size_t(o.j)] += o.share;
+                rep.massMoved += o.share;
+            }
+            cur[i] -= x;
+        }
+        // Write the changed cells.
+        Box region;
+        std::vector<size_t> changed;
+        for (size_t i = 0; i < mCells.size(); ++i) {
+            if (cur[i] == mM0[i]) continue;
+            if (cur[i] > INT32_MAX) return; // cannot happen for Tc-sized inflows; refuse to write
+            changed.push_back(i);
+            const Coord& c = mCells[i];
+            region = unite(region, Box{{{c.x(), c.y(), c.z()}}, {{c.x(), c.y(), c.z()}}});
+        }
+        if (changed.empty()) return;
+        rep.region = region;
+        mA.edit(region, [&](MassGrid& grid) {
+            auto acc = grid.getAccessor();
+            for (size_t i : changed) {
+                if (cur[i] > 0)
+                    acc.setValueOn(mCells[i], int32_t(cur[i]));
+                else
+                    acc.setValueOff(mCells[i], 0);
+            }
+        });
+        rep.overloadAfter = mA.residualOverload();
+    }
+
+    Automaton& mA;
+    GlobalTransportOptions mOpt;
+    int32_t mTc;
+    int mDirs;
+    const openvdb::Int32Tree& mMass;
+    const openvdb::MaskTree* mObs;
+    bool mSerial;
+
+    std::unique_ptr<openvdb::Int32Tree> mIndex;
+    std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> mIndexAcc;
+    std::vector<Coord> mCells;
+    std::vector<int64_t> mM0;
+    std::vector<uint8_t> mKind, mHasNb;
+    std::vector<int32_t> mNb; ///< 6 per cell: neighbour cell, or -1 (wall)
+    std::vector<int64_t> mDist;
+    std::vector<double> mP;
+    std::vector<int32_t> mRow, mRowCell;
+};
+
+} // namespace
+
+GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& options)
+{
+    if (options.reach < 0)
+        throw Error("transportGlobally: reach must be >= 0, got " + std::to_string(options.reach));
+    if (options.maxRounds < 1) throw Error("transportGlobally: maxRounds must be >= 1");
+    if (!(options.tolerance > 0 && options.tolerance < 1))
+        throw Error("transportGlobally: tolerance must lie in (0, 1)");
+    const auto t0 = std::chrono::steady_clock::now();
+    GlobalTransportReport rep;
+    auto body = [&] {
+        Solver s(automaton, options);
+        rep = s.run();
+    };
+    if (options.threads > 1) {
+        tbb::task_arena arena(options.threads);
+        arena.execute(body);
+    } else {
+        body();
+    }
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return rep;
+}
+
+} // namespace vdbclay
