@@ -45,8 +45,13 @@ fi
 # --- vdbclay, instrumented: the library and the threaded test executables only ---------------
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
+launcher=() # ccache, as scripts/build.sh uses it
+if command -v ccache >/dev/null 2>&1; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD}
+fi
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
-  cmake -S . -B "$BUILD_DIR" "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
         -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_APPS=OFF >/dev/null
 fi
 cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton
