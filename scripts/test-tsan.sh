@@ -36,7 +36,7 @@ if [ ! -f "$TBB_PREFIX/lib/libtbb.so.12" ]; then
   # Compiler must match the one the tests are built with (TSan runtimes differ between gcc/clang).
   cmake -S "$TBB_ROOT/src" -B "$TBB_ROOT/build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
         -DTBB_TEST=OFF -DTBB_EXAMPLES=OFF -DTBB_STRICT=OFF -DTBB_SANITIZE=thread \
-        -DTBBMALLOC_BUILD=OFF -DTBB_DISABLE_HWLOC_AUTOMATIC_SEARCH=ON \
+        -DTBBMALLOC_BUILD=OFF -DTBB_DISABLE_HWLOC_AUTOMATIC_SEARCH=ON $(command -v ccache >/dev/null && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache) \
         -DCMAKE_INSTALL_PREFIX="$TBB_PREFIX" >/dev/null
   cmake --build "$TBB_ROOT/build" --parallel "$JOBS"
   cmake --install "$TBB_ROOT/build" >/dev/null
