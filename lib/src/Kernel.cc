@@ -42,6 +42,53 @@ alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
 /// Offsets of a block's corners c = dx + 2 dy + 4 dz from its first cell, in one leaf.
 constexpr int kCornerOffset[8] = {0, 64, 8, 72, 1, 65, 9, 73};
 
+/// Odd blocks that lie inside the anchor leaf (no local coordinate at -1): read like even blocks.
+constexpr uint64_t kInsideOdd3 = ~(kX0 | kY0 | kZ0), kInsideOdd2 = ~(kX0 | kY0) & 0xFFFFull;
+
+/// Bits set in a 64-bit mask (SWAR; the build targets no popcnt instruction).
+inline uint64_t popcount64(uint64_t x)
+{
+    x = x - ((x >> 1) & 0x5555555555555555ull);
+    x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
+    return (x * 0x0101010101010101ull) >> 56;
+}
+
+/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a m (in corner
+/// order); returns whether one is over @a tc.
+template <int N>
+__attribute__((always_inline)) inline bool loadInside(const int32_t* d, int32_t tc, int32_t* m)
+{
+#if defined(__SSE2__)
+    // Corners (dx, dy) pairs along z are adjacent in the leaf: four 8-byte loads, two shuffles.
+    // In 2D (z = 0) the z = 1 neighbours are read (inside the leaf) and ignored.
+    const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d));
+    const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 64));
+    const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 8));
+    const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 72));
+    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);  // d0 d64 d1 d65
+    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);  // d8 d72 d9 d73
+    const __m128i lo = _mm_unpacklo_epi64(a01, a23); // corners 0-3
+    const __m128i t = _mm_set1_epi32(tc);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(m), lo);
+    int any = _mm_movemask_epi8(_mm_cmpgt_epi32(lo, t));
+    if constexpr (N == 8) {
+        const __m128i hi = _mm_unpackhi_epi64(a01, a23); // corners 4-7
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+        any |= _mm_movemask_epi8(_mm_cmpgt_epi32(hi, t));
+    }
+    return any != 0;
+#else
+    int32_t top = d[0];
+    VDBCLAY_UNROLL
+    for (int c = 0; c < N; ++c) {
+        m[c] = d[kCornerOffset[c]];
+        top = std::max(top, m[c]);
+    }
+    return top > tc;
+#endif
+}
+
 /// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
 struct LeafSet {
     MassLeaf* leaf[8] = {};
@@ -92,6 +139,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const int32_t tc32 = int32_t(std::min<int64_t>(tc, INT32_MAX));
     const uint64_t prefix = rules_internal::stepPrefix(in.step, in.seed);
     const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun;
+    const uint64_t insideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
     MassAcc acc(*in.tree);
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
@@ -102,7 +150,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
         w.changed = 0;
-        examined += uint64_t(__builtin_popcountll(w.mask));
+        examined += popcount64(w.mask);
         fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
@@ -112,19 +160,21 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             bits &= bits - 1;
             const uint16_t* off = tab.offset[D3][P][b];
             const uint8_t* lf = tab.leaf[D3][P][b];
-            int32_t m[8];
-            if constexpr (P == 0) {
-                const int32_t* d = ls.data[0] + off[0];
-                for (int c = 0; c < N; ++c)
-                    m[c] = d[kCornerOffset[c]];
+            // Even blocks, and odd blocks not reaching into a lower neighbour, lie in the anchor's
+            // leaf at constant offsets; the others go through the tables.
+            const bool inside = P == 0 || ((insideOdd >> b) & 1u);
+            alignas(16) int32_t m[8];
+            if (inside) {
+                if (!loadInside<N>(ls.read[0] + off[0], tc32, m)) continue;
             } else {
-                for (int c = 0; c < N; ++c)
+                int32_t top = 0;
+                VDBCLAY_UNROLL
+                for (int c = 0; c < N; ++c) {
                     m[c] = ls.read[lf[c]][off[c]];
+                    top = std::max(top, m[c]);
+                }
+                if (top <= tc32) continue;
             }
-            int32_t hi = m[0];
-            for (int c = 1; c < N; ++c)
-                hi = std::max(hi, m[c]);
-            if (hi <= tc32) continue;
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
                 for (int c = 0; c < N; ++c) {
@@ -169,8 +219,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 const int c = __builtin_ctz(ch);
                 ch &= ch - 1;
                 overloadDelta += std::max<int64_t>(out[c] - tc, 0) - std::max<int64_t>(m[c] - tc, 0);
-                const int li = (P == 0) ? 0 : lf[c];
-                const int o = (P == 0) ? off[0] + kCornerOffset[c] : off[c];
+                const int li = inside ? 0 : lf[c];
+                const int o = inside ? off[0] + kCornerOffset[c] : off[c];
                 ls.data[li][o] = int32_t(out[c]);
                 maxWritten = std::max(maxWritten, out[c]);
                 if (m[c] == 0) {

@@ -7,6 +7,13 @@
 #include <algorithm>
 #include <cstdint>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+// Fixed-trip loops over a block's cells, fully unrolled (GCC and Clang both read this pragma).
+#define VDBCLAY_UNROLL _Pragma("GCC unroll 8")
+
 namespace vdbclay {
 namespace rules_internal {
 
@@ -47,26 +54,52 @@ struct PrefixHash { // from the step's prefix and the block's corner (the automa
     uint64_t operator()() const { return finishHash(prefix, x, y, z); }
 };
 
+/// Bits set in a block's cell mask (at most 8 bits; no popcnt instruction needed).
+inline int popcount8(uint32_t m)
+{
+    static constexpr uint8_t kBits[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+    return kBits[m & 15u] + kBits[(m >> 4) & 15u];
+}
+
+/// The cells of @a cells (mask of N bits) whose value in @a out is below @a tc.
+template<int N>
+__attribute__((always_inline)) inline uint32_t below(const int64_t* out, uint32_t cells, int64_t tc)
+{
+    uint32_t m = 0;
+    VDBCLAY_UNROLL
+    for (int i = 0; i < N; ++i) m |= uint32_t(out[i] < tc) << i;
+    return m & cells;
+}
+
+/// Gives one unit to each of the first @a r cells of @a cells in the rotation that starts at cell
+/// @a start; returns how many units are left (r minus the cells there were).
+template<int N>
+__attribute__((always_inline)) inline int64_t giveInRotation(int64_t r, uint32_t cells, int start, int64_t* out)
+{
+    constexpr uint32_t kAll = (1u << N) - 1;
+    // Rotate right by start: bit k is cell (start + k) mod N, so ascending bits follow the rotation.
+    uint32_t rot = ((cells >> start) | (cells << ((N - start) & (N - 1)))) & kAll;
+    while (rot && r > 0) {
+        const int k = __builtin_ctz(rot);
+        rot &= rot - 1;
+        ++out[(start + k) & (N - 1)];
+        --r;
+    }
+    return r;
+}
+
 /// Gives one unit to each of r distinct cells of @a under, visiting cells in a rotation that starts
 /// at hash mod N (N is 4 or 8: a mask): first the cells whose new mass is still below Tc, then the
-/// others.
+/// others (those at or above Tc after the first pass, which may include cells the first pass
+/// filled to Tc).
 template<int N>
 __attribute__((always_inline)) inline void giveRemainder(int64_t r, uint32_t under, int64_t tc, uint64_t hash,
                                                          int64_t* out)
 {
     if (r <= 0) return;
     const int start = int(hash & uint64_t(N - 1));
-    for (int pass = 0; pass < 2 && r > 0; ++pass) {
-        for (int k = 0; k < N && r > 0; ++k) {
-            const int i = (start + k) & (N - 1);
-            if (!((under >> i) & 1u)) continue;
-            const bool hasRoom = out[i] < tc;
-            if (hasRoom == (pass == 0)) {
-                ++out[i];
-                --r;
-            }
-        }
-    }
+    r = giveInRotation<N>(r, below<N>(out, under, tc), start, out);
+    if (r > 0) giveInRotation<N>(r, under & ~below<N>(out, under, tc), start, out);
 }
 
 /// a / b for non-negative operands, in 32 bits when both fit (several times cheaper than a 64-bit
@@ -102,32 +135,54 @@ __attribute__((always_inline)) inline void shareEqually(int64_t amount, uint32_t
 {
     const int64_t share = divideBySmall(amount, nu);
     const int64_t r = amount - share * nu;
+    VDBCLAY_UNROLL
     for (int i = 0; i < N; ++i) {
         if ((under >> i) & 1u) out[i] += share;
     }
     if (r) giveRemainder<N>(r, under, tc, hash(), out);
 }
 
+/// The cells of a block holding more than @a tc (bit i = cell i): SSE2 compares where the target
+/// has it (every x86-64), a plain loop elsewhere.
+template<int N>
+__attribute__((always_inline)) inline uint32_t overMask(const int32_t* mass, int32_t tc)
+{
+#if defined(__SSE2__)
+    const __m128i t = _mm_set1_epi32(tc);
+    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(
+        _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(mass)), t))));
+    if constexpr (N == 8) {
+        m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(
+                 _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(mass + 4)), t))))
+             << 4;
+    }
+    return m;
+#else
+    uint32_t m = 0;
+    VDBCLAY_UNROLL
+    for (int i = 0; i < N; ++i) m |= uint32_t(mass[i] > tc) << i;
+    return m;
+#endif
+}
+
 /// The rule @a R on one block of N cells (see vdbclay/Rules.h). The kernel instantiates it per rule
-/// and dimension, so no switch runs per block.
+/// and dimension, so no switch runs per block. Unlike repartitionBlock, @a out is left unwritten
+/// when the block has no over or no under cell (the result is then 0 and out is not needed).
 template<Rule R, int N, typename Hash>
 __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& rule, const int32_t* mass,
                                                             uint32_t valid, const Hash& hash, int64_t* out)
 {
     const int64_t tc = rule.threshold;
-    uint32_t over = 0, under = 0;
-    for (int i = 0; i < N; ++i) {
-        out[i] = mass[i];
-        const uint32_t v = (valid >> i) & 1u;
-        const uint32_t o = uint32_t(mass[i] > tc);
-        over |= (v & o) << i;
-        under |= (v & (o ^ 1u)) << i;
-    }
+    const uint32_t over = overMask<N>(mass, int32_t(rule.threshold)) & valid;
+    const uint32_t under = valid & ~over;
     if (!over || !under) return 0;
-    const int nu = __builtin_popcount(under);
+    VDBCLAY_UNROLL
+    for (int i = 0; i < N; ++i) out[i] = mass[i];
+    const int nu = popcount8(under);
 
     if constexpr (R == Rule::Arata) {
         int64_t d = 0;
+        VDBCLAY_UNROLL
         for (int i = 0; i < N; ++i) {
             if (!((over >> i) & 1u)) continue;
             // floor(alpha * m) in 32.32 fixed point; m < 2^31 and alpha < 2^32 so no wrap.
@@ -139,6 +194,7 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
         shareEqually<N>(d, under, nu, tc, hash, out);
     } else if constexpr (R == Rule::Bingham) {
         int64_t d = 0;
+        VDBCLAY_UNROLL
         for (int i = 0; i < N; ++i) {
             if (!((over >> i) & 1u)) continue;
             d += out[i] - tc;
@@ -147,6 +203,7 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
         shareEqually<N>(d, under, nu, tc, hash, out);
     } else {
         int64_t e = 0, a = 0;
+        VDBCLAY_UNROLL
         for (int i = 0; i < N; ++i) {
             if ((over >> i) & 1u) {
                 e += out[i] - tc;
@@ -157,7 +214,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
         }
         if (e > a) {
             // More excess than room (A may be 0): fill every room, share the surplus equally.
-            for (int i = 0; i < N; ++i) {
+            VDBCLAY_UNROLL
+        for (int i = 0; i < N; ++i) {
                 if ((under >> i) & 1u) out[i] = tc;
             }
             shareEqually<N>(e - a, under, nu, tc, hash, out);
@@ -193,7 +251,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
             int64_t given = 0;
             if (uint64_t(e) * uint64_t(tc) <= UINT32_MAX) {
                 const double inv = 1.0 / double(a);
-                for (int i = 0; i < N; ++i) {
+                VDBCLAY_UNROLL
+        for (int i = 0; i < N; ++i) {
                     if (!((under >> i) & 1u)) continue;
                     const uint64_t x = uint64_t(e) * uint64_t(tc - out[i]);
                     uint64_t q = uint64_t(double(x) * inv);
@@ -203,7 +262,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
                     given += int64_t(q);
                 }
             } else {
-                for (int i = 0; i < N; ++i) {
+                VDBCLAY_UNROLL
+        for (int i = 0; i < N; ++i) {
                     if (!((under >> i) & 1u)) continue;
                     const int64_t room = tc - out[i];
                     const int64_t share = divide(int64_t(uint64_t(e) * uint64_t(room)), a);
@@ -216,6 +276,7 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
     }
 
     uint32_t changed = 0;
+    VDBCLAY_UNROLL
     for (int i = 0; i < N; ++i) changed |= uint32_t(out[i] != mass[i]) << i;
     return changed;
 }
@@ -224,6 +285,7 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
 inline uint32_t repartition(const CompiledRule& rule, int n, const int32_t* mass, uint32_t valid,
                             const BlockKey& key, int64_t* out)
 {
+    for (int i = 0; i < n; ++i) out[i] = mass[i]; // the result when nothing moves
     const KeyHash h{key};
     const bool n8 = n == 8;
     switch (rule.rule) {
