@@ -408,7 +408,9 @@ TEST_F(AutomatonTest, SettleStopsOnBudgetOrTolerance)
 TEST_F(AutomatonTest, CostFollowsTheMovingClayNotTheVolume)
 {
     // A wide settled slab (64 x 8 x 64 at Tc) and one small overload on its top. After the two
-    // full-scan steps, each step examines only blocks near the moving clay.
+    // full-scan steps, each step examines only blocks near the moving clay. blocksVisited counts
+    // every candidate block before any filter (no over cell, missing leaf), so a regression to a
+    // full scan of the slab's leaves shows here even though such blocks would change nothing.
     auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(63, 7, 63)), 100);
     mass->tree().setValue(Coord(30, 7, 30), 100 + 300);
     Automaton a(mass, options(Rule::Prorata, 3, 100));
@@ -419,6 +421,8 @@ TEST_F(AutomatonTest, CostFollowsTheMovingClayNotTheVolume)
     for (int i = 0; i < 5000 && !a.settled(); ++i) {
         const StepReport r = a.step();
         maxVisited = std::max(maxVisited, r.blocksVisited);
+        EXPECT_GE(r.blocksVisited, r.blocksOverTc);
+        EXPECT_GE(r.blocksOverTc, r.blocksUpdated);
         total += r;
     }
     EXPECT_TRUE(a.settled());
@@ -426,6 +430,7 @@ TEST_F(AutomatonTest, CostFollowsTheMovingClayNotTheVolume)
     // A dense sweep visits every block of the slab every step; here no step comes near that.
     EXPECT_LT(maxVisited * 10, slabBlocks) << maxVisited << " of " << slabBlocks << " blocks";
     EXPECT_LT(total.blocksVisited, total.steps * slabBlocks / 20);
+    EXPECT_GT(total.blocksVisited, total.blocksOverTc); // the filter did reject candidates
     // The tree grew only where clay flowed: no leaf is without clay.
     for (auto it = mass->tree().cbeginLeaf(); it; ++it) EXPECT_FALSE(it->isEmpty()) << it->origin();
 }
@@ -438,6 +443,93 @@ TEST_F(AutomatonTest, SettledRegionCostsNothing)
     const StepReport r = a.run(1000);
     EXPECT_EQ(r.blocksVisited, 0u);
     EXPECT_EQ(a.stepCount(), 1000u);
+}
+
+TEST_F(AutomatonTest, SettledRegionWithOverloadLeftCostsNothing)
+{
+    // A settled lump at Tc and, inside it, one over cell walled in by obstacles on every side: the
+    // overload stays (so steps are not skipped for want of overload), but once two steps change
+    // nothing no candidate is left. Counted before any filter: a full scan would show here.
+    for (int dims : {2, 3}) {
+        const bool d3 = dims == 3;
+        auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(31, 31, d3 ? 31 : 0)), 100);
+        auto obs = openvdb::MaskGrid::create(false);
+        const Coord c(12, 13, d3 ? 14 : 0);
+        mass->tree().setValue(c, 900);
+        for (int dx = -1; dx <= 1; ++dx)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dz = d3 ? -1 : 0; dz <= (d3 ? 1 : 0); ++dz)
+                    if (dx || dy || dz) obs->tree().setValueOn(c.offsetBy(dx, dy, dz));
+        Automaton a(mass, options(Rule::Sorted, dims, 100), obs);
+        EXPECT_EQ(a.residualOverload(), 800);
+        const StepReport first = a.run(2);
+        EXPECT_GT(first.blocksVisited, 0u) << "the first two steps examine the leaf holding the over cell";
+        EXPECT_EQ(first.blocksUpdated, 0u);
+        EXPECT_TRUE(a.settled());
+        const StepReport r = a.run(1000);
+        EXPECT_EQ(r.blocksVisited, 0u) << dims << "D";
+        EXPECT_EQ(r.blocksOverTc, 0u);
+        EXPECT_EQ(r.residualOverload, 800);
+    }
+}
+
+// ---- settle with a stop hook ----------------------------------------------------------------------
+
+TEST_F(AutomatonTest, SettleStopHookStopsAfterAStepAndResumesExactly)
+{
+    auto build = [] {
+        auto mass = lump(CoordBBox(Coord(0, 0, 0), Coord(7, 7, 7)), 100);
+        mass->tree().setValue(Coord(3, 3, 3), 100 + 6000);
+        return mass;
+    };
+    // Unbroken.
+    auto m1 = build();
+    Automaton a1(m1, options(Rule::Prorata, 3, 100));
+    const StepReport whole = a1.settle(100000);
+    ASSERT_EQ(whole.reason, StopReason::Settled);
+    ASSERT_GT(whole.steps, 20u);
+
+    // The hook is polled after every step: stop after 11, then go on with the steps done.
+    auto m2 = build();
+    Automaton a2(m2, options(Rule::Prorata, 3, 100));
+    uint64_t polls = 0;
+    SettleOptions so;
+    so.maxSteps = 100000;
+    so.stop = [&](const Automaton& a) {
+        ++polls;
+        EXPECT_EQ(a.stepCount(), polls);
+        return a.stepCount() == 11;
+    };
+    const StepReport part = a2.settle(so);
+    EXPECT_EQ(part.reason, StopReason::Stopped);
+    EXPECT_STREQ(stopReasonName(part.reason), "stopped");
+    EXPECT_EQ(part.steps, 11u);
+    EXPECT_EQ(polls, 11u);
+    EXPECT_FALSE(part.settled);
+    so.stepsDone = part.steps;
+    so.stop = nullptr;
+    const StepReport rest = a2.settle(so);
+    EXPECT_EQ(rest.reason, StopReason::Settled);
+    EXPECT_EQ(part.steps + rest.steps, whole.steps);
+    EXPECT_EQ(contentHash(*m2), contentHash(*m1));
+
+    // The budget counts the steps already done.
+    auto m3 = build();
+    Automaton a3(m3, options(Rule::Prorata, 3, 100));
+    SettleOptions budget;
+    budget.maxSteps = 15;
+    budget.stepsDone = 10;
+    const StepReport r3 = a3.settle(budget);
+    EXPECT_EQ(r3.steps, 5u);
+    EXPECT_EQ(r3.reason, StopReason::StepBudget);
+    // A hook that never stops changes nothing.
+    auto m4 = build();
+    Automaton a4(m4, options(Rule::Prorata, 3, 100));
+    SettleOptions never;
+    never.maxSteps = 100000;
+    never.stop = [](const Automaton&) { return false; };
+    EXPECT_EQ(a4.settle(never).steps, whole.steps);
+    EXPECT_EQ(contentHash(*m4), contentHash(*m1));
 }
 
 // ---- edits ------------------------------------------------------------------------------------------

@@ -1,6 +1,8 @@
 // The repartition rules on single blocks, against values computed by hand from the paper's formulas.
 #include <vdbclay/Rules.h>
 
+#include "RulesImpl.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -383,4 +385,66 @@ TEST(Rules, BlockSizeMustBeFourOrEight)
     int32_t m[8] = {};
     int64_t out[8];
     EXPECT_THROW(repartitionBlock(c, 6, m, 0xFF, key(0), out), Error);
+}
+
+// ---- the kernel's arithmetic shortcuts (lib/src/RulesImpl.h) ------------------------------------
+
+TEST(Rules, DivisionBySmallCountsIsExact)
+{
+    // a * ceil(2^35 / d) >> 35 for a < 2^28, a division above: compare with '/' on every a below
+    // 2^16, around every multiple of d near the switch, and at the extremes.
+    for (int d = 1; d <= 8; ++d) {
+        for (int64_t a = 0; a < (1 << 16); ++a) ASSERT_EQ(rules_internal::divideBySmall(a, d), a / d) << a << "/" << d;
+        for (int64_t base : {int64_t(1) << 20, (int64_t(1) << 28) - 64, int64_t(1) << 28, int64_t(1) << 31,
+                             (int64_t(1) << 32) - 64, int64_t(1) << 40}) {
+            for (int64_t a = base - 64; a < base + 64; ++a) {
+                ASSERT_EQ(rules_internal::divideBySmall(a, d), a / d) << a << "/" << d;
+            }
+        }
+        uint64_t s = 99 + uint64_t(d);
+        for (int i = 0; i < 200000; ++i) {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            const int64_t a = int64_t(s >> (1 + (s & 31)));
+            ASSERT_EQ(rules_internal::divideBySmall(a, d), a / d) << a << "/" << d;
+        }
+    }
+}
+
+TEST(Rules, HashFromTheStepPrefixEqualsTheBlockHash)
+{
+    BlockKey k{-5, 7, 1 << 30, (uint64_t(1) << 50) + 9, 0xFEEDull};
+    EXPECT_EQ(rules_internal::finishHash(rules_internal::stepPrefix(k.step, k.seed), k.x, k.y, k.z), blockHash(k));
+}
+
+TEST(Rules, ProrataReciprocalSharesAreExactFloors)
+{
+    // The common prorata case (E * Tc < 2^32) takes shares from one reciprocal of A: check against
+    // the plain division on blocks built to hit exact multiples (E * room divisible by A).
+    RuleParams p;
+    p.rule = Rule::Prorata;
+    p.threshold = 1000;
+    const CompiledRule cr = compileRule(p);
+    for (int over = 1001; over <= 1064; ++over) {
+        for (int u = 0; u <= 1000; u += 7) {
+            const int32_t m[8] = {over, u, 1000 - u / 2, 0, 1000, 999, 500, 250};
+            int64_t out[8];
+            const BlockKey k{1, 2, 3, 4, 5};
+            repartitionBlock(cr, 8, m, 0xFFu, k, out);
+            const int64_t e = over - 1000;
+            int64_t a = 0;
+            for (int i = 1; i < 8; ++i) a += 1000 - m[i];
+            int64_t before = m[0], after = out[0];
+            for (int i = 1; i < 8; ++i) {
+                const int64_t share = e * (1000 - m[i]) / a;
+                EXPECT_GE(out[i] - m[i], share) << over << " " << u << " cell " << i;
+                EXPECT_LE(out[i] - m[i], share + 1); // plus at most one unit of the remainder
+                before += m[i];
+                after += out[i];
+            }
+            EXPECT_EQ(after, before);
+            EXPECT_EQ(out[0], 1000);
+        }
+    }
 }

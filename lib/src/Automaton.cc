@@ -1,34 +1,19 @@
-// The virtual-clay automaton on a sparse OpenVDB grid.
+// The virtual-clay automaton on a sparse OpenVDB grid: the public Automaton (see Automaton.h).
 //
 // Design
 // ======
-// Blocks and anchors. OpenVDB leaves are 8^3 voxels. On even steps a Margolus block starts at even
-// coordinates, so the 4x4x4 = 64 even blocks of a leaf lie inside it. On odd steps blocks start at
-// odd coordinates, (2i-1, 2i), and the blocks whose maximum corner lies in a leaf L are again 64:
-// their minimum corners sit at local -1, 1, 3, 5 along each axis, so the blocks with local -1 reach
-// into L's lower neighbours (-x, -y, -z and their combinations: the 7 "straddling" leaves). Every
-// block therefore has one anchor leaf (the leaf of its maximum corner; for even blocks the leaf that
-// holds it whole) and one bit in a 64-bit mask per anchor: bit = bx + 4 by + 16 bz. In 2D the clay
-// lives in z = 0, blocks are 2x2, and only the 16 bits with bz = 0 are used.
-//
-// What is examined. A block can change only if one of its cells changed in the previous two steps:
-// otherwise it is exactly as it was two steps ago, when it could not change (or it would have been
-// updated). So the candidates of step t are the blocks changed at t-2 (same phase, same masks) plus
-// the blocks of this phase that overlap a block changed at t-1: each block of one phase overlaps 8
-// (2D: 4) blocks of the other, which is a shift-and-or on the 64-bit masks, with bits that fall off
-// a face going to the neighbouring anchor (dilateAcrossPhase). After construction, resync() or
-// edit(), the region concerned is scanned whole for two steps. When no cell is over Tc nothing is
-// examined at all. The cost of a step follows the blocks that changed recently, not the volume.
+// The automaton is split along its concepts, one file each:
+//   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
+//   Candidates.*   which blocks a step examines: the last two steps' changes, merged in layer order
+//   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule
+//   this file      the state (mass, overload, bounds), the stages of a step, validation and scans,
+//                  edits, settle() and the no-room flood
 //
 // Stages of step(), each timed into StageSeconds:
-//   gather       candidates from the last two steps' changes, in order of anchor (y, z, x), one entry
-//                per anchor: a sequence of horizontal layers, y up, as in the paper's p layers. The
-//                inputs are already sorted runs, so they are merged, not sorted.
-//   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks).
-//                Blocks of one phase are disjoint, so tasks write disjoint voxels; they write values
-//                only into leaves that exist, and read missing leaves as background 0. The only
-//                shared words are leaf value masks (active bits), set with atomic OR when a cell
-//                goes from 0 to positive. No topology changes happen in the pass.
+//   gather       Candidates::gather: one entry per anchor, in order of anchor (y, z, x): a sequence
+//                of horizontal layers, y up, as in the paper's p layers.
+//   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks), each
+//                range through processRange (Kernel.h: what a task may write and why it is safe).
 //   grow         a block that must write into a missing leaf is not written in the pass but queued;
 //                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
 //                Since blocks of a phase are disjoint, doing it later gives the identical result.
@@ -40,7 +25,7 @@
 // Determinism. Each block's result depends only on its cells and on blockHash(origin, step, seed).
 // Blocks of a phase are disjoint, so neither the partition nor the order matters; the reductions are
 // integer sums and maxima. Results are bit-identical for any thread count and for threads = 1,
-// which runs the same body without TBB.
+// which runs the same body without TBB. tests/TestGolden.cc pins whole runs per rule and dimension.
 //
 // Overflow. No result can exceed the sum of its block, which is at most 8 times the largest cell.
 // The automaton tracks an upper bound of the largest cell; while 8 x bound fits in int32 nothing can
@@ -50,8 +35,10 @@
 #include "vdbclay/Automaton.h"
 #include "vdbclay/Metrics.h"
 
+#include "BlockMasks.h"
+#include "Candidates.h"
 #include "Format.h"
-#include "RulesImpl.h"
+#include "Kernel.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -79,216 +66,13 @@ using MassTree = openvdb::Int32Tree;
 using MassLeaf = MassTree::LeafNodeType;
 using ObsTree = openvdb::MaskTree;
 using ObsLeaf = ObsTree::LeafNodeType;
-static_assert(MassLeaf::DIM == 8, "vdbclay's block masks assume 8^3 leaves");
+using namespace automaton_internal;
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
 {
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
-
-// ---- Block masks -------------------------------------------------------------------------------
-// bit = bx + 4 by + 16 bz, each in 0..3.
-constexpr uint64_t kX0 = 0x1111111111111111ull, kX3 = 0x8888888888888888ull;
-constexpr uint64_t kY0 = 0x000F000F000F000Full, kY3 = 0xF000F000F000F000ull;
-constexpr uint64_t kZ0 = 0x000000000000FFFFull, kZ3 = 0xFFFF000000000000ull;
-
-uint64_t fullMask(bool is3D) { return is3D ? ~0ull : 0xFFFFull; }
-
-/// A set of candidate (or changed) blocks anchored at one leaf.
-struct Anchor {
-    Coord origin;
-    uint64_t mask;
-};
-
-/// Horizontal layers: order by y, then z, then x.
-inline bool layerLess(const Coord& a, const Coord& b)
-{
-    if (a.y() != b.y()) return a.y() < b.y();
-    if (a.z() != b.z()) return a.z() < b.z();
-    return a.x() < b.x();
-}
-
-/// The blocks of the other phase that overlap the blocks in @a a, which belong to phase
-/// @a fromPhase. Even block b overlaps odd blocks b and b+1 along each axis (b+1 = 4 is block 0 of
-/// the +axis neighbour); odd block c overlaps even blocks c-1 and c (c-1 = -1 is block 3 of the
-/// -axis neighbour). Writes up to 8 anchors to @a buf, and to @a shift[i] which neighbour leaf
-/// buf[i] is (bit 0 = x, 1 = y, 2 = z; 0 = a's own leaf). Returns how many.
-int dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, Anchor buf[8], int shift[8])
-{
-    int n = 1;
-    buf[0] = a;
-    shift[0] = 0;
-    const uint64_t lo[3] = {kX0, kY0, kZ0}, hi[3] = {kX3, kY3, kZ3};
-    const int unit[3] = {1, 4, 16};
-    const int axes = is3D ? 3 : 2;
-    for (int ax = 0; ax < axes; ++ax) {
-        const int cnt = n;
-        for (int i = 0; i < cnt; ++i) {
-            const uint64_t m = buf[i].mask;
-            uint64_t within, spill;
-            Coord nb = buf[i].origin;
-            if (fromPhase == 0) {
-                within = m | ((m & ~hi[ax]) << unit[ax]);
-                spill = (m & hi[ax]) >> (3 * unit[ax]);
-                nb[ax] += 8;
-            } else {
-                within = m | ((m & ~lo[ax]) >> unit[ax]);
-                spill = (m & lo[ax]) << (3 * unit[ax]);
-                nb[ax] -= 8;
-            }
-            buf[i].mask = within;
-            if (spill) {
-                shift[n] = shift[i] | (1 << ax);
-                buf[n++] = Anchor{nb, spill};
-            }
-        }
-    }
-    return n;
-}
-
-/// Appends to @a out the merge of two runs sorted by layerLess with distinct origins; anchors with
-/// the same origin in both become one, their masks ORed. The result has distinct origins too.
-void mergeOr(const Anchor* a, const Anchor* ae, const Anchor* b, const Anchor* be, std::vector<Anchor>& out)
-{
-    while (a != ae && b != be) {
-        if (layerLess(a->origin, b->origin)) {
-            out.push_back(*a++);
-        } else if (layerLess(b->origin, a->origin)) {
-            out.push_back(*b++);
-        } else {
-            out.push_back(Anchor{a->origin, a->mask | b->mask});
-            ++a, ++b;
-        }
-    }
-    out.insert(out.end(), a, ae);
-    out.insert(out.end(), b, be);
-}
-
-// ---- Per-block addressing tables ---------------------------------------------------------------
-// For phase p, block bit b and corner c (c = dx + 2 dy + 4 dz): which of the anchor's 8 leaves
-// (0 = anchor, bit 0 = -x, bit 1 = -y, bit 2 = -z neighbour) holds the cell, and its offset there.
-struct Tables {
-    uint16_t offset[2][2][64][8];
-    uint8_t leaf[2][2][64][8];
-    uint64_t needLeaf[2][8]; // [dims3][leaf]: blocks (odd phase) that touch that neighbour leaf
-    Tables()
-    {
-        for (int d3 = 0; d3 < 2; ++d3) {
-            for (int p = 0; p < 2; ++p) {
-                for (int b = 0; b < 64; ++b) {
-                    const int bx = b & 3, by = (b >> 2) & 3, bz = b >> 4;
-                    for (int c = 0; c < 8; ++c) {
-                        const int dx = c & 1, dy = (c >> 1) & 1, dz = c >> 2;
-                        int lx = 2 * bx - p + dx, ly = 2 * by - p + dy;
-                        int lz = d3 ? 2 * bz - p + dz : 0;
-                        const int which = (lx < 0 ? 1 : 0) | (ly < 0 ? 2 : 0) | (lz < 0 ? 4 : 0);
-                        lx &= 7, ly &= 7, lz &= 7;
-                        leaf[d3][p][b][c] = uint8_t(which);
-                        offset[d3][p][b][c] = uint16_t((lx << 6) | (ly << 3) | lz);
-                    }
-                }
-            }
-            for (int w = 0; w < 8; ++w) {
-                uint64_t m = ~0ull;
-                if (w & 1) m &= kX0;
-                if (w & 2) m &= kY0;
-                if (w & 4) m &= (d3 ? kZ0 : 0ull);
-                needLeaf[d3][w] = (w == 0) ? ~0ull : m;
-            }
-        }
-    }
-};
-const Tables& tables()
-{
-    static const Tables t;
-    return t;
-}
-
-/// Leaf origin offsets of an anchor's 8 leaves.
-inline Coord leafOrigin(const Coord& anchor, int which)
-{
-    return Coord(anchor.x() - ((which & 1) ? 8 : 0), anchor.y() - ((which & 2) ? 8 : 0),
-                 anchor.z() - ((which & 4) ? 8 : 0));
-}
-
-/// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
-struct LeafSet {
-    MassLeaf* leaf[8] = {};
-    int32_t* data[8] = {};
-    const int32_t* read[8] = {}; // data, or zeros for a missing leaf: reads need no null test
-    const ObsLeaf* obs[8] = {};
-    bool obsTile[8] = {}; // obstacle state of the whole region when obs[i] is null
-    bool anyMissing = false; // a leaf the mask's blocks touch does not exist
-    bool anyObs = false;     // a leaf they touch holds obstacles or lies in an obstacle tile
-};
-
-/// What a missing leaf reads as: background 0.
-alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
-
-template<typename MassAcc>
-void fetchLeaves(LeafSet& ls, const Coord& anchor, uint64_t mask, int phase, bool is3D,
-                 MassAcc& acc, const ObsTree* obsTree)
-{
-    const Tables& t = tables();
-    const int count = (phase == 1) ? (is3D ? 8 : 4) : 1;
-    ls.anyMissing = false;
-    ls.anyObs = false;
-    for (int w = 0; w < count; ++w) {
-        ls.leaf[w] = nullptr;
-        ls.data[w] = nullptr;
-        ls.read[w] = kZeroLeaf;
-        ls.obs[w] = nullptr;
-        ls.obsTile[w] = false;
-        if (w && !(mask & t.needLeaf[is3D][w])) continue;
-        const Coord o = leafOrigin(anchor, w);
-        ls.leaf[w] = acc.probeLeaf(o);
-        if (ls.leaf[w]) ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
-        else ls.anyMissing = true;
-        if (obsTree) {
-            ls.obs[w] = obsTree->probeConstLeaf(o);
-            if (!ls.obs[w]) ls.obsTile[w] = obsTree->isValueOn(o);
-            ls.anyObs |= ls.obs[w] || ls.obsTile[w];
-        }
-    }
-}
-
-/// What one range of the repartition pass accumulates.
-struct PassTotals {
-    uint64_t visited = 0, updated = 0;
-    int64_t overloadDelta = 0;
-    int64_t maxWritten = 0;
-    bool overflow = false;
-    size_t overflowItem = SIZE_MAX;
-    int overflowBit = 0;
-    struct Deferred {
-        uint32_t item;
-        uint8_t bit;
-        uint8_t cells; // cells the update changes (bit c = corner c)
-    };
-    std::vector<Deferred> deferred;
-
-    void join(const PassTotals& o)
-    {
-        visited += o.visited;
-        updated += o.updated;
-        overloadDelta += o.overloadDelta;
-        maxWritten = std::max(maxWritten, o.maxWritten);
-        if (o.overflow && (!overflow || o.overflowItem < overflowItem ||
-                           (o.overflowItem == overflowItem && o.overflowBit < overflowBit))) {
-            overflow = true;
-            overflowItem = o.overflowItem;
-            overflowBit = o.overflowBit;
-        }
-        deferred.insert(deferred.end(), o.deferred.begin(), o.deferred.end());
-    }
-};
-
-struct WorkItem {
-    Coord anchor;
-    uint64_t mask;    // candidate blocks
-    uint64_t changed; // output: blocks updated
-};
 
 } // namespace
 
@@ -306,15 +90,7 @@ struct Automaton::Impl {
     int64_t overload = 0;
     int64_t maxBound = 0;     // upper bound of the largest cell value
     int quietSteps = 0;       // consecutive steps that changed nothing
-    int fullScanSteps = 0;    // upcoming steps that must examine every leaf holding an over cell
-    std::vector<Coord> hotLeaves; // those leaves, found by the last resync()
-    struct Pending {
-        Box box;
-        int steps;
-    };
-    std::vector<Pending> pending; // edited regions to examine whole for the next two steps
-    std::vector<Anchor> changedPrev;  // blocks changed at t-1 (phase of t-1)
-    std::vector<Anchor> changedPrev2; // blocks changed at t-2 (phase of t)
+    Candidates candidates;
 
     // scratch, reused between steps
     std::vector<WorkItem> work;
@@ -350,7 +126,7 @@ struct Automaton::Impl {
         int64_t mass = 0, overload = 0, maxValue = 0;
     };
     /// When @a hot is given, the origins of the leaves holding an over cell are appended to it.
-    Scan scanLeaves(const Box* region, const char* context, std::vector<Coord>* hot = nullptr)
+    Scan scanLeaves(const Box* region, const char* context, std::vector<Origin>* hot = nullptr)
     {
         Scan s;
         const int64_t tc = rule.threshold;
@@ -383,7 +159,9 @@ struct Automaton::Impl {
                 const bool isObs = ol ? ol->isValueOn(i) : tileObs;
                 if (!isObs && v > tc) s.overload += v - tc;
             }
-            if (hot && s.overload != overloadBefore) hot->push_back(leaf.origin());
+            if (hot && s.overload != overloadBefore) {
+                hot->push_back(Origin(leaf.origin().x(), leaf.origin().y(), leaf.origin().z()));
+            }
         };
         if (!region) {
             for (auto it = tree().beginLeaf(); it; ++it) visit(*it);
@@ -419,248 +197,56 @@ struct Automaton::Impl {
                             std::to_string(*it) + "; voxelize it or make it active");
             }
         }
-        hotLeaves.clear();
-        const Scan s = scanLeaves(nullptr, "mass grid", &hotLeaves);
+        std::vector<Origin> hot;
+        const Scan s = scanLeaves(nullptr, "mass grid", &hot);
         totalMass = s.mass;
         overload = s.overload;
         maxBound = s.maxValue;
         quietSteps = 0;
-        fullScanSteps = 2;
-        pending.clear();
-        changedPrev.clear();
-        changedPrev2.clear();
+        candidates.reset(std::move(hot));
     }
 
-    // ---- gather ----
-    // The candidates come as sorted runs with distinct origins, merged instead of sorted:
-    // changedPrev2 (in layer order, as every work list), and changedPrev dilated across the phase,
-    // which splits into one run per neighbour shift (streams[w]): each is changedPrev moved by one
-    // constant vector, so still in layer order. Only the rare extras (hot leaves after resync(),
-    // edited regions) need a sort.
-    // All scratch, members so that a step allocates nothing once the buffers have grown.
-    struct Run {
-        const Anchor *b, *e;
-    };
-    std::vector<Anchor> streams[8];
-    std::vector<Anchor> extras;
-    std::vector<Anchor> mergeBuf[2];
-    std::vector<Run> runs;
-    std::vector<std::pair<size_t, size_t>> spans;
-
-    void addExtra(const Anchor& a, int anchorPhase, int phase)
+    PassInput passInput(int phase, bool dryRun)
     {
-        if (anchorPhase == phase) {
-            extras.push_back(a);
-            return;
-        }
-        Anchor buf[8];
-        int shift[8];
-        const int n = dilateAcrossPhase(a, anchorPhase, is3D(), buf, shift);
-        extras.insert(extras.end(), buf, buf + n);
-    }
-
-    /// Every block overlapping an edited region (grown by one voxel).
-    void addPending(const Pending& p, int phase)
-    {
-        const uint64_t full = fullMask(is3D());
-        const Coord lo((p.box.min[0] - 1) & ~7, (p.box.min[1] - 1) & ~7, is3D() ? ((p.box.min[2] - 1) & ~7) : 0);
-        const int zmax = is3D() ? p.box.max[2] + 1 : 0;
-        for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8) {
-            for (int y = lo.y(); y <= p.box.max[1] + 1; y += 8) {
-                for (int z = lo.z(); z <= zmax; z += 8) addExtra(Anchor{Coord(x, y, z), full}, 0, phase);
-            }
-        }
-    }
-
-    void gather(int phase)
-    {
-        runs.clear();
-        for (auto& st : streams) st.clear();
-        extras.clear();
-        const uint64_t full = fullMask(is3D());
-        if (fullScanSteps > 0) {
-            // After resync() only blocks holding an over cell can change, and those cells lie in
-            // hotLeaves (an over cell that moved at the first step is followed by changedPrev).
-            for (const Coord& o : hotLeaves) addExtra(Anchor{o, full}, 0, phase);
-        } else {
-            runs.push_back(Run{changedPrev2.data(), changedPrev2.data() + changedPrev2.size()});
-        }
-        for (const Pending& p : pending) addPending(p, phase);
-        Anchor buf[8];
-        int shift[8];
-        for (const Anchor& a : changedPrev) {
-            const int n = dilateAcrossPhase(a, 1 - phase, is3D(), buf, shift);
-            for (int i = 0; i < n; ++i) streams[shift[i]].push_back(buf[i]);
-        }
-        for (const auto& st : streams) runs.push_back(Run{st.data(), st.data() + st.size()});
-        if (!extras.empty()) {
-            std::sort(extras.begin(), extras.end(),
-                      [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });
-            size_t k = 0; // fold equal origins
-            for (size_t i = 1; i < extras.size(); ++i) {
-                if (extras[i].origin == extras[k].origin) extras[k].mask |= extras[i].mask;
-                else extras[++k] = extras[i];
-            }
-            extras.resize(k + 1);
-            runs.push_back(Run{extras.data(), extras.data() + extras.size()});
-        }
-        runs.erase(std::remove_if(runs.begin(), runs.end(), [](const Run& r) { return r.b == r.e; }),
-                   runs.end());
-
-        // Merge pairwise, level by level, ping-ponging between two buffers.
-        size_t total = 0;
-        for (const Run& r : runs) total += size_t(r.e - r.b);
-        for (int level = 0; runs.size() > 1; ++level) {
-            std::vector<Anchor>& out = mergeBuf[level & 1];
-            out.clear();
-            out.reserve(total); // no reallocation below: the offsets stay valid
-            spans.clear();
-            for (size_t i = 0; i < runs.size(); i += 2) {
-                const size_t start = out.size();
-                if (i + 1 < runs.size()) mergeOr(runs[i].b, runs[i].e, runs[i + 1].b, runs[i + 1].e, out);
-                else out.insert(out.end(), runs[i].b, runs[i].e);
-                spans.emplace_back(start, out.size());
-            }
-            runs.clear();
-            for (const auto& sp : spans) runs.push_back(Run{out.data() + sp.first, out.data() + sp.second});
-        }
-        work.clear();
-        if (!runs.empty()) {
-            work.reserve(size_t(runs[0].e - runs[0].b));
-            for (const Anchor* a = runs[0].b; a != runs[0].e; ++a) work.push_back(WorkItem{a->origin, a->mask, 0});
-        }
-    }
-
-    // ---- the per-block kernel ----
-    /// Updates (or, when @a dryRun, only checks) the candidate blocks of work items [begin, end).
-    void processRange(size_t begin, size_t end, int phase, bool dryRun, PassTotals& tot)
-    {
-        const Tables& tab = tables();
-        const bool d3 = is3D();
-        const int n = cells();
-        const int64_t tc = rule.threshold;
-        const ObsTree* ot = obsTree();
-        const bool mayOverflow = maxBound > INT32_MAX / 8;
-        openvdb::tree::ValueAccessor<MassTree, false> acc(tree());
-        LeafSet ls;
-        // Totals in locals (registers), added to tot once at the end.
-        uint64_t visited = 0, updated = 0;
-        int64_t overloadDelta = 0, maxWritten = 0;
-        for (size_t wi = begin; wi < end; ++wi) {
-            WorkItem& w = work[wi];
-            w.changed = 0;
-            fetchLeaves(ls, w.anchor, w.mask, phase, d3, acc, ot);
-            if (phase == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
-            const int odd = phase;
-            uint64_t bits = w.mask;
-            while (bits) {
-                const int b = __builtin_ctzll(bits);
-                bits &= bits - 1;
-                const uint16_t* off = tab.offset[d3][phase][b];
-                const uint8_t* lf = tab.leaf[d3][phase][b];
-                int32_t m[8];
-                bool anyOver = false;
-                for (int c = 0; c < n; ++c) {
-                    m[c] = ls.read[lf[c]][off[c]];
-                    anyOver |= (m[c] > tc);
-                }
-                if (!anyOver) continue;
-                uint32_t valid = (1u << n) - 1;
-                if (ls.anyObs) {
-                    for (int c = 0; c < n; ++c) {
-                        const ObsLeaf* ol = ls.obs[lf[c]];
-                        if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
-                    }
-                }
-                ++visited;
-                BlockKey key;
-                key.x = w.anchor.x() + 2 * (b & 3) - odd;
-                key.y = w.anchor.y() + 2 * ((b >> 2) & 3) - odd;
-                key.z = d3 ? w.anchor.z() + 2 * (b >> 4) - odd : 0;
-                key.step = stepCount;
-                key.seed = opts.seed;
-                int64_t out[8];
-                const uint32_t changed = rules_internal::repartition(rule, n, m, valid, key, out);
-                if (!changed) continue;
-                // Both checks can only fire rarely: a result over INT32_MAX needs a cell over
-                // INT32_MAX / 8 somewhere (maxBound), and a write into a missing leaf needs one of
-                // the fetched leaves to be missing (clay flowing into space the grid has not grown).
-                bool fits = true, missing = false;
-                if (mayOverflow || ls.anyMissing) {
-                    for (int c = 0; c < n; ++c) {
-                        if (!((changed >> c) & 1u)) continue;
-                        if (out[c] > INT32_MAX) fits = false;
-                        if (!ls.data[lf[c]]) missing = true;
-                    }
-                }
-                if (!fits) {
-                    if (!tot.overflow || wi < tot.overflowItem) {
-                        tot.overflow = true;
-                        tot.overflowItem = wi;
-                        tot.overflowBit = b;
-                    }
-                    continue;
-                }
-                if (dryRun) continue;
-                if (missing) {
-                    tot.deferred.push_back(PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(changed)});
-                    continue;
-                }
-                for (int c = 0; c < n; ++c) {
-                    if (!((valid >> c) & 1u)) continue;
-                    overloadDelta += std::max<int64_t>(out[c] - tc, 0) - std::max<int64_t>(m[c] - tc, 0);
-                    if (!((changed >> c) & 1u)) continue;
-                    ls.data[lf[c]][off[c]] = int32_t(out[c]);
-                    maxWritten = std::max(maxWritten, out[c]);
-                    if (m[c] == 0) {
-                        // 0 -> positive: the voxel becomes active. Other tasks may set bits in the
-                        // same mask word (straddling blocks), hence the atomic OR.
-                        auto& word = ls.leaf[lf[c]]->getValueMask().template getWord<uint64_t>(off[c] >> 6);
-                        __atomic_fetch_or(&word, uint64_t(1) << (off[c] & 63), __ATOMIC_RELAXED);
-                    }
-                }
-                ++updated;
-                w.changed |= uint64_t(1) << b;
-            }
-        }
-        tot.visited += visited;
-        tot.updated += updated;
-        tot.overloadDelta += overloadDelta;
-        tot.maxWritten = std::max(tot.maxWritten, maxWritten);
+        PassInput in;
+        in.tree = &tree();
+        in.obstacles = obsTree();
+        in.rule = rule;
+        in.is3D = is3D();
+        in.phase = phase;
+        in.step = stepCount;
+        in.seed = opts.seed;
+        in.mayOverflow = maxBound > INT32_MAX / 8;
+        in.dryRun = dryRun;
+        return in;
     }
 
     PassTotals runPass(int phase, bool dryRun)
     {
         PassTotals tot;
         if (work.empty()) return tot;
+        const PassInput in = passInput(phase, dryRun);
         if (opts.threads == 1) {
-            processRange(0, work.size(), phase, dryRun, tot);
+            processRange(in, work.data(), 0, work.size(), tot);
             return tot;
         }
         struct Body {
-            Impl* self;
-            int phase;
-            bool dryRun;
+            const PassInput* in;
+            WorkItem* work;
             PassTotals tot;
-            Body(Impl* s, int p, bool d) : self(s), phase(p), dryRun(d) {}
-            Body(Body& o, tbb::split) : self(o.self), phase(o.phase), dryRun(o.dryRun) {}
-            void operator()(const tbb::blocked_range<size_t>& r)
-            {
-                self->processRange(r.begin(), r.end(), phase, dryRun, tot);
-            }
+            Body(const PassInput* i, WorkItem* w) : in(i), work(w) {}
+            Body(Body& o, tbb::split) : in(o.in), work(o.work) {}
+            void operator()(const tbb::blocked_range<size_t>& r) { processRange(*in, work, r.begin(), r.end(), tot); }
             void join(Body& o) { tot.join(o.tot); }
         };
-        Body body(this, phase, dryRun);
+        Body body(&in, work.data());
         inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
         return std::move(body.tot);
     }
 
     [[noreturn]] void throwOverflow(const PassTotals& tot, int phase)
     {
-        const WorkItem& w = work[tot.overflowItem];
-        const int b = tot.overflowBit;
-        const Coord o(w.anchor.x() + 2 * (b & 3) - phase, w.anchor.y() + 2 * ((b >> 2) & 3) - phase,
-                      is3D() ? w.anchor.z() + 2 * (b >> 4) - phase : 0);
+        const Origin o = blockOrigin(work[tot.overflowItem].anchor, tot.overflowBit, phase, is3D());
         throw Error("step " + std::to_string(stepCount) + ": the block at " + coordStr(o) +
                     " would put more than INT32_MAX (" + std::to_string(INT32_MAX) +
                     ") clay in one cell; the state was refused and left unchanged "
@@ -674,14 +260,13 @@ struct Automaton::Impl {
         const int phase = int(stepCount & 1);
         if (overload == 0) {
             // No cell is over Tc: no block can change.
-            changedPrev2.clear();
-            changedPrev.clear();
+            candidates.clearChanges();
             finishStep(rep, 0);
             return rep;
         }
 
         auto t0 = Clock::now();
-        gather(phase);
+        candidates.gather(phase, is3D(), work);
         rep.seconds.gather = secondsSince(t0);
 
         t0 = Clock::now();
@@ -707,12 +292,9 @@ struct Automaton::Impl {
         rep.seconds.grow = secondsSince(t0);
 
         t0 = Clock::now();
-        changedPrev2.swap(changedPrev);
-        changedPrev.clear();
-        for (const WorkItem& w : work) {
-            if (w.changed) changedPrev.push_back(Anchor{w.anchor, w.changed});
-        }
-        rep.blocksVisited = tot.visited;
+        candidates.record(work);
+        rep.blocksVisited = tot.examined;
+        rep.blocksOverTc = tot.overTc;
         rep.blocksUpdated = tot.updated;
         overload += tot.overloadDelta;
         maxBound = std::max(maxBound, tot.maxWritten);
@@ -725,11 +307,7 @@ struct Automaton::Impl {
     {
         ++stepCount;
         quietSteps = updated ? 0 : quietSteps + 1;
-        if (fullScanSteps > 0) --fullScanSteps;
-        for (Pending& p : pending) --p.steps;
-        pending.erase(std::remove_if(pending.begin(), pending.end(),
-                                     [](const Pending& p) { return p.steps <= 0; }),
-                      pending.end());
+        candidates.endStep();
         rep.residualOverload = overload;
         rep.settled = settled();
     }
@@ -739,13 +317,14 @@ struct Automaton::Impl {
     uint64_t growAndUpdate(const PassTotals::Deferred& d, int phase, PassTotals& tot)
     {
         WorkItem& w = work[d.item];
-        const Tables& tab = tables();
+        const BlockTables& tab = blockTables();
         const int n = cells();
         const uint8_t* lf = tab.leaf[is3D()][phase][d.bit];
         uint64_t created = 0;
         for (int c = 0; c < n; ++c) {
             if (!((d.cells >> c) & 1u)) continue;
-            const Coord o = leafOrigin(w.anchor, lf[c]);
+            const Origin lo = leafOrigin(w.anchor, lf[c]);
+            const Coord o(lo.x(), lo.y(), lo.z());
             if (!tree().probeLeaf(o)) {
                 tree().touchLeaf(o);
                 ++created;
@@ -755,7 +334,7 @@ struct Automaton::Impl {
         const uint64_t savedMask = w.mask, savedChanged = w.changed;
         w.mask = uint64_t(1) << d.bit;
         PassTotals one;
-        processRange(d.item, d.item + 1, phase, false, one);
+        processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
         w.mask = savedMask;
         w.changed = savedChanged | w.changed;
         if (!one.deferred.empty() || one.overflow) {
@@ -823,6 +402,7 @@ const char* stopReasonName(StopReason r)
     case StopReason::Tolerance: return "tolerance";
     case StopReason::StepBudget: return "step-budget";
     case StopReason::NoRoom: return "no-room";
+    case StopReason::Stopped: return "stopped";
     }
     return "unknown";
 }
@@ -831,6 +411,7 @@ StepReport& StepReport::operator+=(const StepReport& o)
 {
     steps += o.steps;
     blocksVisited += o.blocksVisited;
+    blocksOverTc += o.blocksOverTc;
     blocksUpdated += o.blocksUpdated;
     blocksGrown += o.blocksGrown;
     leavesCreated += o.leavesCreated;
@@ -874,36 +455,51 @@ bool Automaton::overloadHasNoRoom() { return mImpl->overloadHasNoRoom(); }
 
 StepReport Automaton::settle(uint64_t maxSteps, int64_t tolerance)
 {
+    SettleOptions o;
+    o.maxSteps = maxSteps;
+    o.tolerance = tolerance;
+    return settle(o);
+}
+
+StepReport Automaton::settle(const SettleOptions& so)
+{
     StepReport total;
     total.residualOverload = mImpl->overload;
     total.settled = mImpl->settled();
-    // After 8192 steps of one call, then at each doubling: is there room for the overload at all?
-    // A flood can cost as much as a few hundred steps of a large lump (measured: 0.17 s for a 48^3
-    // lump, ~500 steps' worth), so it waits until settling is long; callers settling in short
-    // chunks never pay it.
+    // After 8192 steps of one settle (counted with so.stepsDone), then at each doubling: is there
+    // room for the overload at all? A flood can cost as much as a few hundred steps of a large lump
+    // (measured: 0.17 s for a 48^3 lump, ~500 steps' worth), so it waits until settling is long;
+    // callers settling in short chunks never pay it.
     uint64_t roomCheck = kNoRoomCheckSteps;
+    while (roomCheck < so.stepsDone) roomCheck *= 2;
+    const uint64_t tolerance = uint64_t(std::max<int64_t>(so.tolerance, 0));
     for (;;) {
+        const uint64_t done = so.stepsDone + total.steps;
         if (mImpl->settled()) {
             // Quiet with overload left: every over cell is walled in by obstacles and over cells.
             total.reason = mImpl->overload > 0 ? StopReason::NoRoom : StopReason::Settled;
             break;
         }
-        if (tolerance > 0 && mImpl->overload <= tolerance) {
+        if (tolerance > 0 && uint64_t(mImpl->overload) <= tolerance) {
             total.reason = StopReason::Tolerance;
             break;
         }
-        if (total.steps >= roomCheck) {
+        if (done >= roomCheck) {
             roomCheck *= 2;
             if (mImpl->overloadHasNoRoom()) {
                 total.reason = StopReason::NoRoom;
                 break;
             }
         }
-        if (total.steps >= maxSteps) {
+        if (done >= so.maxSteps) {
             total.reason = StopReason::StepBudget;
             break;
         }
         total += mImpl->step();
+        if (so.stop && so.stop(*this)) {
+            total.reason = StopReason::Stopped;
+            break;
+        }
     }
     total.residualOverload = mImpl->overload;
     total.settled = mImpl->settled();
@@ -932,7 +528,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     for (const Coord& c : empty) {
         delete im.tree().stealNode<MassLeaf>(c, 0, false);
     }
-    im.pending.push_back(Impl::Pending{region, 2});
+    im.candidates.addRegion(region);
     im.quietSteps = 0;
 }
 
@@ -949,7 +545,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
     fn(*im.obsGrid);
     const Impl::Scan after = im.scanLeaves(&region, "editObstacles");
     im.overload += after.overload - before.overload;
-    im.pending.push_back(Impl::Pending{region, 2});
+    im.candidates.addRegion(region);
     im.quietSteps = 0;
 }
 

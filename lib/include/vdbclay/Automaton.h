@@ -70,14 +70,35 @@ enum class StopReason {
     /// walled in by obstacles and other over cells), or, while clay still moves inside such a region
     /// (settled false), once a settle() call has run 8192 steps, then at each doubling. The state is
     /// exact; residualOverload says how much clay found no room.
-    NoRoom
+    NoRoom,
+    /// SettleOptions::stop asked to stop after a step (the state is exact; settling can go on).
+    Stopped
 };
 const char* stopReasonName(StopReason reason);
+
+class Automaton;
+
+/// How settle() runs; settle(maxSteps, tolerance) is settle(SettleOptions{maxSteps, tolerance}).
+struct SettleOptions {
+    uint64_t maxSteps = 0;  ///< step budget of the whole settle, the stepsDone included
+    int64_t tolerance = 0;  ///< stop once the residual overload is <= tolerance (when > 0)
+    /// Steps an interrupted settle already ran (e.g. before a checkpoint): the budget and the
+    /// no-room schedule count from here, so a resumed settle stops exactly where an unbroken one
+    /// would.
+    uint64_t stepsDone = 0;
+    /// Polled after every step; returning true stops the settle after that step with
+    /// StopReason::Stopped. Null: never stops early.
+    std::function<bool(const Automaton&)> stop;
+};
 
 /// What a call to step(), run() or settle() did.
 struct StepReport {
     uint64_t steps = 0;          ///< steps run by this call
-    uint64_t blocksVisited = 0;  ///< candidate blocks examined
+    /// Candidate blocks examined, counted before any filter: every block of every anchor's
+    /// candidate mask, including those found to hold no over cell or to lie in a missing leaf.
+    /// The cost of a step follows this number.
+    uint64_t blocksVisited = 0;
+    uint64_t blocksOverTc = 0;   ///< examined blocks holding a cell over Tc (the rule ran on them)
     uint64_t blocksUpdated = 0;  ///< blocks whose cells changed
     uint64_t blocksGrown = 0;    ///< updated blocks that needed new leaves (run after the pass)
     uint64_t leavesCreated = 0;  ///< leaves added to the tree
@@ -112,6 +133,11 @@ public:
     /// @a maxSteps steps have run, or the overload provably has no room (StopReason::NoRoom),
     /// whichever comes first.
     StepReport settle(uint64_t maxSteps, int64_t tolerance = 0);
+    /// settle() with a stop hook and a resumable step count (see SettleOptions). The checks run in
+    /// this order before each step: settled (Settled, or NoRoom when overload is left), tolerance,
+    /// the no-room flood (at kNoRoomCheckSteps steps, counted with stepsDone, then at each
+    /// doubling), the budget; after each step the stop hook.
+    StepReport settle(const SettleOptions& options);
     /// settle() checks for StopReason::NoRoom once a call has run this many steps, then at each
     /// doubling (a flood costs about as much as a few hundred steps of a large lump).
     static constexpr uint64_t kNoRoomCheckSteps = 8192;

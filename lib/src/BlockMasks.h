@@ -1,0 +1,179 @@
+// Block-mask algebra of the automaton: pure integer functions, no OpenVDB (tests/TestBlockMasks.cc
+// includes this header alone).
+//
+// Blocks and anchors. OpenVDB leaves are 8^3 voxels. On even steps a Margolus block starts at even
+// coordinates, so the 4x4x4 = 64 even blocks of a leaf lie inside it. On odd steps blocks start at
+// odd coordinates, (2i-1, 2i), and the blocks whose maximum corner lies in a leaf L are again 64:
+// their minimum corners sit at local -1, 1, 3, 5 along each axis, so the blocks with local -1 reach
+// into L's lower neighbours (-x, -y, -z and their combinations: the 7 "straddling" leaves). Every
+// block therefore has one anchor leaf (the leaf of its maximum corner; for even blocks the leaf that
+// holds it whole) and one bit in a 64-bit mask per anchor: bit = bx + 4 by + 16 bz. In 2D the clay
+// lives in z = 0, blocks are 2x2, and only the 16 bits with bz = 0 are used.
+//
+// Candidates. Each block of one phase overlaps 8 (2D: 4) blocks of the other: a shift-and-or on
+// the masks, with bits that fall off a face going to the neighbouring anchor (dilateAcrossPhase).
+// Candidate lists are kept in layer order (y, then z, then x: the paper's horizontal layers) with
+// one entry per anchor, so lists merge (mergeOr) instead of being sorted.
+//
+// Addressing. BlockTables gives, per phase, block bit and corner, which of the anchor's 8 leaves
+// holds the cell (0 = the anchor, bit 0 = its -x, bit 1 = -y, bit 2 = -z neighbour) and the cell's
+// offset in that leaf (x << 6 | y << 3 | z, OpenVDB's order).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace vdbclay {
+namespace automaton_internal {
+
+// bit = bx + 4 by + 16 bz, each in 0..3.
+constexpr uint64_t kX0 = 0x1111111111111111ull, kX3 = 0x8888888888888888ull;
+constexpr uint64_t kY0 = 0x000F000F000F000Full, kY3 = 0xF000F000F000F000ull;
+constexpr uint64_t kZ0 = 0x000000000000FFFFull, kZ3 = 0xFFFF000000000000ull;
+
+/// Every block of an anchor (3D: 64; 2D: the 16 with bz = 0).
+inline uint64_t fullMask(bool is3D)
+{
+    return is3D ? ~0ull : 0xFFFFull;
+}
+
+/// A leaf origin (multiples of 8), like openvdb::Coord without the include.
+struct Origin {
+    int32_t v[3] = {0, 0, 0};
+    Origin() = default;
+    Origin(int32_t x, int32_t y, int32_t z) : v{x, y, z} {}
+    int32_t x() const { return v[0]; }
+    int32_t y() const { return v[1]; }
+    int32_t z() const { return v[2]; }
+    int32_t& operator[](int i) { return v[i]; }
+    int32_t operator[](int i) const { return v[i]; }
+    bool operator==(const Origin& o) const { return v[0] == o.v[0] && v[1] == o.v[1] && v[2] == o.v[2]; }
+    bool operator!=(const Origin& o) const { return !(*this == o); }
+};
+
+/// A set of candidate (or changed) blocks anchored at one leaf.
+struct Anchor {
+    Origin origin;
+    uint64_t mask;
+};
+
+/// Horizontal layers: order by y, then z, then x.
+inline bool layerLess(const Origin& a, const Origin& b)
+{
+    if (a.y() != b.y()) return a.y() < b.y();
+    if (a.z() != b.z()) return a.z() < b.z();
+    return a.x() < b.x();
+}
+
+/// The blocks of the other phase that overlap the blocks in @a a, which belong to phase
+/// @a fromPhase. Even block b overlaps odd blocks b and b+1 along each axis (b+1 = 4 is block 0 of
+/// the +axis neighbour); odd block c overlaps even blocks c-1 and c (c-1 = -1 is block 3 of the
+/// -axis neighbour). Writes up to 8 anchors to @a buf, and to @a shift[i] which neighbour leaf
+/// buf[i] is (bit 0 = x, 1 = y, 2 = z; 0 = a's own leaf). Returns how many.
+inline int dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, Anchor buf[8], int shift[8])
+{
+    int n = 1;
+    buf[0] = a;
+    shift[0] = 0;
+    const uint64_t lo[3] = {kX0, kY0, kZ0}, hi[3] = {kX3, kY3, kZ3};
+    const int unit[3] = {1, 4, 16};
+    const int axes = is3D ? 3 : 2;
+    for (int ax = 0; ax < axes; ++ax) {
+        const int cnt = n;
+        for (int i = 0; i < cnt; ++i) {
+            const uint64_t m = buf[i].mask;
+            uint64_t within, spill;
+            Origin nb = buf[i].origin;
+            if (fromPhase == 0) {
+                within = m | ((m & ~hi[ax]) << unit[ax]);
+                spill = (m & hi[ax]) >> (3 * unit[ax]);
+                nb[ax] += 8;
+            } else {
+                within = m | ((m & ~lo[ax]) >> unit[ax]);
+                spill = (m & lo[ax]) << (3 * unit[ax]);
+                nb[ax] -= 8;
+            }
+            buf[i].mask = within;
+            if (spill) {
+                shift[n] = shift[i] | (1 << ax);
+                buf[n++] = Anchor{nb, spill};
+            }
+        }
+    }
+    return n;
+}
+
+/// Appends to @a out the merge of two runs sorted by layerLess with distinct origins; anchors with
+/// the same origin in both become one, their masks ORed. The result has distinct origins too.
+inline void mergeOr(const Anchor* a, const Anchor* ae, const Anchor* b, const Anchor* be,
+                    std::vector<Anchor>& out)
+{
+    while (a != ae && b != be) {
+        if (layerLess(a->origin, b->origin)) {
+            out.push_back(*a++);
+        } else if (layerLess(b->origin, a->origin)) {
+            out.push_back(*b++);
+        } else {
+            out.push_back(Anchor{a->origin, a->mask | b->mask});
+            ++a, ++b;
+        }
+    }
+    out.insert(out.end(), a, ae);
+    out.insert(out.end(), b, be);
+}
+
+/// The origin of neighbour leaf @a which (bit 0 = -x, 1 = -y, 2 = -z) of the anchor at @a anchor.
+inline Origin leafOrigin(const Origin& anchor, int which)
+{
+    return Origin(anchor.x() - ((which & 1) ? 8 : 0), anchor.y() - ((which & 2) ? 8 : 0),
+                  anchor.z() - ((which & 4) ? 8 : 0));
+}
+
+/// The minimum corner of block @a bit of phase @a phase anchored at @a anchor.
+inline Origin blockOrigin(const Origin& anchor, int bit, int phase, bool is3D)
+{
+    return Origin(anchor.x() + 2 * (bit & 3) - phase, anchor.y() + 2 * ((bit >> 2) & 3) - phase,
+                  is3D ? anchor.z() + 2 * (bit >> 4) - phase : 0);
+}
+
+/// Per-block addressing, see the top of this file.
+struct BlockTables {
+    uint16_t offset[2][2][64][8]; // [dims3][phase][bit][corner]
+    uint8_t leaf[2][2][64][8];
+    uint64_t needLeaf[2][8]; // [dims3][leaf]: blocks (odd phase) that touch that neighbour leaf
+    BlockTables()
+    {
+        for (int d3 = 0; d3 < 2; ++d3) {
+            for (int p = 0; p < 2; ++p) {
+                for (int b = 0; b < 64; ++b) {
+                    const int bx = b & 3, by = (b >> 2) & 3, bz = b >> 4;
+                    for (int c = 0; c < 8; ++c) {
+                        const int dx = c & 1, dy = (c >> 1) & 1, dz = c >> 2;
+                        int lx = 2 * bx - p + dx, ly = 2 * by - p + dy;
+                        int lz = d3 ? 2 * bz - p + dz : 0;
+                        const int which = (lx < 0 ? 1 : 0) | (ly < 0 ? 2 : 0) | (lz < 0 ? 4 : 0);
+                        lx &= 7, ly &= 7, lz &= 7;
+                        leaf[d3][p][b][c] = uint8_t(which);
+                        offset[d3][p][b][c] = uint16_t((lx << 6) | (ly << 3) | lz);
+                    }
+                }
+            }
+            for (int w = 0; w < 8; ++w) {
+                uint64_t m = ~0ull;
+                if (w & 1) m &= kX0;
+                if (w & 2) m &= kY0;
+                if (w & 4) m &= (d3 ? kZ0 : 0ull);
+                needLeaf[d3][w] = (w == 0) ? ~0ull : m;
+            }
+        }
+    }
+};
+
+inline const BlockTables& blockTables()
+{
+    static const BlockTables t;
+    return t;
+}
+
+} // namespace automaton_internal
+} // namespace vdbclay

@@ -1,0 +1,68 @@
+// The automaton's per-block kernel: one pass over a range of a step's work list (Kernel.cc).
+//
+// The pass reads each anchor's leaves once (the anchor's own leaf, and on odd steps the lower
+// neighbours its straddling blocks reach into), then runs its candidate blocks through the rule.
+// The rule, the dimension and the phase are template parameters of the loop (Kernel.cc picks one of
+// 16 instantiations per pass), so no switch runs per block; the step's part of the block hash is
+// computed once per pass (rules_internal::stepPrefix).
+//
+// Thread-safety. Tasks of one pass get disjoint ranges of the work list; blocks of one phase are
+// disjoint, so tasks write disjoint voxels. Values are written only into leaves that exist (a block
+// whose result would flow into a missing leaf is deferred, see PassTotals::deferred); missing leaves
+// read as 0. The only shared words are leaf value masks (active bits), set with an atomic OR when a
+// cell goes from 0 to positive. Nothing in the pass changes the tree's topology.
+#pragma once
+
+#include "Candidates.h"
+
+#include "vdbclay/Fwd.h"
+#include "vdbclay/Rules.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace vdbclay {
+namespace automaton_internal {
+
+using MassTree = Tree543<int32_t>;
+using ObsTree = Tree543<openvdb::ValueMask>;
+
+/// What a pass needs to know about the step.
+struct PassInput {
+    MassTree* tree = nullptr;
+    const ObsTree* obstacles = nullptr; // null: no obstacles
+    CompiledRule rule;
+    bool is3D = true;
+    int phase = 0;
+    uint64_t step = 0, seed = 0;
+    bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
+    bool dryRun = false;      // check for overflow only, write nothing
+};
+
+/// What one range of the pass accumulates.
+struct PassTotals {
+    uint64_t examined = 0; // candidate blocks examined (every bit of every mask in the range)
+    uint64_t overTc = 0;   // those holding a cell over Tc (the rule ran on them)
+    uint64_t updated = 0;  // those the rule changed
+    int64_t overloadDelta = 0;
+    int64_t maxWritten = 0;
+    bool overflow = false;
+    size_t overflowItem = SIZE_MAX;
+    int overflowBit = 0;
+    struct Deferred {
+        uint32_t item;
+        uint8_t bit;
+        uint8_t cells; // cells the update changes (bit c = corner c)
+    };
+    std::vector<Deferred> deferred; // blocks whose update writes into a missing leaf
+
+    void join(const PassTotals& o);
+};
+
+/// Updates (or, when in.dryRun, only checks) the candidate blocks of work[begin, end); sets each
+/// item's `changed` mask.
+void processRange(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot);
+
+} // namespace automaton_internal
+} // namespace vdbclay
