@@ -141,7 +141,36 @@ struct RunArgs {
     int64_t seed = -1;
     uint64_t frames = 0;
     bool quiet = false;
+    std::string up; ///< --up: empty keeps the scene's
 };
+
+vdbclay::UpAxis upOption(const std::string& up)
+{
+    try {
+        return vdbclay::parseUpAxis(up);
+    } catch (const vdbclay::Error& e) {
+        throw vdbclay::Error(std::string("--up: ") + e.what());
+    }
+}
+
+/// --up for run: the scene's meshes and level sets were read with the scene's own "up", so a
+/// different --up is refused when the scene has any (docs/INTEROP.md).
+void applyUp(vdbclay::Scene& scene, const std::string& up)
+{
+    if (up.empty()) return;
+    const vdbclay::UpAxis axis = upOption(up);
+    if (axis == scene.up) return;
+    auto readWithUp = [](const vdbclay::ShapeSpec& s) { return s.kind == "mesh" || s.kind == "levelset"; };
+    bool files = false;
+    for (const auto& c : scene.clay) files |= readWithUp(c.shape);
+    for (const auto& t : scene.tools) files |= readWithUp(t.shape);
+    for (const auto& o : scene.obstacles) files |= readWithUp(o);
+    if (files) {
+        throw vdbclay::Error("--up " + up + ": " + scene.source + " reads its meshes and level sets with up " +
+                             vdbclay::upAxisName(scene.up) + "; set \"up\": \"" + up + "\" in the scene instead");
+    }
+    scene.up = axis;
+}
 
 // ---- interrupts -----------------------------------------------------------------------------------
 // SIGINT and SIGTERM only set this flag (a lock-free atomic store is async-signal-safe); the run
@@ -236,6 +265,7 @@ int runScene(const RunArgs& a)
     if (!a.rule.empty()) scene.rule.rule = vdbclay::parseRule(a.rule);
     if (a.seed >= 0) scene.seed = uint64_t(a.seed);
     if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
+    applyUp(scene, a.up);
     if (!a.memoryBudget.empty()) {
         try {
             scene.memoryBudget = vdbclay::parseByteSize(a.memoryBudget);
@@ -393,6 +423,7 @@ int main(int argc, char** argv)
     run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply");
     run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")");
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
+    run->add_option("--up", ra.up, "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
     run->add_option("--checkpoint", ra.checkpoint,
                     "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
     run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
@@ -411,6 +442,8 @@ int main(int argc, char** argv)
     mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required();
     mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)");
     mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it");
+    std::string meshUp;
+    mesh->add_option("--up", meshUp, "y or z: orient the mesh for this up axis (default: the file's)");
 
     std::string renIn, renOut;
     vdbclay::RenderOptions ro;
@@ -436,6 +469,8 @@ int main(int argc, char** argv)
     imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required();
     imp->add_option("--voxel-size", impVoxel, "world units per voxel (default 1)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
+    std::string impUp = "y";
+    imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
 
     DemoArgs da;
     std::string demoRule;
@@ -464,6 +499,7 @@ int main(int argc, char** argv)
         if (*inf) return info(infoPath);
         if (*mesh) {
             const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
+            if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
             vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
             std::printf("wrote %s\n", meshOut.c_str());
             return 0;
@@ -483,11 +519,13 @@ int main(int argc, char** argv)
             if (!(impVoxel > 0)) throw vdbclay::Error("--voxel-size must be > 0");
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
             const vdbclay::ShapePtr shape =
-                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel) : vdbclay::loadMesh(impIn, impVoxel);
+                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, "", upOption(impUp))
+                      : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp));
             const vdbclay::MassGridPtr clay = vdbclay::makeClay(*shape, int32_t(impMass), impDims);
             vdbclay::ClayMeta meta;
             meta.dimensions = impDims;
             meta.voxelSize = impVoxel;
+            meta.up = upOption(impUp);
             vdbclay::writeClayFile(impOut, *clay, meta);
             std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
                         (unsigned long long)vdbclay::clayVoxelCount(*clay), (long long)vdbclay::totalMass(*clay));

@@ -233,7 +233,7 @@ size_t openEdges(const Mesh& m)
 
 } // namespace
 
-ShapePtr loadMesh(const std::string& path, double voxelSize)
+ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement)
 {
     requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
     requireFile(path);
@@ -273,16 +273,36 @@ ShapePtr loadMesh(const std::string& path, double voxelSize)
         throw Error(path + ": the mesh is not closed: " + std::to_string(open) +
                     " open edges (edges not shared by exactly two faces)");
     }
+    // Into the clay's index space (voxel size, up axis), then placed: the level set is built from
+    // the placed vertices, so scaling costs no resolution.
+    std::string placed;
+    if (!placement.isIdentity()) {
+        requireFinite(placement.translate, "transform", "translate");
+        requireFinite(placement.rotateDeg, "transform", "rotate");
+        requireFinite(placement.pivot, "transform", "pivot");
+        for (int i = 0; i < 3; ++i) {
+            if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
+                throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
+                            num(placement.scale[i]));
+            }
+        }
+        placed = " placed (scale " + vecStr(placement.scale) + ", rotate " + vecStr(placement.rotateDeg) +
+                 ", translate " + vecStr(placement.translate) + ", pivot " + vecStr(placement.pivot) + ")";
+    }
+    for (auto& p : mesh.points) {
+        const Vec3 q = placement.apply(worldToIndex(Vec3{{p[0], p[1], p[2]}}, voxelSize, up));
+        p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
+    }
     openvdb::initialize();
     openvdb::FloatGrid::Ptr grid;
     try {
-        auto xform = openvdb::math::Transform::createLinearTransform(voxelSize);
+        auto xform = openvdb::math::Transform::createLinearTransform(1.0);
         grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xform, mesh.points, mesh.triangles, 3.0f);
     } catch (const std::exception& e) {
         throw Error(path + ": cannot convert the mesh to a level set: " + e.what());
     }
     grid->setName(std::filesystem::path(path).filename().string());
-    return std::make_shared<LevelSet>(grid, voxelSize, "mesh " + path);
+    return std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + placed);
 }
 
 } // namespace vdbclay
