@@ -527,6 +527,9 @@ int main(int argc, char** argv)
             meta.voxelSize = impVoxel;
             meta.up = upOption(impUp);
             vdbclay::writeClayFile(impOut, *clay, meta);
+            if (shape->describe().find("winding number") != std::string::npos) {
+                std::printf("note: %s\n", shape->describe().c_str()); // open or non-manifold: how it was filled
+            }
             std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
                         (unsigned long long)vdbclay::clayVoxelCount(*clay), (long long)vdbclay::totalMass(*clay));
             return 0;

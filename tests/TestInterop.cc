@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -294,4 +295,62 @@ TEST_F(InteropTest, TransformPlacesEveryShapeIncludingMeshes)
         const std::string e = errorOf([&] { parseScene(bad, "b.json", dir); });
         EXPECT_TRUE(contains(e, "b.json: clay[0].transform")) << e;
     }
+}
+
+namespace {
+/// An OBJ of the boxes given as (min, max) corners, 6 quads each, vertices shared where they coincide.
+std::string boxesObj(const std::vector<std::pair<Vec3, Vec3>>& boxes)
+{
+    std::ostringstream o;
+    int base = 0;
+    for (const auto& [lo, hi] : boxes) {
+        for (int c = 0; c < 8; ++c) {
+            o << "v " << ((c & 1) ? hi[0] : lo[0]) << ' ' << ((c & 2) ? hi[1] : lo[1]) << ' '
+              << ((c & 4) ? hi[2] : lo[2]) << '\n';
+        }
+        // Outward quads of corners (bit 0 = x, bit 1 = y, bit 2 = z), 1-based.
+        const int q[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                             {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+        for (const auto& f : q)
+            o << "f " << base + f[0] + 1 << ' ' << base + f[1] + 1 << ' ' << base + f[2] + 1 << ' '
+              << base + f[3] + 1 << '\n';
+        base += 8;
+    }
+    return o.str();
+}
+} // namespace
+
+// Issue 14 item 4: a closed but non-manifold mesh (two boxes sharing an edge: 4 faces on it) is
+// accepted and fills both boxes; a mesh with a hole is refused with the way on.
+TEST_F(InteropTest, ClosedNonManifoldMeshesAreAcceptedOpenOnesExplained)
+{
+    {
+        std::ofstream o(file("two.obj"));
+        o << boxesObj({{{{-0.5, -0.5, -0.5}}, {{7.5, 7.5, 7.5}}}, {{{7.5, 7.5, -0.5}}, {{15.5, 15.5, 7.5}}}});
+    }
+    const MassGridPtr clay = makeClay(*loadMesh(file("two.obj")), 9);
+    EXPECT_EQ(clayVoxelCount(*clay), uint64_t(2 * 512));
+    EXPECT_EQ(clay->tree().getValue(Coord(7, 7, 3)), 9);
+    EXPECT_EQ(clay->tree().getValue(Coord(8, 8, 3)), 9);
+    EXPECT_EQ(clay->tree().getValue(Coord(7, 8, 3)), 0);
+    EXPECT_EQ(clay->tree().getValue(Coord(8, 7, 3)), 0);
+
+    // A box without its top (+y) face: open, 4 open edges, filled by the winding number.
+    std::string open = boxesObj({{{{-0.5, -0.5, -0.5}}, {{5.5, 5.5, 5.5}}}});
+    open.erase(open.find("f 3 7 8 4\n"), std::strlen("f 3 7 8 4\n"));
+    {
+        std::ofstream o(file("open.obj"));
+        o << open;
+    }
+    const ShapePtr s = loadMesh(file("open.obj"));
+    EXPECT_TRUE(contains(s->describe(), "open: 4 open edges")) << s->describe();
+    EXPECT_EQ(clayVoxelCount(*makeClay(*s, 1)), uint64_t(6 * 6 * 6));
+
+    // A single triangle encloses nothing: refused, naming the file and why.
+    {
+        std::ofstream o(file("tri.obj"));
+        o << "v 0 0 0\nv 4 0 0\nv 0 4 0\nf 1 2 3\n";
+    }
+    const std::string e = errorOf([&] { loadMesh(file("tri.obj")); });
+    EXPECT_TRUE(contains(e, "tri.obj") && contains(e, "open") && contains(e, "encloses no volume")) << e;
 }
