@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <signal.h>
@@ -20,6 +21,7 @@
 #include <cerrno>
 #include <chrono>
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -461,13 +463,16 @@ int main(int argc, char** argv)
 
     std::string impIn, impOut;
     int64_t impMass = 0;
-    double impVoxel = 1.0;
+    double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
     CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
     imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required();
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required();
     imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required();
-    imp->add_option("--voxel-size", impVoxel, "world units per voxel (default 1)");
+    imp->add_option("--voxel-size", impVoxel,
+                    "world units per voxel (default: a level set's own voxel size; 1 for meshes)");
+    std::string impGrid;
+    imp->add_option("--grid", impGrid, "LEVELSET.vdb: the level set grid to import (default: the first)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
     std::string impUp = "y";
     imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
@@ -516,10 +521,29 @@ int main(int argc, char** argv)
                 throw vdbclay::Error("--mass must be in [1, " + std::to_string(INT32_MAX) + "], got " +
                                      std::to_string(impMass));
             }
-            if (!(impVoxel > 0)) throw vdbclay::Error("--voxel-size must be > 0");
+            if (!(impVoxel >= 0) || !std::isfinite(impVoxel)) throw vdbclay::Error("--voxel-size must be > 0");
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
+            if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
+            if (impVoxel == 0 && isVdb) {
+                // The level set's own voxel size; loadLevelSet checks the file before OpenVDB reads it.
+                vdbclay::loadLevelSet(impIn, 1.0, impGrid, upOption(impUp));
+                openvdb::io::File f(impIn);
+                f.open(false);
+                std::string name = impGrid;
+                if (name.empty()) {
+                    for (const auto& g : *f.readAllGridMetadata()) {
+                        if (g->getGridClass() == openvdb::GRID_LEVEL_SET && g->isType<openvdb::FloatGrid>()) {
+                            name = g->getName();
+                            break;
+                        }
+                    }
+                }
+                impVoxel = f.readGridMetadata(name)->voxelSize()[0];
+                f.close();
+            }
+            if (impVoxel == 0) impVoxel = 1.0;
             const vdbclay::ShapePtr shape =
-                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, "", upOption(impUp))
+                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, impGrid, upOption(impUp))
                       : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp));
             const vdbclay::MassGridPtr clay = vdbclay::makeClay(*shape, int32_t(impMass), impDims);
             vdbclay::ClayMeta meta;

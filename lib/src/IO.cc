@@ -534,7 +534,7 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
 {
     initOpenVDB();
     if (massPerVoxel <= 0) {
-        throw Error("makeClay: the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
+        throw Error("the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
     }
     if (dimensions != 2 && dimensions != 3) {
         throw Error("makeClay: dimensions must be 2 or 3, not " + std::to_string(dimensions));
@@ -545,7 +545,7 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
     forEachVoxelInside(shape, dimensions,
                        [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel); });
     if (grid->activeVoxelCount() == 0) {
-        throw Error("makeClay: no voxel centre lies inside " + shape.describe() +
+        throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));
     }
     return grid;

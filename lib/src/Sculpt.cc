@@ -604,7 +604,12 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
         for (const ClaySpec& c : scene.clay) {
             const std::string field = scene.source + ": " + c.shape.field;
             if (c.shape.kind == "vdb") {
-                ClayFile f = readClayFile(c.shape.file, c.shape.grid);
+                ClayFile f;
+                try {
+                    f = readClayFile(c.shape.file, c.shape.grid);
+                } catch (const Error& e) {
+                    throw Error(field + ": " + e.what()); // names the scene and the field
+                }
                 addClay(*im.mass, *f.mass, field);
             } else {
                 MassGridPtr g;
