@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <signal.h>
@@ -20,6 +21,7 @@
 #include <cerrno>
 #include <chrono>
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -143,7 +145,36 @@ struct RunArgs {
     int64_t seed = -1;
     uint64_t frames = 0;
     bool quiet = false;
+    std::string up; ///< --up: empty keeps the scene's
 };
+
+vdbclay::UpAxis upOption(const std::string& up)
+{
+    try {
+        return vdbclay::parseUpAxis(up);
+    } catch (const vdbclay::Error& e) {
+        throw vdbclay::Error(std::string("--up: ") + e.what());
+    }
+}
+
+/// --up for run: the scene's meshes and level sets were read with the scene's own "up", so a
+/// different --up is refused when the scene has any (docs/INTEROP.md).
+void applyUp(vdbclay::Scene& scene, const std::string& up)
+{
+    if (up.empty()) return;
+    const vdbclay::UpAxis axis = upOption(up);
+    if (axis == scene.up) return;
+    auto readWithUp = [](const vdbclay::ShapeSpec& s) { return s.kind == "mesh" || s.kind == "levelset"; };
+    bool files = false;
+    for (const auto& c : scene.clay) files |= readWithUp(c.shape);
+    for (const auto& t : scene.tools) files |= readWithUp(t.shape);
+    for (const auto& o : scene.obstacles) files |= readWithUp(o);
+    if (files) {
+        throw vdbclay::Error("--up " + up + ": " + scene.source + " reads its meshes and level sets with up " +
+                             vdbclay::upAxisName(scene.up) + "; set \"up\": \"" + up + "\" in the scene instead");
+    }
+    scene.up = axis;
+}
 
 // ---- interrupts -----------------------------------------------------------------------------------
 // SIGINT and SIGTERM only set this flag (a lock-free atomic store is async-signal-safe); the run
@@ -286,6 +317,7 @@ int runScene(const RunArgs& a)
         scene.sweep = a.sweep == "on";
     }
     if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
+    applyUp(scene, a.up);
     if (!a.memoryBudget.empty()) {
         try {
             scene.memoryBudget = vdbclay::parseByteSize(a.memoryBudget);
@@ -465,6 +497,7 @@ int main(int argc, char** argv)
     run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply");
     run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")");
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
+    run->add_option("--up", ra.up, "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
     run->add_option("--checkpoint", ra.checkpoint,
                     "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
     run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
@@ -486,6 +519,8 @@ int main(int argc, char** argv)
     mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required();
     mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)");
     mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it");
+    std::string meshUp;
+    mesh->add_option("--up", meshUp, "y or z: orient the mesh for this up axis (default: the file's)");
 
     std::string renIn, renOut;
     vdbclay::RenderOptions ro;
@@ -503,14 +538,19 @@ int main(int argc, char** argv)
 
     std::string impIn, impOut;
     int64_t impMass = 0;
-    double impVoxel = 1.0;
+    double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
     CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
     imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required();
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required();
     imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required();
-    imp->add_option("--voxel-size", impVoxel, "world units per voxel (default 1)");
+    imp->add_option("--voxel-size", impVoxel,
+                    "world units per voxel (default: a level set's own voxel size; 1 for meshes)");
+    std::string impGrid;
+    imp->add_option("--grid", impGrid, "LEVELSET.vdb: the level set grid to import (default: the first)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
+    std::string impUp = "y";
+    imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
 
     DemoArgs da;
     std::string demoRule;
@@ -539,6 +579,7 @@ int main(int argc, char** argv)
         if (*inf) return info(infoPath);
         if (*mesh) {
             const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
+            if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
             vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
             std::printf("wrote %s\n", meshOut.c_str());
             return 0;
@@ -555,15 +596,39 @@ int main(int argc, char** argv)
                 throw vdbclay::Error("--mass must be in [1, " + std::to_string(INT32_MAX) + "], got " +
                                      std::to_string(impMass));
             }
-            if (!(impVoxel > 0)) throw vdbclay::Error("--voxel-size must be > 0");
+            if (!(impVoxel >= 0) || !std::isfinite(impVoxel)) throw vdbclay::Error("--voxel-size must be > 0");
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
+            if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
+            if (impVoxel == 0 && isVdb) {
+                // The level set's own voxel size; loadLevelSet checks the file before OpenVDB reads it.
+                vdbclay::loadLevelSet(impIn, 1.0, impGrid, upOption(impUp));
+                openvdb::io::File f(impIn);
+                f.open(false);
+                std::string name = impGrid;
+                if (name.empty()) {
+                    for (const auto& g : *f.readAllGridMetadata()) {
+                        if (g->getGridClass() == openvdb::GRID_LEVEL_SET && g->isType<openvdb::FloatGrid>()) {
+                            name = g->getName();
+                            break;
+                        }
+                    }
+                }
+                impVoxel = f.readGridMetadata(name)->voxelSize()[0];
+                f.close();
+            }
+            if (impVoxel == 0) impVoxel = 1.0;
             const vdbclay::ShapePtr shape =
-                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel) : vdbclay::loadMesh(impIn, impVoxel);
+                isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, impGrid, upOption(impUp))
+                      : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp));
             const vdbclay::MassGridPtr clay = vdbclay::makeClay(*shape, int32_t(impMass), impDims);
             vdbclay::ClayMeta meta;
             meta.dimensions = impDims;
             meta.voxelSize = impVoxel;
+            meta.up = upOption(impUp);
             vdbclay::writeClayFile(impOut, *clay, meta);
+            if (shape->describe().find("winding number") != std::string::npos) {
+                std::printf("note: %s\n", shape->describe().c_str()); // open or non-manifold: how it was filled
+            }
             std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
                         (unsigned long long)vdbclay::clayVoxelCount(*clay), (long long)vdbclay::totalMass(*clay));
             return 0;

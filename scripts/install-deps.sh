@@ -8,6 +8,8 @@
 #   libopenvdb-tools:       vdb_print, used by the tests to check our .vdb files open in OpenVDB's tools.
 #   curl, xz-utils:         scripts/test-tsan.sh fetches Debian's oneTBB source to build it with TSan.
 #   ccache:                 compiler cache for every build script (clean clones share its hits).
+#   pybind11-dev, python3-dev, python3-numpy: the Python module `vdbclay` (python/, docs/INTEROP.md).
+#   python3-openvdb:        OpenVDB's own Python module; a test proves it reads Tc and mass back.
 #   clang, libclang-rt-dev: the sanitizer and fuzzing build (scripts/test-sanitizers.sh): libFuzzer
 #                           and the sanitizer runtimes come with clang's runtime libraries.
 set -euo pipefail
@@ -19,6 +21,7 @@ PKGS=(
   nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
   curl ca-certificates xz-utils
   clang libclang-rt-dev ccache
+  pybind11-dev python3-dev python3-numpy python3-openvdb
 )
 
 missing=()

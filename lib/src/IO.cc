@@ -86,6 +86,7 @@ const char* kMetaFrameSteps = "vdbclay_frame_steps";
 const char* kMetaDimensions = "vdbclay_dimensions";
 const char* kMetaVoxelSize = "vdbclay_voxel_size";
 const char* kMetaVersion = "vdbclay_version";
+const char* kMetaUp = "vdbclay_up";
 
 void validateMeta(const ClayMeta& meta, const std::string& path)
 {
@@ -208,31 +209,39 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     initOpenVDB();
     validateMeta(meta, path);
 
+    // The vdbclay_* metadata goes on "mass" (readClayFile's source) and on "density" too: Debian's
+    // python3-openvdb (and other FloatGrid-only readers) cannot load Int32 grids, and with Tc there
+    // a Python user turns density back into mass (round(density * Tc); docs/INTEROP.md).
+    openvdb::MetaMap clayMeta;
+    clayMeta.insertMeta(kMetaThreshold, openvdb::Int32Metadata(meta.rule.threshold));
+    clayMeta.insertMeta(kMetaRule, openvdb::StringMetadata(ruleName(meta.rule.rule)));
+    clayMeta.insertMeta(kMetaAlpha, openvdb::DoubleMetadata(meta.rule.alpha));
+    clayMeta.insertMeta(kMetaSeed, openvdb::Int64Metadata(int64_t(meta.seed)));
+    clayMeta.insertMeta(kMetaSteps, openvdb::Int64Metadata(int64_t(meta.steps)));
+    clayMeta.insertMeta(kMetaFrames, openvdb::Int64Metadata(int64_t(meta.frames)));
+    if (meta.frameSteps > 0) {
+        clayMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
+    }
+    clayMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
+    clayMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
+    clayMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));
+    if (meta.up != UpAxis::Y) clayMeta.insertMeta(kMetaUp, openvdb::StringMetadata(upAxisName(meta.up)));
+
     openvdb::MetaMap massMeta;
     massMeta.insertMeta(openvdb::GridBase::META_GRID_NAME, openvdb::StringMetadata("mass"));
     massMeta.insertMeta(openvdb::GridBase::META_GRID_CLASS,
                         openvdb::StringMetadata(openvdb::GridBase::gridClassToString(
                             openvdb::GRID_UNKNOWN)));
-    massMeta.insertMeta(kMetaThreshold, openvdb::Int32Metadata(meta.rule.threshold));
-    massMeta.insertMeta(kMetaRule, openvdb::StringMetadata(ruleName(meta.rule.rule)));
-    massMeta.insertMeta(kMetaAlpha, openvdb::DoubleMetadata(meta.rule.alpha));
-    massMeta.insertMeta(kMetaSeed, openvdb::Int64Metadata(int64_t(meta.seed)));
-    massMeta.insertMeta(kMetaSteps, openvdb::Int64Metadata(int64_t(meta.steps)));
-    massMeta.insertMeta(kMetaFrames, openvdb::Int64Metadata(int64_t(meta.frames)));
-    if (meta.frameSteps > 0) {
-        massMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
-    }
-    massMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
-    massMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
-    massMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));
+    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it) massMeta.insertMeta(it->first, *it->second);
 
-    const auto xform = openvdb::math::Transform::createLinearTransform(meta.voxelSize);
+    const auto xform = io_internal::clayTransform(meta.voxelSize, meta.up);
     // Shares the caller's tree (read only) with a fresh name, metadata and transform.
     openvdb::GridBase::ConstPtr massOut = mass.copyGridReplacingMetadataAndTransform(massMeta, xform);
 
     openvdb::FloatGrid::Ptr density, surface;
     try {
         density = io_internal::densityGrid(mass, meta.rule.threshold, meta.voxelSize);
+        density->setTransform(xform->copy());
         surface = io_internal::surfaceLevelSet(*density, 0.5);
     } catch (const Error& e) {
         throw Error("cannot write " + path + ": " + e.what());
@@ -240,6 +249,7 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
         throw Error("cannot write " + path + ": building the density and surface failed: " +
                     reason(e));
     }
+    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it) density->insertMeta(it->first, *it->second);
 
     openvdb::GridCPtrVec grids{massOut, density, surface};
     writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
@@ -335,6 +345,14 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     }
     if (readMeta<std::string, openvdb::StringMetadata>(g, kMetaVersion, str, path, "string")) {
         m.version = str;
+        any = true;
+    }
+    if (readMeta<std::string, openvdb::StringMetadata>(g, kMetaUp, str, path, "string")) {
+        try {
+            m.up = parseUpAxis(str);
+        } catch (const Error& e) {
+            throw Error(path + ": metadata " + kMetaUp + ": " + e.what());
+        }
         any = true;
     }
     out.hasMeta = any;
@@ -465,6 +483,11 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
         throw Error("cannot write " + path + ": no surface at density " + std::to_string(isovalue) +
                     " (no cell is that full)");
     }
+    // World units: the vertices go through the grid's transform (voxel size, up axis), so the mesh
+    // lies where the .vdb's grids lie in Blender or Houdini, and loadMesh with the same voxel size
+    // and up axis puts it back on the same voxels.
+    const openvdb::math::Transform& xform = mass.transform();
+    for (auto& p : mesh.points) p = openvdb::Vec3s(xform.indexToWorld(openvdb::Vec3d(p)));
 
     // Quads are split into two triangles, so both formats hold triangles only.
     const size_t faces = mesh.triangles.size() + 2 * mesh.quads.size();
@@ -472,7 +495,7 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
         os << std::setprecision(9);
         if (ext == ".obj") {
             os << "# vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue
-               << " (index space)\n";
+               << " (world units, voxel size " << xform.voxelSize()[0] << ")\n";
             os << "# " << mesh.points.size() << " vertices, " << faces << " triangles\n";
             for (const auto& p : mesh.points) os << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
             for (const auto& t : mesh.triangles) {
@@ -485,7 +508,7 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
         } else {
             os << "ply\nformat ascii 1.0\n";
             os << "comment vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue
-               << " (index space)\n";
+               << " (world units, voxel size " << xform.voxelSize()[0] << ")\n";
             os << "element vertex " << mesh.points.size() << "\n";
             os << "property float x\nproperty float y\nproperty float z\n";
             os << "element face " << faces << "\n";
@@ -502,36 +525,27 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
     });
 }
 
+void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up)
+{
+    mass.setTransform(io_internal::clayTransform(voxelSize, up));
+}
+
 MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
 {
     initOpenVDB();
     if (massPerVoxel <= 0) {
-        throw Error("makeClay: the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
+        throw Error("the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
     }
     if (dimensions != 2 && dimensions != 3) {
         throw Error("makeClay: dimensions must be 2 or 3, not " + std::to_string(dimensions));
     }
-    Box b = shape.bounds();
-    if (dimensions == 2) {
-        b.min[2] = std::max(b.min[2], 0);
-        b.max[2] = std::min(b.max[2], 0);
-    }
     auto grid = openvdb::Int32Grid::create(0);
     grid->setName("mass");
-    if (!b.empty()) {
-        auto acc = grid->getAccessor();
-        for (int32_t x = b.min[0]; x <= b.max[0]; ++x) {
-            for (int32_t y = b.min[1]; y <= b.max[1]; ++y) {
-                for (int32_t z = b.min[2]; z <= b.max[2]; ++z) {
-                    if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) {
-                        acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
-                    }
-                }
-            }
-        }
-    }
+    auto acc = grid->getAccessor();
+    forEachVoxelInside(shape, dimensions,
+                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel); });
     if (grid->activeVoxelCount() == 0) {
-        throw Error("makeClay: no voxel centre lies inside " + shape.describe() +
+        throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));
     }
     return grid;

@@ -14,8 +14,8 @@ namespace shapes_internal {
 
 class LevelSet final : public Shape {
 public:
-    LevelSet(openvdb::FloatGrid::ConstPtr grid, double voxelSize, std::string what)
-        : mGrid(std::move(grid)), mVoxelSize(voxelSize), mWhat(std::move(what)), mSampler(*mGrid)
+    LevelSet(openvdb::FloatGrid::ConstPtr grid, double voxelSize, std::string what, UpAxis up = UpAxis::Y)
+        : mGrid(std::move(grid)), mVoxelSize(voxelSize), mUp(up), mWhat(std::move(what)), mSampler(*mGrid)
     {
         // Everything inside the level set lies within its narrow band's active voxels (which enclose
         // the interior) or in inactive negative tiles. One voxel of margin covers interpolation.
@@ -41,7 +41,8 @@ public:
             openvdb::Vec3d c;
             for (int i = 0; i < 3; ++i)
                 c[i] = ((corner >> i) & 1) ? bb.max()[i] + 0.5 : bb.min()[i] - 0.5;
-            const openvdb::Vec3d w = mGrid->indexToWorld(c) / mVoxelSize;
+            const openvdb::Vec3d g = mGrid->indexToWorld(c);
+            const Vec3 w = worldToIndex(Vec3{{g[0], g[1], g[2]}}, mVoxelSize, mUp);
             for (int i = 0; i < 3; ++i) {
                 lo[i] = std::min(lo[i], w[i]);
                 hi[i] = std::max(hi[i], w[i]);
@@ -51,8 +52,8 @@ public:
     }
     double distance(const Vec3& p) const override
     {
-        const openvdb::Vec3d w(p[0] * mVoxelSize, p[1] * mVoxelSize, p[2] * mVoxelSize);
-        return double(mSampler.wsSample(w)) / mVoxelSize;
+        const Vec3 w = indexToWorld(p, mVoxelSize, mUp);
+        return double(mSampler.wsSample(openvdb::Vec3d(w[0], w[1], w[2]))) / mVoxelSize;
     }
     Box bounds() const override { return mBounds; }
     std::string describe() const override { return mWhat; }
@@ -60,6 +61,7 @@ public:
 private:
     openvdb::FloatGrid::ConstPtr mGrid;
     double mVoxelSize;
+    UpAxis mUp;
     std::string mWhat;
     openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> mSampler;
     Box mBounds;

@@ -322,18 +322,8 @@ ShapeError compareShapes(const MassGrid& clay, int32_t threshold, const Shape& r
 {
     checkArgs("compareShapes", threshold, dims);
     auto ref = openvdb::MaskGrid::create(false);
-    Box b = reference.bounds();
-    if (dims == 2) {
-        b.min[2] = std::max(b.min[2], 0);
-        b.max[2] = std::min(b.max[2], 0);
-    }
-    if (!b.empty()) {
-        auto acc = ref->getAccessor();
-        for (int32_t x = b.min[0]; x <= b.max[0]; ++x)
-            for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
-                for (int32_t z = b.min[2]; z <= b.max[2]; ++z)
-                    if (reference.distance(Vec3{{double(x), double(y), double(z)}}) < 0) acc.setValueOn(Coord(x, y, z));
-    }
+    auto acc = ref->getAccessor();
+    forEachVoxelInside(reference, dims, [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(Coord(x, y, z)); });
     return compareSets(*occupiedSet(clay, threshold, dims, "compareShapes"), *ref, dims);
 }
 

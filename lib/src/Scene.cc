@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <climits>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace vdbclay {
@@ -22,6 +23,7 @@ struct Ctx {
     std::string baseDir;
     int dims = 3;
     double voxelSize = 1.0;
+    UpAxis up = UpAxis::Y;
 
     [[noreturn]] void fail(const std::string& field, const std::string& what) const
     {
@@ -122,8 +124,8 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     s.kind = string(need(obj, field, "shape"), join(field, "shape"));
     // Fields every shape of a list may carry besides its geometry.
     std::vector<const char*> extra;
-    if (forClay) extra = {"mass"};
-    else extra = {"path", "pivot"};
+    if (forClay) extra = {"mass", "transform"};
+    else extra = {"path", "pivot", "transform"};
     auto allowed = [&](std::initializer_list<const char*> geo) {
         std::vector<const char*> all{"shape", "name", "comment"};
         all.insert(all.end(), geo.begin(), geo.end());
@@ -144,6 +146,30 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
             fail(field, e.what());
         }
     };
+    // A mesh is placed vertex by vertex before it becomes a level set (no resampling); other
+    // shapes are wrapped (makePlaced).
+    std::optional<Placement> place;
+    if (const json* t = s.kind != "vdb" ? find(obj, "transform") : nullptr) {
+        const std::string tf = join(field, "transform");
+        keys(*t, tf, {"translate", "rotate", "scale", "pivot", "comment"});
+        Placement pl;
+        if (const json* v = find(*t, "translate")) pl.translate = vec3(*v, join(tf, "translate"));
+        if (const json* v = find(*t, "rotate")) pl.rotateDeg = vec3(*v, join(tf, "rotate"));
+        if (const json* v = find(*t, "pivot")) pl.pivot = vec3(*v, join(tf, "pivot"));
+        if (const json* v = find(*t, "scale")) {
+            if (v->is_number()) {
+                const double k = number(*v, join(tf, "scale"));
+                pl.scale = {{k, k, k}};
+            } else {
+                pl.scale = vec3(*v, join(tf, "scale"));
+                if (v->size() == 2) pl.scale[2] = 1; // 2D: [sx, sy]
+            }
+            for (int i = 0; i < 3; ++i) {
+                if (!(pl.scale[i] > 0)) fail(join(tf, "scale"), "must be > 0, got " + v->dump());
+            }
+        }
+        place = pl;
+    }
     if (s.kind == "sphere") {
         allowed({"center", "radius"});
         const Vec3 c = vec3(need(obj, field, "center"), join(field, "center"));
@@ -193,11 +219,11 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
         if (const json* g = find(obj, "grid")) s.grid = string(*g, join(field, "grid"));
         // Loaded here, at the scene's voxel size, so a bad file is reported with its scene field.
-        s.shape = wrap([&] { return loadLevelSet(s.file, voxelSize, s.grid); });
+        s.shape = wrap([&] { return loadLevelSet(s.file, voxelSize, s.grid, up); });
     } else if (s.kind == "mesh") {
         allowed({"file"});
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
-        s.shape = wrap([&] { return loadMesh(s.file, voxelSize); });
+        s.shape = wrap([&] { return loadMesh(s.file, voxelSize, up, place ? *place : Placement()); });
     } else if (s.kind == "vdb" && forClay) {
         extra.clear(); // exact masses come from the file
         allowed({"file", "grid"});
@@ -208,6 +234,7 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         fail(join(field, "shape"), "unknown shape \"" + s.kind + "\" (expected one of: sphere, box, "
                                    "cylinder, capsule, levelset, mesh" + (forClay ? ", vdb" : "") + ")");
     }
+    if (place && s.kind != "mesh") s.shape = wrap([&] { return makePlaced(s.shape, *place); });
     return s;
 }
 
@@ -258,7 +285,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     }
     cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
                        "obstacles", "settle", "frames", "start", "outputs", "memory_budget", "description",
-                       "comment", "push", "transport", "sweep"});
+                       "comment", "push", "transport", "sweep", "up"});
     Scene sc;
     sc.source = source;
     if (const json* v = cx.find(root, "dimensions")) {
@@ -270,6 +297,14 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         if (!(sc.voxelSize > 0)) cx.fail("voxel_size", "must be > 0, got " + v->dump());
     }
     cx.voxelSize = sc.voxelSize;
+    if (const json* v = cx.find(root, "up")) {
+        try {
+            sc.up = parseUpAxis(cx.string(*v, "up"));
+        } catch (const Error& e) {
+            cx.fail("up", e.what());
+        }
+    }
+    cx.up = sc.up;
     if (const json* v = cx.find(root, "threshold")) {
         if (v->is_number() && v->get<double>() <= 0) cx.fail("threshold", "Tc must be > 0, got " + v->dump());
         sc.rule.threshold = int32_t(cx.integer(*v, "threshold", 1, INT32_MAX));

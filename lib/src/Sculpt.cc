@@ -42,17 +42,8 @@ void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::
 /// Every voxel whose centre lies inside @a shape (only z = 0 in 2D) becomes an obstacle.
 void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
 {
-    const Box b = shape.bounds();
-    if (b.empty()) return;
     auto acc = mask.getAccessor();
-    const int z0 = dims == 2 ? 0 : b.min[2], z1 = dims == 2 ? 0 : b.max[2];
-    if (dims == 2 && (b.min[2] > 0 || b.max[2] < 0)) return;
-    for (int x = b.min[0]; x <= b.max[0]; ++x)
-        for (int y = b.min[1]; y <= b.max[1]; ++y)
-            for (int z = z0; z <= z1; ++z)
-                if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) {
-                    acc.setValueOn(openvdb::Coord(x, y, z));
-                }
+    forEachVoxelInside(shape, dims, [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z)); });
 }
 
 /// A start file written in the middle of a frame continues that frame: only the scene that wrote it
@@ -631,19 +622,13 @@ struct Sculptor::Impl {
             }
             toolCells.clear();
             for (const ShapePtr& t : tools) {
-                const Box b = t->bounds();
-                const int z0 = scene.dimensions == 2 ? 0 : b.min[2], z1 = scene.dimensions == 2 ? 0 : b.max[2];
-                if (b.empty() || (scene.dimensions == 2 && (b.min[2] > 0 || b.max[2] < 0))) continue;
-                for (int x = b.min[0]; x <= b.max[0]; ++x)
-                    for (int y = b.min[1]; y <= b.max[1]; ++y)
-                        for (int z = z0; z <= z1; ++z) {
-                            const openvdb::Coord c(x, y, z);
-                            if (acc.isValueOn(c)) continue;
-                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0) {
-                                acc.setValueOn(c);
-                                toolCells.push_back(c);
-                            }
-                        }
+                forEachVoxelInside(
+                    *t, scene.dimensions,
+                    [&](int32_t x, int32_t y, int32_t z) {
+                        acc.setValueOn(openvdb::Coord(x, y, z));
+                        toolCells.emplace_back(x, y, z);
+                    },
+                    [&](int32_t x, int32_t y, int32_t z) { return acc.isValueOn(openvdb::Coord(x, y, z)); });
             }
             grid.tree().prune();
         });
@@ -670,6 +655,14 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
             throw Error(scene.source + ": start: " + scene.start + " holds " + std::to_string(f.meta.dimensions) +
                         "D clay but the scene is " + std::to_string(scene.dimensions) + "D");
         }
+        if (f.hasMeta && f.meta.rule.threshold != scene.rule.threshold) {
+            // Clay at rest holds up to Tc per voxel: continuing under another Tc would silently
+            // reshape it (a Tc = 250 file under Tc = 1000 reads as a quarter-full fog).
+            throw Error(scene.source + ": start: " + scene.start + " was made with Tc " +
+                        std::to_string(f.meta.rule.threshold) + " but the scene has Tc " +
+                        std::to_string(scene.rule.threshold) + " (1000 when it sets none); set \"threshold\": " +
+                        std::to_string(f.meta.rule.threshold) + " in the scene to continue it");
+        }
         if (f.meta.frameSteps > 0) checkResumable(scene, f.meta);
         im.startMeta = f.meta;
         im.mass = f.mass;
@@ -682,7 +675,12 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
         for (const ClaySpec& c : scene.clay) {
             const std::string field = scene.source + ": " + c.shape.field;
             if (c.shape.kind == "vdb") {
-                ClayFile f = readClayFile(c.shape.file, c.shape.grid);
+                ClayFile f;
+                try {
+                    f = readClayFile(c.shape.file, c.shape.grid);
+                } catch (const Error& e) {
+                    throw Error(field + ": " + e.what()); // names the scene and the field
+                }
                 addClay(*im.mass, *f.mass, field);
             } else {
                 MassGridPtr g;
@@ -696,7 +694,7 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
         }
     }
     im.mass->setName("mass");
-    im.mass->setTransform(openvdb::math::Transform::createLinearTransform(scene.voxelSize));
+    setClayTransform(*im.mass, scene.voxelSize, scene.up);
 
     im.obstacles = openvdb::MaskGrid::create(false);
     im.obstacles->setName("obstacles");
@@ -753,6 +751,7 @@ ClayMeta Sculptor::checkpointMeta() const
     m.frames = im.frame;
     m.frameSteps = im.open ? im.openSteps : 0;
     m.voxelSize = im.scene.voxelSize;
+    m.up = im.scene.up;
     return m;
 }
 

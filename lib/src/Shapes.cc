@@ -183,6 +183,53 @@ private:
     Box mBounds;
 };
 
+class Scaled final : public Shape {
+public:
+    Scaled(ShapePtr inner, const Vec3& scale, const Vec3& pivot)
+        : mInner(std::move(inner)), mScale(scale), mPivot(pivot)
+    {
+        mMin = std::min({scale[0], scale[1], scale[2]});
+        const Box ib = mInner->bounds();
+        if (ib.empty()) return;
+        Vec3 lo, hi;
+        for (int i = 0; i < 3; ++i) {
+            lo[i] = (ib.min[i] - 0.5 - pivot[i]) * scale[i] + pivot[i];
+            hi[i] = (ib.max[i] + 0.5 - pivot[i]) * scale[i] + pivot[i];
+            lo[i] -= 1e-9 * (1 + std::abs(lo[i]));
+            hi[i] += 1e-9 * (1 + std::abs(hi[i]));
+        }
+        mBounds = boxOf(lo, hi, describe());
+    }
+    double distance(const Vec3& p) const override
+    {
+        Vec3 q;
+        for (int i = 0; i < 3; ++i) q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
+        return mInner->distance(q) * mMin;
+    }
+    Vec3 normal(const Vec3& p) const override
+    {
+        // The inner normal through the inverse transpose of the scale, renormalised.
+        Vec3 q;
+        for (int i = 0; i < 3; ++i) q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
+        const Vec3 n = mInner->normal(q);
+        Vec3 m{{n[0] / mScale[0], n[1] / mScale[1], n[2] / mScale[2]}};
+        const double l = length(m);
+        if (!(l > 0) || !std::isfinite(l)) return n;
+        return {{m[0] / l, m[1] / l, m[2] / l}};
+    }
+    Box bounds() const override { return mBounds; }
+    std::string describe() const override
+    {
+        return mInner->describe() + " scaled by " + vecStr(mScale) + " about " + vecStr(mPivot);
+    }
+
+private:
+    ShapePtr mInner;
+    Vec3 mScale, mPivot;
+    double mMin = 1;
+    Box mBounds;
+};
+
 } // namespace
 
 // ---- Pose, Shape ---------------------------------------------------------------------------------
@@ -226,6 +273,29 @@ Vec3 Shape::normal(const Vec3& p) const
     return {{g[0] / l, g[1] / l, g[2] / l}};
 }
 
+// ---- up axis -------------------------------------------------------------------------------------
+
+UpAxis parseUpAxis(const std::string& text)
+{
+    if (text == "y" || text == "Y") return UpAxis::Y;
+    if (text == "z" || text == "Z") return UpAxis::Z;
+    throw Error("unknown up axis \"" + text + "\" (expected \"y\" or \"z\")");
+}
+
+const char* upAxisName(UpAxis up) { return up == UpAxis::Z ? "z" : "y"; }
+
+Vec3 worldToIndex(const Vec3& w, double voxelSize, UpAxis up)
+{
+    if (up == UpAxis::Z) return {{w[0] / voxelSize, w[2] / voxelSize, -w[1] / voxelSize}};
+    return {{w[0] / voxelSize, w[1] / voxelSize, w[2] / voxelSize}};
+}
+
+Vec3 indexToWorld(const Vec3& p, double voxelSize, UpAxis up)
+{
+    if (up == UpAxis::Z) return {{p[0] * voxelSize, -p[2] * voxelSize, p[1] * voxelSize}};
+    return {{p[0] * voxelSize, p[1] * voxelSize, p[2] * voxelSize}};
+}
+
 // ---- factories -----------------------------------------------------------------------------------
 
 ShapePtr makeSphere(const Vec3& center, double radius)
@@ -265,6 +335,47 @@ ShapePtr makeCapsule(const Vec3& a, const Vec3& b, double radius)
     requireFinite(b, "makeCapsule", "b");
     requirePositive(radius, "makeCapsule", "radius");
     return std::make_shared<Capsule>(a, b, radius);
+}
+
+Vec3 Placement::apply(const Vec3& p) const
+{
+    Vec3 q;
+    for (int i = 0; i < 3; ++i) q[i] = (p[i] - pivot[i]) * scale[i] + pivot[i];
+    Pose pose;
+    pose.translation = translate;
+    pose.rotationDeg = rotateDeg;
+    pose.pivot = pivot;
+    return pose.apply(q);
+}
+
+bool Placement::isIdentity() const
+{
+    Pose pose;
+    pose.translation = translate;
+    pose.rotationDeg = rotateDeg;
+    return scale == Vec3{{1, 1, 1}} && pose.isIdentity();
+}
+
+ShapePtr makePlaced(ShapePtr shape, const Placement& placement)
+{
+    if (!shape) throw Error("transform: shape is null");
+    requireFinite(placement.translate, "transform", "translate");
+    requireFinite(placement.rotateDeg, "transform", "rotate");
+    requireFinite(placement.pivot, "transform", "pivot");
+    for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
+            throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
+                        num(placement.scale[i]));
+        }
+    }
+    if (placement.scale != Vec3{{1, 1, 1}}) {
+        shape = std::make_shared<Scaled>(std::move(shape), placement.scale, placement.pivot);
+    }
+    Pose pose;
+    pose.translation = placement.translate;
+    pose.rotationDeg = placement.rotateDeg;
+    pose.pivot = placement.pivot;
+    return makeTransformed(std::move(shape), pose);
 }
 
 ShapePtr makeTransformed(ShapePtr shape, const Pose& pose)

@@ -15,7 +15,7 @@ namespace vdbclay {
 
 using namespace shapes_internal;
 
-ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::string& gridName)
+ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::string& gridName, UpAxis up)
 {
     requireVoxelSize(voxelSize, "loadLevelSet(" + path + ")");
     requireFile(path);
@@ -72,7 +72,7 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
     }
     if (!grid) throw Error("cannot read level set from " + path);
     const std::string what = "level set \"" + grid->getName() + "\" from " + path;
-    return std::make_shared<LevelSet>(grid, voxelSize, what);
+    return std::make_shared<LevelSet>(grid, voxelSize, what, up);
 }
 
 } // namespace vdbclay

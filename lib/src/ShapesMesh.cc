@@ -7,6 +7,9 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/MeshToVolume.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -213,7 +216,7 @@ std::string lowerExtension(const std::string& path)
     return e;
 }
 
-/// Number of undirected edges not shared by exactly two triangles.
+/// Number of undirected edges bounding an odd number of triangles (boundary edges of holes).
 size_t openEdges(const Mesh& m)
 {
     std::unordered_map<uint64_t, uint32_t> count;
@@ -225,15 +228,101 @@ size_t openEdges(const Mesh& m)
             ++count[(uint64_t(a) << 32) | b];
         }
     }
+    // Closed means every edge bounds an even number of faces: 2 (manifold) or 4, 6, ... (closed but
+    // non-manifold, e.g. two boxes sharing an edge, which meshToLevelSet fills correctly).
     size_t open = 0;
     for (const auto& e : count)
-        if (e.second != 2) ++open;
+        if (e.second % 2 != 0) ++open;
     return open;
+}
+
+/// Number of edges bounding more than two triangles (non-manifold edges; closed if even).
+size_t nonManifoldEdges(const Mesh& m)
+{
+    std::unordered_map<uint64_t, uint32_t> count;
+    count.reserve(m.triangles.size() * 3);
+    for (const auto& t : m.triangles) {
+        for (int i = 0; i < 3; ++i) {
+            uint32_t a = t[i], b = t[(i + 1) % 3];
+            if (a > b) std::swap(a, b);
+            ++count[(uint64_t(a) << 32) | b];
+        }
+    }
+    size_t n = 0;
+    for (const auto& e : count)
+        if (e.second > 2) ++n;
+    return n;
+}
+
+/// The generalized winding number of the triangles at @a p (Jacobson, Kavan, Sorkine-Hornung 2013):
+/// the sum of the solid angles the triangles subtend at p over 4 pi (Van Oosterom and Strackee's
+/// formula). 1 inside a closed outward-wound mesh, 0 outside, in between near the holes of an open
+/// one; -1 inside an inside-out mesh.
+double windingNumber(const Mesh& m, const openvdb::Vec3d& p)
+{
+    double sum = 0;
+    for (const auto& t : m.triangles) {
+        const openvdb::Vec3d a = openvdb::Vec3d(m.points[t[0]]) - p, b = openvdb::Vec3d(m.points[t[1]]) - p,
+                             c = openvdb::Vec3d(m.points[t[2]]) - p;
+        const double la = a.length(), lb = b.length(), lc = c.length();
+        const double num = a.dot(b.cross(c));
+        const double den = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
+        sum += 2 * std::atan2(num, den);
+    }
+    return sum / (4 * M_PI);
+}
+
+/// The level set of a mesh whose inside meshToLevelSet cannot decide by flood fill (open, or closed
+/// with non-manifold edges): distances from @a band (the unsigned narrow band, clamped to its
+/// width), signs from the generalized winding number (|w| > 0.5 is inside), at every grid point of
+/// the mesh's bounds. O(points x triangles), computed once, in parallel.
+openvdb::FloatGrid::Ptr windingLevelSet(const Mesh& m, const openvdb::FloatGrid& band, const std::string& path,
+                                        bool& anyInside)
+{
+    openvdb::CoordBBox bb;
+    for (const auto& p : m.points) {
+        bb.expand(openvdb::Coord(int32_t(std::floor(p[0])), int32_t(std::floor(p[1])), int32_t(std::floor(p[2]))));
+        bb.expand(openvdb::Coord(int32_t(std::ceil(p[0])), int32_t(std::ceil(p[1])), int32_t(std::ceil(p[2]))));
+    }
+    bb.expand(2);
+    const openvdb::Coord dim = bb.dim();
+    const uint64_t n = uint64_t(dim.x()) * uint64_t(dim.y()) * uint64_t(dim.z());
+    if (n * m.triangles.size() > (uint64_t(1) << 36)) {
+        throw Error(path + ": the mesh is open or non-manifold, and deciding its inside by winding numbers "
+                           "would take " + std::to_string(n) + " points x " + std::to_string(m.triangles.size()) +
+                    " triangles; close it first, or use a larger voxel size");
+    }
+    const float width = band.background();
+    std::vector<float> values(n);
+    tbb::parallel_for(tbb::blocked_range<int32_t>(0, dim.x()), [&](const tbb::blocked_range<int32_t>& r) {
+        auto acc = band.getConstAccessor();
+        for (int32_t i = r.begin(); i < r.end(); ++i)
+            for (int32_t j = 0; j < dim.y(); ++j)
+                for (int32_t k = 0; k < dim.z(); ++k) {
+                    const openvdb::Coord c = bb.min() + openvdb::Coord(i, j, k);
+                    const float d = std::min(std::abs(acc.getValue(c)), width);
+                    // Strictly above one half: points on the surface (w = 1/2) are not inside.
+                    const bool inside = std::abs(windingNumber(m, c.asVec3d())) > 0.5;
+                    values[(uint64_t(i) * dim.y() + j) * dim.z() + k] = inside ? -d : d;
+                }
+    });
+    auto grid = openvdb::FloatGrid::create(width);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto acc = grid->getAccessor();
+    anyInside = false;
+    for (int32_t i = 0; i < dim.x(); ++i)
+        for (int32_t j = 0; j < dim.y(); ++j)
+            for (int32_t k = 0; k < dim.z(); ++k) {
+                const float v = values[(uint64_t(i) * dim.y() + j) * dim.z() + k];
+                if (v < 0) anyInside = true;
+                if (v != width) acc.setValue(bb.min() + openvdb::Coord(i, j, k), v);
+            }
+    return grid;
 }
 
 } // namespace
 
-ShapePtr loadMesh(const std::string& path, double voxelSize)
+ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement)
 {
     requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
     requireFile(path);
@@ -268,21 +357,57 @@ ShapePtr loadMesh(const std::string& path, double voxelSize)
         throw Error(path + ": unknown mesh format (expected .obj or .stl)");
     }
     if (mesh.triangles.empty()) throw Error(path + ": the mesh has no faces");
-    const size_t open = openEdges(mesh);
-    if (open) {
-        throw Error(path + ": the mesh is not closed: " + std::to_string(open) +
-                    " open edges (edges not shared by exactly two faces)");
+    // Open (edges of an odd number of faces: rims of holes) or non-manifold (edges of 4, 6, ...
+    // faces) meshes cannot be filled by meshToLevelSet's flood fill: their inside is decided by the
+    // generalized winding number instead, and describe() says so.
+    const size_t open = openEdges(mesh), nonManifold = nonManifoldEdges(mesh);
+    // Into the clay's index space (voxel size, up axis), then placed: the level set is built from
+    // the placed vertices, so scaling costs no resolution.
+    std::string placed;
+    if (!placement.isIdentity()) {
+        requireFinite(placement.translate, "transform", "translate");
+        requireFinite(placement.rotateDeg, "transform", "rotate");
+        requireFinite(placement.pivot, "transform", "pivot");
+        for (int i = 0; i < 3; ++i) {
+            if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
+                throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
+                            num(placement.scale[i]));
+            }
+        }
+        placed = " placed (scale " + vecStr(placement.scale) + ", rotate " + vecStr(placement.rotateDeg) +
+                 ", translate " + vecStr(placement.translate) + ", pivot " + vecStr(placement.pivot) + ")";
+    }
+    for (auto& p : mesh.points) {
+        const Vec3 q = placement.apply(worldToIndex(Vec3{{p[0], p[1], p[2]}}, voxelSize, up));
+        p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
     }
     openvdb::initialize();
     openvdb::FloatGrid::Ptr grid;
     try {
-        auto xform = openvdb::math::Transform::createLinearTransform(voxelSize);
+        auto xform = openvdb::math::Transform::createLinearTransform(1.0);
         grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xform, mesh.points, mesh.triangles, 3.0f);
     } catch (const std::exception& e) {
         throw Error(path + ": cannot convert the mesh to a level set: " + e.what());
     }
+    std::string how;
+    if (open || nonManifold) {
+        bool anyInside = false;
+        try {
+            grid = windingLevelSet(mesh, *grid, path, anyInside);
+        } catch (const Error&) {
+            throw;
+        } catch (const std::exception& e) {
+            throw Error(path + ": cannot fill the mesh: " + e.what());
+        }
+        how = open ? " (open: " + std::to_string(open) + " open edges, closed by the generalized winding number)"
+                   : " (closed, " + std::to_string(nonManifold) +
+                         " non-manifold edges: inside by the generalized winding number)";
+        if (!anyInside) {
+            throw Error(path + ": the mesh" + how + " encloses no volume (winding number at most 0.5 everywhere)");
+        }
+    }
     grid->setName(std::filesystem::path(path).filename().string());
-    return std::make_shared<LevelSet>(grid, voxelSize, "mesh " + path);
+    return std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + how + placed);
 }
 
 } // namespace vdbclay

@@ -16,6 +16,19 @@
 namespace vdbclay {
 namespace io_internal {
 
+openvdb::math::Transform::Ptr clayTransform(double voxelSize, UpAxis up)
+{
+    if (!(voxelSize > 0) || !std::isfinite(voxelSize)) {
+        throw Error("the voxel size must be positive and finite");
+    }
+    if (up == UpAxis::Y) return openvdb::math::Transform::createLinearTransform(voxelSize);
+    // Rx(+90 deg) exactly (no rounding in sin and cos): (x, y, z) -> (x, -z, y), then scaled.
+    // OpenVDB maps row vectors (world = index * M): row i is the image of index axis i.
+    const double v = voxelSize;
+    return openvdb::math::Transform::createLinearTransform(
+        openvdb::Mat4d(v, 0., 0., 0., /**/ 0., 0., v, 0., /**/ 0., -v, 0., 0., /**/ 0., 0., 0., 1.));
+}
+
 openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize)
 {
     if (threshold <= 0) throw Error("density: the threshold Tc must be > 0");

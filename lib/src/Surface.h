@@ -4,6 +4,7 @@
 #pragma once
 
 #include "vdbclay/Fwd.h"
+#include "vdbclay/Shapes.h"
 
 #include <openvdb/openvdb.h>
 
@@ -11,6 +12,10 @@
 
 namespace vdbclay {
 namespace io_internal {
+
+/// @a voxelSize world units per voxel, then for UpAxis::Z a rotation of +90 degrees about x (index
+/// y becomes world z). @throw Error if voxelSize is not positive and finite.
+openvdb::math::Transform::Ptr clayTransform(double voxelSize, UpAxis up);
 
 /// The density m / Tc of every active voxel or tile holding nonzero mass (active there, background 0), a
 /// GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize. Built leaf by leaf in

@@ -22,6 +22,9 @@ struct ClayMeta {
     /// its push and n steps of its settling (Sculptor resumes the frame there). Stored only when > 0.
     uint64_t frameSteps = 0;
     double voxelSize = 1.0;
+    /// The world's up axis: the grids' transform is voxelSize, rotated for UpAxis::Z (Shapes.h).
+    /// Stored as vdbclay_up only when it is z.
+    UpAxis up = UpAxis::Y;
     std::string version;  ///< vdbclay version that wrote it (filled by writeClayFile)
 };
 
@@ -50,10 +53,17 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName = "ma
 std::string describeVdb(const std::string& path);
 
 /// Writes the clay surface (openvdb::tools::volumeToMesh of the density at isovalue 0.5, i.e. where
-/// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension. Atomic like
-/// writeClayFile. @throw Error on an unknown extension or a write failure.
+/// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension, in world units: the
+/// vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform),
+/// so the mesh lies on the .vdb and loadMesh() with the same voxel size and up axis puts it back on
+/// the same voxels. Atomic like writeClayFile. @throw Error on an unknown extension or a write
+/// failure.
 void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
                       double isovalue = 0.5);
+
+/// Gives @a mass the transform a clay file records: @a voxelSize world units per voxel, rotated for
+/// @a up (Shapes.h: UpAxis).
+void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up);
 
 /// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0).
 /// @throw Error if massPerVoxel <= 0 or the shape is empty.

@@ -64,6 +64,9 @@ struct Scene {
     std::string source;  ///< the file (or "<built-in>") for messages
     int dimensions = 3;
     double voxelSize = 1.0;
+    /// The world's up axis for files: meshes and level sets are read with it, and the output .vdb's
+    /// transform (and --mesh) is rotated for it. Scene files: "up": "y" (default) or "z".
+    UpAxis up = UpAxis::Y;
     RuleParams rule;
     uint64_t seed = 0;
     std::vector<ClaySpec> clay;

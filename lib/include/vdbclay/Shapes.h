@@ -49,6 +49,33 @@ public:
 };
 using ShapePtr = std::shared_ptr<const Shape>;
 
+/// The one rasterisation of vdbclay: calls @a inside(x, y, z) for every voxel whose centre lies
+/// inside @a shape (distance < 0), in x, then y, then z order, within shape.bounds() (only the
+/// z = 0 layer when @a dimensions == 2). Voxels for which @a skip(x, y, z) is true are passed over
+/// without evaluating the shape (e.g. voxels already marked). Clay, obstacles, tools and the
+/// accuracy metrics all go through it.
+template<typename Inside, typename Skip>
+void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside, Skip&& skip)
+{
+    Box b = shape.bounds();
+    if (dimensions == 2) {
+        b.min[2] = b.min[2] > 0 ? b.min[2] : 0;
+        b.max[2] = b.max[2] < 0 ? b.max[2] : 0;
+    }
+    if (b.empty()) return;
+    for (int32_t x = b.min[0]; x <= b.max[0]; ++x)
+        for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
+            for (int32_t z = b.min[2]; z <= b.max[2]; ++z) {
+                if (skip(x, y, z)) continue;
+                if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) inside(x, y, z);
+            }
+}
+template<typename Inside>
+void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside)
+{
+    forEachVoxelInside(shape, dimensions, inside, [](int32_t, int32_t, int32_t) { return false; });
+}
+
 /// @throw Error (naming the parameter) on NaN/infinite values, radius/height <= 0, min > max,
 /// an axis other than 0, 1, 2.
 ShapePtr makeSphere(const Vec3& center, double radius);
@@ -61,15 +88,46 @@ ShapePtr makeCapsule(const Vec3& a, const Vec3& b, double radius);
 /// @a shape moved by @a pose (returns @a shape itself for the identity pose).
 ShapePtr makeTransformed(ShapePtr shape, const Pose& pose);
 
+/// Where a shape is put: scaled (uniformly or per axis) about @a pivot, then rotated about @a pivot
+/// (degrees about x, then y, then z), then translated. Scenes: "transform" on any shape.
+struct Placement {
+    Vec3 translate{{0, 0, 0}};
+    Vec3 rotateDeg{{0, 0, 0}};
+    Vec3 scale{{1, 1, 1}};
+    Vec3 pivot{{0, 0, 0}};
+    /// The placed position of @a p.
+    Vec3 apply(const Vec3& p) const;
+    bool isIdentity() const;
+};
+/// @a shape placed by @a placement. A scaled shape's distance is the inner distance times the
+/// smallest scale factor: exact in sign (which voxels are inside), a lower bound on the distance.
+/// @throw Error naming the field if a value is not finite or a scale factor is not > 0.
+ShapePtr makePlaced(ShapePtr shape, const Placement& placement);
+
+/// Which world axis is up in files (meshes, level sets, the .vdb transform). vdbclay's index space
+/// is always y up; with UpAxis::Z, world = Rx(+90 deg) * index * voxelSize: index y (up) is world z
+/// and index z is world -y (Blender's convention: its OBJ importer applies the same rotation).
+enum class UpAxis { Y, Z };
+/// "y" or "z". @throw Error naming @a text and the valid names otherwise.
+UpAxis parseUpAxis(const std::string& text);
+const char* upAxisName(UpAxis up);
+/// The index-space point of world point @a w (divided by @a voxelSize, rotated for @a up).
+Vec3 worldToIndex(const Vec3& w, double voxelSize, UpAxis up);
+/// The world point of index-space point @a p.
+Vec3 indexToWorld(const Vec3& p, double voxelSize, UpAxis up);
+
 /// A level set (openvdb::FloatGrid of class GRID_LEVEL_SET) read from a .vdb file. Its own
-/// transform maps it to world space; @a voxelSize is the clay grid's voxel size (world units per
-/// voxel) used to bring it into the clay's index space. @a gridName empty: the first level set.
+/// transform maps it to world space; @a voxelSize and @a up (the clay's) bring world space into the
+/// clay's index space. @a gridName empty: the first level set.
 /// @throw Error naming the file if it is missing, unreadable, truncated, not a .vdb, or has no
 ///        FloatGrid level set (of that name).
-ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std::string& gridName = "");
-/// A closed triangle mesh (OBJ or STL, ASCII or binary STL), in world units, converted with
-/// openvdb::tools::meshToLevelSet at @a voxelSize.
+ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std::string& gridName = "",
+                      UpAxis up = UpAxis::Y);
+/// A closed triangle mesh (OBJ or STL, ASCII or binary STL), in world units with @a up as its up
+/// axis, brought into index space (@a voxelSize), its vertices placed by @a placement (in index
+/// space), then converted with openvdb::tools::meshToLevelSet.
 /// @throw Error naming the file if it is unreadable, empty, malformed (with the line), or not closed.
-ShapePtr loadMesh(const std::string& path, double voxelSize = 1.0);
+ShapePtr loadMesh(const std::string& path, double voxelSize = 1.0, UpAxis up = UpAxis::Y,
+                  const Placement& placement = Placement());
 
 } // namespace vdbclay

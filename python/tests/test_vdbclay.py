@@ -1,0 +1,156 @@
+"""Tests of the Python module vdbclay, run by ctest with PYTHONPATH at the built module."""
+import os
+import tempfile
+import unittest
+
+import numpy as np
+import vdbclay
+
+
+def tmpdir():
+    base = os.environ.get("VDBCLAY_TEST_TMP")
+    if base:
+        os.makedirs(base, exist_ok=True)
+    return tempfile.mkdtemp(prefix="vdbclay-py-", dir=base)
+
+
+class ShapesAndClay(unittest.TestCase):
+    def test_box_clay_counts_and_masses_exactly(self):
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (3, 4, 5)), mass=700, threshold=1000)
+        self.assertEqual(clay.voxel_count(), 4 * 5 * 6)
+        self.assertEqual(clay.total_mass(), 4 * 5 * 6 * 700)
+        self.assertEqual(clay.bounds, ([0, 0, 0], [3, 4, 5]))
+        m = clay.mass_array()
+        self.assertEqual(m.dtype, np.int32)
+        self.assertEqual(m.shape, (4, 5, 6))
+        self.assertTrue((m == 700).all())
+        d = clay.density_array(min=(-1, 0, 0), max=(0, 0, 0))
+        self.assertEqual(d.dtype, np.float32)
+        self.assertEqual(d[0, 0, 0], 0.0)
+        self.assertAlmostEqual(float(d[1, 0, 0]), 0.7, places=6)
+
+    def test_shapes_have_signed_distances_and_move(self):
+        s = vdbclay.sphere((0, 0, 0), 5)
+        self.assertAlmostEqual(s.distance((0, 0, 0)), -5.0)
+        self.assertAlmostEqual(s.distance((8, 0, 0)), 3.0)
+        moved = s.moved(translate=(10, 0, 0))
+        self.assertAlmostEqual(moved.distance((10, 0, 0)), -5.0)
+        self.assertIn("sphere", repr(moved))
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.sphere((0, 0, 0), -1)
+        self.assertIn("radius", str(e.exception))
+
+    def test_numpy_round_trip_is_exact(self):
+        rng = np.random.default_rng(7)
+        a = rng.integers(0, 5000, size=(5, 6, 7)).astype(np.int32)
+        clay = vdbclay.from_array(a, origin=(-2, 3, 1), threshold=1000)
+        self.assertEqual(clay.total_mass(), int(a.sum()))
+        b = clay.mass_array(min=(-2, 3, 1), max=(2, 8, 7))
+        self.assertTrue(np.array_equal(a, b))
+        with self.assertRaises(vdbclay.Error):
+            vdbclay.from_array(np.full((2, 2, 2), -1), origin=(0, 0, 0))
+
+
+class AutomatonTests(unittest.TestCase):
+    def test_settle_conserves_mass_and_removes_overload(self):
+        a = np.zeros((8, 8, 8), dtype=np.int32)
+        a[:, 0:4, :] = 1000
+        a[3, 4, 3] = 9000
+        clay = vdbclay.from_array(a, threshold=1000)
+        auto = vdbclay.Automaton(clay, rule="sorted", threads=2)
+        r = auto.settle(max_steps=100000)
+        self.assertTrue(r["settled"])
+        self.assertEqual(r["residual_overload"], 0)
+        self.assertEqual(auto.total_mass, int(a.sum()))
+        self.assertEqual(clay.total_mass(), int(a.sum()))  # the same grid, changed in place
+        self.assertLessEqual(int(clay.mass_array().max()), 1000)
+
+    def test_threads_do_not_change_the_result(self):
+        hashes = set()
+        for threads in (1, 2, 3, 8):
+            clay = vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 6), mass=1000)
+            auto = vdbclay.Automaton(clay, threads=threads)
+            auto.add_mass(np.full((2, 2, 2), 5000), origin=(0, 6, 0))
+            auto.settle()
+            hashes.add(clay.content_hash())
+            del auto  # its thread limit ends with it, before the next one's begins
+        self.assertEqual(len(hashes), 1)
+
+    def test_add_mass_refuses_negative_results_and_changes_nothing(self):
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (1, 1, 1)), mass=10)
+        auto = vdbclay.Automaton(clay)
+        before = clay.content_hash()
+        with self.assertRaises(vdbclay.Error):
+            auto.add_mass(np.full((2, 2, 2), -11), origin=(0, 0, 0))
+        self.assertEqual(clay.content_hash(), before)
+        auto.add_mass(np.full((1, 1, 1), -10), origin=(0, 0, 0))
+        self.assertEqual(clay.total_mass(), 70)
+
+    def test_push_moves_clay_out_of_a_tool_exactly(self):
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (15, 7, 15)), mass=1000)
+        auto = vdbclay.Automaton(clay)
+        r = auto.push([vdbclay.box((4, 5, 4), (11, 12, 11))])
+        self.assertEqual(r["voxels_pushed"], 8 * 3 * 8)
+        self.assertEqual(auto.total_mass, 16 * 8 * 16 * 1000)
+        self.assertEqual(int(clay.mass_array(min=(4, 5, 4), max=(11, 7, 11)).sum()), 0)
+
+
+class FilesAndScenes(unittest.TestCase):
+    def test_write_read_round_trip_keeps_clay_and_metadata(self):
+        d = tmpdir()
+        clay = vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 4), mass=250, threshold=250, voxel_size=0.5)
+        path = os.path.join(d, "ball.vdb")
+        clay.write(path)
+        back = vdbclay.read(path)
+        self.assertEqual(back.content_hash(), clay.content_hash())
+        self.assertEqual(back.threshold, 250)
+        self.assertEqual(back.voxel_size, 0.5)
+        self.assertIn("vdbclay_threshold", vdbclay.describe(path))
+        mesh = os.path.join(d, "ball.obj")
+        back.write_mesh(mesh)
+        with open(mesh) as f:
+            self.assertTrue(f.read().startswith("# vdbclay"))
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.read(os.path.join(d, "missing.vdb"))
+        self.assertIn("missing.vdb", str(e.exception))
+
+    def test_scene_runs_frame_by_frame_with_progress_and_continues_from_its_file(self):
+        d = tmpdir()
+        scene = vdbclay.Scene.default()
+        scene.frames = 4
+        unbroken = vdbclay.Sculptor(scene, threads=2)
+        initial = unbroken.total_mass
+        self.assertGreater(initial, 0)
+        seen = []
+        n = unbroken.run(progress=lambda r: seen.append((r["frame"], r["total_frames"])))
+        self.assertEqual(n, 4)
+        self.assertEqual(seen, [(1, 4), (2, 4), (3, 4), (4, 4)])
+        self.assertEqual(unbroken.total_mass, initial)
+
+        first = vdbclay.Sculptor(scene, threads=1)
+        self.assertEqual(first.run(frames=2), 2)
+        path = os.path.join(d, "half.vdb")
+        first.write(path)
+        scene.start = path
+        second = vdbclay.Sculptor(scene, threads=2)
+        self.assertEqual(second.frame, 2)
+        second.run_frame()
+        second.run(progress=lambda r: None)
+        self.assertTrue(second.done)
+        self.assertEqual(second.clay.content_hash(), unbroken.clay.content_hash())
+
+    def test_progress_returning_false_stops(self):
+        scene = vdbclay.Scene.default()
+        s = vdbclay.Sculptor(scene)
+        self.assertEqual(s.run(progress=lambda r: False), 1)
+        self.assertEqual(s.frame, 1)
+
+    def test_bad_scene_is_an_error_naming_the_field(self):
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.Scene.from_json('{"threshold": -5}', source="bad.json")
+        self.assertIn("bad.json", str(e.exception))
+        self.assertIn("threshold", str(e.exception))
+
+
+if __name__ == "__main__":
+    unittest.main()

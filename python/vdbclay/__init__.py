@@ -1,0 +1,22 @@
+"""vdbclay: virtual clay on sparse OpenVDB grids (Druon, Crosnier, Brigandat 2003).
+
+Clay is an exact integer mass per voxel; a cellular automaton moves the excess of cells over Tc to
+cells under it. Coordinates are voxel indices (y up); numpy arrays are dense boxes indexed
+[x, y, z]. See docs/INTEROP.md and help(vdbclay.Automaton), help(vdbclay.Sculptor), ...
+"""
+import ctypes
+import ctypes.util
+
+# libopenvdb must be loaded before the extension's libvdbclay: Python loads extensions with
+# RTLD_LOCAL, and when libvdbclay's copies of OpenVDB's template statics (GNU unique symbols such as
+# the tree type names) are registered first, openvdb::initialize() reads a name never set and
+# crashes. Loading libopenvdb on its own first makes its copies the ones everybody uses.
+_openvdb = ctypes.util.find_library("openvdb")
+if _openvdb:
+    try:
+        ctypes.CDLL(_openvdb)
+    except OSError:
+        pass
+
+from ._vdbclay import *  # noqa: E402,F401,F403
+from ._vdbclay import Error, __version__  # noqa: E402,F401

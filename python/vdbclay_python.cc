@@ -1,0 +1,629 @@
+// The Python module `vdbclay` (pybind11): scenes, the automaton, shapes, clay files, numpy arrays.
+//
+// One translation unit over the C++ library. Clay crosses the boundary as a `Clay` object: the
+// Int32 mass grid (shared, not copied) and the metadata a clay file records (Tc, dimensions, voxel
+// size, ...). numpy arrays are dense boxes indexed [x, y, z]; the sparse grid never becomes dense
+// unless asked for a box. Long calls (steps, settling, frames) release the GIL; progress callbacks
+// run between frames with the GIL held, and Ctrl-C (KeyboardInterrupt) is honoured between frames.
+// Errors from the library arrive as vdbclay.Error (a RuntimeError) with the library's message.
+#include <vdbclay/Automaton.h>
+#include <vdbclay/IO.h>
+#include <vdbclay/Metrics.h>
+#include <vdbclay/Push.h>
+#include <vdbclay/Render.h>
+#include <vdbclay/Scene.h>
+#include <vdbclay/Sculpt.h>
+#include <vdbclay/Shapes.h>
+
+#include <openvdb/openvdb.h>
+
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <climits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace py = pybind11;
+using namespace vdbclay;
+
+namespace {
+
+/// Clay as Python sees it: the exact mass grid and what a clay file records beside it.
+struct Clay {
+    MassGridPtr mass;
+    ClayMeta meta;
+};
+
+using Int3 = std::array<int32_t, 3>;
+
+Box boxOf(const Int3& lo, const Int3& hi)
+{
+    Box b;
+    b.min = lo;
+    b.max = hi;
+    return b;
+}
+
+/// The active voxels' bounding box, or the box the caller gave.
+Box regionOf(const Clay& c, const std::optional<Int3>& lo, const std::optional<Int3>& hi)
+{
+    if (lo.has_value() != hi.has_value()) throw Error("give both min and max, or neither");
+    if (lo) {
+        const Box b = boxOf(*lo, *hi);
+        if (b.empty()) throw Error("min must not exceed max");
+        return b;
+    }
+    const openvdb::CoordBBox bb = c.mass->evalActiveVoxelBoundingBox();
+    if (bb.empty()) return Box();
+    return boxOf({bb.min().x(), bb.min().y(), bb.min().z()}, {bb.max().x(), bb.max().y(), bb.max().z()});
+}
+
+std::array<py::ssize_t, 3> shapeOf(const Box& b)
+{
+    if (b.empty()) return {0, 0, 0};
+    std::array<py::ssize_t, 3> s;
+    for (int a = 0; a < 3; ++a)
+        s[a] = py::ssize_t(int64_t(b.max[a]) - b.min[a] + 1);
+    if (s[0] * s[1] * s[2] > (py::ssize_t(1) << 32)) {
+        throw Error("the box holds more than 2^32 voxels; ask for a smaller box (min, max)");
+    }
+    return s;
+}
+
+template <typename T, typename F> py::array_t<T> dense(const Clay& c, const Box& b, F value)
+{
+    const auto s = shapeOf(b);
+    py::array_t<T> out({s[0], s[1], s[2]});
+    auto r = out.template mutable_unchecked<3>();
+    auto acc = c.mass->getConstAccessor();
+    for (py::ssize_t x = 0; x < s[0]; ++x)
+        for (py::ssize_t y = 0; y < s[1]; ++y)
+            for (py::ssize_t z = 0; z < s[2]; ++z)
+                r(x, y, z) = value(acc.getValue(
+                    openvdb::Coord(b.min[0] + int32_t(x), b.min[1] + int32_t(y), b.min[2] + int32_t(z))));
+    return out;
+}
+
+/// Writes @a a (int, any integer dtype that fits int32) into @a grid at @a origin: replacing the
+/// box's values, or adding to them; refuses negative results and int32 overflow before writing.
+Box writeArray(MassGrid& grid, const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& a,
+               const Int3& origin, bool add)
+{
+    if (a.ndim() != 3)
+        throw Error("expected a 3D array indexed [x, y, z], got " + std::to_string(a.ndim()) + "D");
+    auto r = a.unchecked<3>();
+    Box b;
+    for (int i = 0; i < 3; ++i) {
+        b.min[i] = origin[i];
+        const int64_t hi = int64_t(origin[i]) + int64_t(a.shape(i)) - 1;
+        if (hi > INT32_MAX) throw Error("the array reaches past the coordinate range");
+        b.max[i] = int32_t(hi);
+    }
+    auto acc = grid.getAccessor();
+    auto check = [&](bool apply) {
+        for (py::ssize_t x = 0; x < a.shape(0); ++x)
+            for (py::ssize_t y = 0; y < a.shape(1); ++y)
+                for (py::ssize_t z = 0; z < a.shape(2); ++z) {
+                    const openvdb::Coord c(origin[0] + int32_t(x), origin[1] + int32_t(y),
+                                           origin[2] + int32_t(z));
+                    const int64_t v = r(x, y, z) + (add ? int64_t(acc.getValue(c)) : 0);
+                    if (!apply) {
+                        if (v < 0 || v > INT32_MAX) {
+                            throw Error("voxel (" + std::to_string(c.x()) + ", " + std::to_string(c.y()) +
+                                        ", " + std::to_string(c.z()) + ") would hold " + std::to_string(v) +
+                                        ", outside [0, 2^31 - 1]");
+                        }
+                    } else if (v != 0) {
+                        acc.setValueOn(c, int32_t(v));
+                    } else if (acc.isValueOn(c)) {
+                        acc.setValueOff(c, 0);
+                    }
+                }
+    };
+    check(false);
+    check(true);
+    return b;
+}
+
+py::dict stepDict(const StepReport& r)
+{
+    py::dict d;
+    d["steps"] = r.steps;
+    d["blocks_visited"] = r.blocksVisited;
+    d["blocks_updated"] = r.blocksUpdated;
+    d["leaves_created"] = r.leavesCreated;
+    d["residual_overload"] = r.residualOverload;
+    d["settled"] = r.settled;
+    d["reason"] = stopReasonName(r.reason);
+    d["seconds"] = r.seconds.total();
+    return d;
+}
+
+py::dict pushDict(const PushReport& r)
+{
+    py::dict d;
+    d["voxels_pushed"] = r.voxelsPushed;
+    d["mass_moved"] = r.massMoved;
+    d["voxels_trapped"] = r.voxelsTrapped;
+    d["mass_trapped"] = r.massTrapped;
+    return d;
+}
+
+py::dict frameDict(const FrameReport& r)
+{
+    py::dict d;
+    d["frame"] = r.frame;
+    d["push"] = pushDict(r.push);
+    d["settle"] = stepDict(r.settle);
+    d["finished"] = r.finished;
+    return d;
+}
+
+Vec3 vec(const std::array<double, 3>& v)
+{
+    return Vec3{{v[0], v[1], v[2]}};
+}
+
+/// A shape for Python (pybind11 holders cannot be shared_ptr<const T>).
+struct PyShape {
+    ShapePtr shape;
+};
+
+/// An Automaton that keeps its Clay's metadata beside it.
+struct PyAutomaton {
+    std::unique_ptr<Automaton> automaton;
+    Clay clay;
+};
+
+/// A Sculptor and the scene it runs.
+struct PySculptor {
+    std::unique_ptr<Sculptor> sculptor;
+};
+
+Clay sculptorClay(const Sculptor& s)
+{
+    Clay c;
+    c.mass = s.mass();
+    c.meta = s.checkpointMeta();
+    return c;
+}
+
+} // namespace
+
+PYBIND11_MODULE(_vdbclay, m)
+{
+    openvdb::initialize();
+    m.doc() = "vdbclay: virtual clay on sparse OpenVDB grids (Druon, Crosnier, Brigandat 2003).\n\n"
+              "Clay is an exact integer mass per voxel; a cellular automaton moves the excess of cells "
+              "over Tc to cells under it. Coordinates are voxel indices (y up unless a scene says "
+              "otherwise); numpy arrays are dense boxes indexed [x, y, z].";
+    py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+    m.attr("Error").attr("__doc__") = "Every error vdbclay reports: bad input, refused states, I/O failures.";
+    m.attr("__version__") = VDBCLAY_VERSION;
+
+    // ---- shapes ----------------------------------------------------------------------------------
+    py::class_<PyShape>(m, "Shape",
+                        "A signed distance field in voxel index space (negative inside). Made by "
+                        "sphere(), box(), cylinder(), capsule(), mesh(), level_set().")
+        .def(
+            "distance", [](const PyShape& s, std::array<double, 3> p) { return s.shape->distance(vec(p)); },
+            py::arg("p"), "Signed distance at index-space point p (voxel units).")
+        .def_property_readonly(
+            "bounds",
+            [](const PyShape& s) {
+                const Box b = s.shape->bounds();
+                return py::make_tuple(b.min, b.max);
+            },
+            "(min, max): a voxel box holding every voxel whose centre is inside.")
+        .def(
+            "moved",
+            [](const PyShape& ps, std::array<double, 3> translate, std::array<double, 3> rotate,
+               std::optional<std::array<double, 3>> pivot) {
+                const ShapePtr& s = ps.shape;
+                Pose p;
+                p.translation = vec(translate);
+                p.rotationDeg = vec(rotate);
+                if (pivot) {
+                    p.pivot = vec(*pivot);
+                } else {
+                    const Box b = s->bounds();
+                    for (int a = 0; a < 3; ++a)
+                        p.pivot[a] = 0.5 * (double(b.min[a]) + double(b.max[a]));
+                }
+                return PyShape{makeTransformed(s, p)};
+            },
+            py::arg("translate") = std::array<double, 3>{0, 0, 0},
+            py::arg("rotate") = std::array<double, 3>{0, 0, 0}, py::arg("pivot") = py::none(),
+            "This shape rotated (degrees about x, then y, then z, around pivot; default the centre of its "
+            "bounds), then translated (voxels).")
+        .def(
+            "placed",
+            [](const PyShape& s, std::array<double, 3> translate, std::array<double, 3> rotate,
+               py::object scale, std::array<double, 3> pivot) {
+                Placement pl;
+                pl.translate = vec(translate);
+                pl.rotateDeg = vec(rotate);
+                pl.pivot = vec(pivot);
+                if (py::isinstance<py::float_>(scale) || py::isinstance<py::int_>(scale)) {
+                    const double k = scale.cast<double>();
+                    pl.scale = {{k, k, k}};
+                } else {
+                    pl.scale = vec(scale.cast<std::array<double, 3>>());
+                }
+                return PyShape{makePlaced(s.shape, pl)};
+            },
+            py::arg("translate") = std::array<double, 3>{0, 0, 0},
+            py::arg("rotate") = std::array<double, 3>{0, 0, 0}, py::arg("scale") = 1.0,
+            py::arg("pivot") = std::array<double, 3>{0, 0, 0},
+            "A scene's \"transform\": scale (number or per axis) about pivot, rotate, translate.")
+        .def("__repr__", [](const PyShape& s) { return "<vdbclay.Shape " + s.shape->describe() + ">"; });
+
+    m.def(
+        "sphere", [](std::array<double, 3> c, double r) { return PyShape{makeSphere(vec(c), r)}; },
+        py::arg("center"), py::arg("radius"), "A ball of radius (voxels) around center (voxel indices).");
+    m.def(
+        "box",
+        [](std::array<double, 3> lo, std::array<double, 3> hi) { return PyShape{makeBox(vec(lo), vec(hi))}; },
+        py::arg("min"), py::arg("max"), "The voxels min..max, inclusive.");
+    m.def(
+        "cylinder",
+        [](std::array<double, 3> c, double r, double h, int axis) {
+            return PyShape{makeCylinder(vec(c), r, h, axis)};
+        },
+        py::arg("center"), py::arg("radius"), py::arg("height"), py::arg("axis") = 1,
+        "A cylinder along axis 0 (x), 1 (y) or 2 (z).");
+    m.def(
+        "capsule",
+        [](std::array<double, 3> a, std::array<double, 3> b, double r) {
+            return PyShape{makeCapsule(vec(a), vec(b), r)};
+        },
+        py::arg("a"), py::arg("b"), py::arg("radius"), "All points within radius of the segment a-b.");
+    m.def(
+        "mesh",
+        [](const std::string& path, double vs, const std::string& up) {
+            return PyShape{loadMesh(path, vs, parseUpAxis(up))};
+        },
+        py::arg("path"), py::arg("voxel_size") = 1.0, py::arg("up") = "y",
+        "A closed triangle mesh (OBJ or STL) in world units with up axis 'y' or 'z', at voxel_size world "
+        "units per voxel.");
+    m.def(
+        "level_set",
+        [](const std::string& path, double vs, const std::string& grid, const std::string& up) {
+            return PyShape{loadLevelSet(path, vs, grid, parseUpAxis(up))};
+        },
+        py::arg("path"), py::arg("voxel_size") = 1.0, py::arg("grid") = "", py::arg("up") = "y",
+        "A FloatGrid level set from a .vdb (grid: its name; empty: the first level set).");
+
+    // ---- clay ------------------------------------------------------------------------------------
+    py::class_<Clay>(m, "Clay",
+                     "Clay: an exact Int32 mass per voxel and what a clay .vdb records with it (Tc, "
+                     "dimensions, voxel size, rule, seed, steps, frames).")
+        .def_property_readonly(
+            "threshold", [](const Clay& c) { return c.meta.rule.threshold; }, "Tc")
+        .def_property_readonly("dimensions", [](const Clay& c) { return c.meta.dimensions; })
+        .def_property_readonly("voxel_size", [](const Clay& c) { return c.meta.voxelSize; })
+        .def_property(
+            "up", [](const Clay& c) { return std::string(upAxisName(c.meta.up)); },
+            [](Clay& c, const std::string& up) { c.meta.up = parseUpAxis(up); },
+            "'y' or 'z': the up axis written into the file's transform (and meshes).")
+        .def_property_readonly("rule", [](const Clay& c) { return std::string(ruleName(c.meta.rule.rule)); })
+        .def_property_readonly("seed", [](const Clay& c) { return c.meta.seed; })
+        .def_property_readonly("steps", [](const Clay& c) { return c.meta.steps; })
+        .def_property_readonly("frames", [](const Clay& c) { return c.meta.frames; })
+        .def(
+            "total_mass", [](const Clay& c) { return totalMass(*c.mass); },
+            "Sum of all voxels' mass (exact).")
+        .def(
+            "voxel_count", [](const Clay& c) { return clayVoxelCount(*c.mass); }, "Voxels holding clay.")
+        .def(
+            "content_hash", [](const Clay& c) { return contentHash(*c.mass); },
+            "A hash of every voxel's coordinates and mass: equal hashes, equal clay.")
+        .def_property_readonly(
+            "bounds",
+            [](const Clay& c) {
+                const Box b = regionOf(c, std::nullopt, std::nullopt);
+                return py::make_tuple(b.min, b.max);
+            },
+            "(min, max) of the voxels holding clay (inclusive); min > max when there is none.")
+        .def(
+            "mass_array",
+            [](const Clay& c, std::optional<Int3> lo, std::optional<Int3> hi) {
+                const Box b = regionOf(c, lo, hi);
+                return dense<int32_t>(c, b, [](int32_t v) { return v; });
+            },
+            py::arg("min") = py::none(), py::arg("max") = py::none(),
+            "The mass of the box min..max (default: the clay's bounds) as an int32 array [x, y, z].")
+        .def(
+            "density_array",
+            [](const Clay& c, std::optional<Int3> lo, std::optional<Int3> hi) {
+                const Box b = regionOf(c, lo, hi);
+                const double tc = c.meta.rule.threshold;
+                return dense<float>(c, b, [tc](int32_t v) { return float(double(v) / tc); });
+            },
+            py::arg("min") = py::none(), py::arg("max") = py::none(),
+            "mass / Tc over the box min..max (default: the clay's bounds) as a float32 array [x, y, z].")
+        .def(
+            "copy",
+            [](const Clay& c) {
+                return Clay{c.mass->deepCopy(), c.meta};
+            },
+            "An independent copy.")
+        .def(
+            "write", [](const Clay& c, const std::string& path) { writeClayFile(path, *c.mass, c.meta); },
+            py::arg("path"),
+            "Writes a clay .vdb (grids mass, density, surface; atomically) with this clay's metadata.")
+        .def(
+            "write_mesh",
+            [](const Clay& c, const std::string& path, double iso) {
+                // In world units through this clay's voxel size and up axis, like write().
+                MassGridPtr view = c.mass->copy(); // shares the tree
+                setClayTransform(*view, c.meta.voxelSize, c.meta.up);
+                writeSurfaceMesh(path, *view, c.meta.rule.threshold, iso);
+            },
+            py::arg("path"), py::arg("isovalue") = 0.5,
+            "Writes the surface where density = isovalue as .obj or .ply, in world units.")
+        .def(
+            "render",
+            [](const Clay& c, const std::string& path, int width, int height, double az, double el) {
+                RenderOptions o;
+                o.width = width;
+                o.height = height;
+                o.azimuthDeg = az;
+                o.elevationDeg = el;
+                renderPng(path, *c.mass, c.meta.rule.threshold, c.meta.dimensions, o);
+            },
+            py::arg("path"), py::arg("width") = 800, py::arg("height") = 600, py::arg("azimuth") = 35.0,
+            py::arg("elevation") = 25.0, "Renders a PNG (2D: density map; 3D: shaded surface).")
+        .def("__repr__", [](const Clay& c) {
+            return "<vdbclay.Clay " + std::to_string(clayVoxelCount(*c.mass)) + " voxels, mass " +
+                   std::to_string(totalMass(*c.mass)) + ", Tc " + std::to_string(c.meta.rule.threshold) + ">";
+        });
+
+    m.def(
+        "from_array",
+        [](const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& a, Int3 origin,
+           int32_t threshold, double voxelSize, int dimensions) {
+            RuleParams rp;
+            rp.threshold = threshold;
+            validate(rp);
+            Clay c;
+            c.mass = openvdb::Int32Grid::create(0);
+            c.mass->setName("mass");
+            writeArray(*c.mass, a, origin, false);
+            c.meta.rule = rp;
+            c.meta.voxelSize = voxelSize;
+            c.meta.dimensions = dimensions;
+            return c;
+        },
+        py::arg("mass"), py::arg("origin") = Int3{0, 0, 0}, py::arg("threshold") = 1000,
+        py::arg("voxel_size") = 1.0, py::arg("dimensions") = 3,
+        "Clay from a dense integer array [x, y, z] whose element [0, 0, 0] is voxel origin.");
+    m.def(
+        "make_clay",
+        [](const PyShape& s, int32_t mass, int dimensions, int32_t threshold, double voxelSize,
+           const std::string& up) {
+            Clay c;
+            c.meta.up = parseUpAxis(up);
+            c.mass = makeClay(*s.shape, mass, dimensions);
+            c.meta.rule.threshold = threshold;
+            validate(c.meta.rule);
+            c.meta.dimensions = dimensions;
+            c.meta.voxelSize = voxelSize;
+            return c;
+        },
+        py::arg("shape"), py::arg("mass"), py::arg("dimensions") = 3, py::arg("threshold") = 1000,
+        py::arg("voxel_size") = 1.0, py::arg("up") = "y",
+        "Clay of `mass` per voxel in every voxel whose centre is inside shape.");
+    m.def(
+        "read",
+        [](const std::string& path, const std::string& grid) {
+            ClayFile f = readClayFile(path, grid);
+            f.mass->tree().voxelizeActiveTiles();
+            return Clay{f.mass, f.meta};
+        },
+        py::arg("path"), py::arg("grid") = "mass", "Reads a clay .vdb (the Int32 grid, with its metadata).");
+    m.def("describe", &describeVdb, py::arg("path"), "What `vdbclay info` prints about any .vdb.");
+
+    // ---- the automaton ---------------------------------------------------------------------------
+    py::class_<PyAutomaton>(m, "Automaton",
+                            "The cellular automaton on a Clay (shares its grid: the clay changes in place).")
+        .def(py::init([](const Clay& clay, std::optional<std::string> rule, std::optional<int32_t> threshold,
+                         std::optional<double> alpha, uint64_t seed, int threads) {
+                 auto a = std::make_unique<PyAutomaton>();
+                 a->clay = clay;
+                 AutomatonOptions o;
+                 o.dimensions = clay.meta.dimensions;
+                 o.rule = clay.meta.rule;
+                 if (rule) o.rule.rule = parseRule(*rule);
+                 if (threshold) o.rule.threshold = *threshold;
+                 if (alpha) o.rule.alpha = *alpha;
+                 o.seed = seed;
+                 o.threads = threads;
+                 a->clay.meta.rule = o.rule;
+                 a->clay.meta.seed = seed;
+                 a->automaton = std::make_unique<Automaton>(clay.mass, o);
+                 return a;
+             }),
+             py::arg("clay"), py::arg("rule") = py::none(), py::arg("threshold") = py::none(),
+             py::arg("alpha") = py::none(), py::arg("seed") = 0, py::arg("threads") = 0,
+             "rule (arata, bingham, sorted, prorata), threshold (Tc) and alpha default to the clay's.")
+        .def(
+            "step",
+            [](PyAutomaton& a) {
+                StepReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = a.automaton->step();
+                }
+                return stepDict(r);
+            },
+            "One step of the current Margolus phase; returns a report dict.")
+        .def(
+            "run",
+            [](PyAutomaton& a, uint64_t n) {
+                StepReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = a.automaton->run(n);
+                }
+                return stepDict(r);
+            },
+            py::arg("n"), "n steps.")
+        .def(
+            "settle",
+            [](PyAutomaton& a, uint64_t maxSteps, int64_t tolerance) {
+                StepReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = a.automaton->settle(maxSteps, tolerance);
+                }
+                return stepDict(r);
+            },
+            py::arg("max_steps") = 100000, py::arg("tolerance") = 0,
+            "Steps until settled, residual overload <= tolerance, or max_steps; returns a report dict.")
+        .def(
+            "add_mass",
+            [](PyAutomaton& a, const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& arr,
+               Int3 origin) {
+                // Checked on a copy of the box first, so a refused edit changes nothing.
+                Box region;
+                for (int i = 0; i < 3; ++i) {
+                    region.min[i] = origin[i];
+                    region.max[i] = int32_t(int64_t(origin[i]) + (arr.ndim() == 3 ? arr.shape(i) : 1) - 1);
+                }
+                auto probe = openvdb::Int32Grid::create(0);
+                auto src = a.automaton->mass()->getConstAccessor();
+                auto dst = probe->getAccessor();
+                for (int x = region.min[0]; x <= region.max[0]; ++x)
+                    for (int y = region.min[1]; y <= region.max[1]; ++y)
+                        for (int z = region.min[2]; z <= region.max[2]; ++z) {
+                            const openvdb::Coord c(x, y, z);
+                            if (src.isValueOn(c)) dst.setValueOn(c, src.getValue(c));
+                        }
+                writeArray(*probe, arr, origin, true);
+                a.automaton->edit(region, [&](MassGrid& g) { writeArray(g, arr, origin, true); });
+            },
+            py::arg("mass"), py::arg("origin") = Int3{0, 0, 0},
+            "Adds a dense integer array [x, y, z] (negative entries remove clay) at origin, through "
+            "Automaton.edit, so the automaton wakes there. Refused, changing nothing, if a voxel would go "
+            "negative or overflow.")
+        .def(
+            "push",
+            [](PyAutomaton& a, const std::vector<PyShape>& tools, int maxSearch) {
+                std::vector<ShapePtr> t;
+                for (const PyShape& s : tools)
+                    t.push_back(s.shape);
+                return pushDict(push(*a.automaton, t, maxSearch));
+            },
+            py::arg("tools"), py::arg("max_search") = 16,
+            "The paper's push: clay inside the tools moves out along their normals (mass exact).")
+        .def_property_readonly(
+            "clay",
+            [](const PyAutomaton& a) {
+                Clay c = a.clay;
+                c.meta.steps = a.automaton->stepCount();
+                return c;
+            },
+            "The clay (the same grid: it keeps changing as the automaton steps).")
+        .def_property_readonly("step_count", [](const PyAutomaton& a) { return a.automaton->stepCount(); })
+        .def_property_readonly("total_mass", [](const PyAutomaton& a) { return a.automaton->totalMass(); })
+        .def_property_readonly("residual_overload",
+                               [](const PyAutomaton& a) { return a.automaton->residualOverload(); })
+        .def_property_readonly("settled", [](const PyAutomaton& a) { return a.automaton->settled(); });
+
+    // ---- scenes ----------------------------------------------------------------------------------
+    py::class_<Scene>(m, "Scene", "A scene (docs/SCENES.md): clay, tools with paths, obstacles, settling.")
+        .def_static("load", &loadScene, py::arg("path"), "Reads a scene .json file.")
+        .def_static(
+            "from_json",
+            [](const std::string& text, const std::string& source, const std::string& baseDir) {
+                return parseScene(text, source, baseDir);
+            },
+            py::arg("text"), py::arg("source") = "<python>", py::arg("base_dir") = ".",
+            "Parses scene JSON text; relative file names resolve against base_dir.")
+        .def_static("default", &defaultScene, "The built-in default scene (a cube pressed by a plate).")
+        .def_readonly("source", &Scene::source)
+        .def_readwrite("seed", &Scene::seed)
+        .def_readwrite("frames", &Scene::frames, "Frames to run.")
+        .def_readwrite("start", &Scene::start, "A clay .vdb to continue from (empty: none).")
+        .def_readonly("dimensions", &Scene::dimensions)
+        .def_readonly("voxel_size", &Scene::voxelSize)
+        .def_property_readonly("up", [](const Scene& s) { return std::string(upAxisName(s.up)); })
+        .def_property(
+            "threshold", [](const Scene& s) { return s.rule.threshold; },
+            [](Scene& s, int32_t t) { s.rule.threshold = t; }, "Tc")
+        .def_property(
+            "rule", [](const Scene& s) { return std::string(ruleName(s.rule.rule)); },
+            [](Scene& s, const std::string& r) { s.rule.rule = parseRule(r); })
+        .def_property_readonly("outputs", [](const Scene& s) {
+            py::dict d;
+            d["vdb"] = s.outputs.vdb;
+            d["png"] = s.outputs.png;
+            d["mesh"] = s.outputs.mesh;
+            d["stats"] = s.outputs.stats;
+            return d;
+        });
+
+    py::class_<PySculptor>(m, "Sculptor", "Runs a scene frame by frame: move the tools, push, settle.")
+        .def(py::init([](const Scene& s, int threads) {
+                 auto p = std::make_unique<PySculptor>();
+                 p->sculptor = std::make_unique<Sculptor>(s, threads);
+                 return p;
+             }),
+             py::arg("scene"), py::arg("threads") = 0)
+        .def(
+            "run_frame",
+            [](PySculptor& p) {
+                FrameReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = p.sculptor->runFrame();
+                }
+                return frameDict(r);
+            },
+            "Runs the next frame; returns a report dict (frame, push, settle).")
+        .def(
+            "run",
+            [](PySculptor& p, uint64_t frames, const std::function<py::object(py::dict)>& progress) {
+                uint64_t n = 0;
+                while (!p.sculptor->done() && (frames == 0 || n < frames)) {
+                    FrameReport r;
+                    {
+                        py::gil_scoped_release nogil;
+                        r = p.sculptor->runFrame();
+                    }
+                    ++n;
+                    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+                    if (progress) {
+                        py::dict d = frameDict(r);
+                        d["total_frames"] = p.sculptor->totalFrames();
+                        const py::object go = progress(d);
+                        if (!go.is_none() && !go.cast<bool>()) break;
+                    }
+                }
+                return n;
+            },
+            py::arg("frames") = 0, py::arg("progress") = nullptr,
+            "Runs up to `frames` frames (0: all left). progress(report) is called after each frame with "
+            "the frame's report and total_frames; returning False stops. Returns the frames run.")
+        .def_property_readonly(
+            "clay", [](const PySculptor& p) { return sculptorClay(*p.sculptor); },
+            "The clay now (shares the grid), with metadata to continue from a file.")
+        .def(
+            "write",
+            [](const PySculptor& p, const std::string& path) {
+                const Clay c = sculptorClay(*p.sculptor);
+                writeClayFile(path, *c.mass, c.meta);
+            },
+            py::arg("path"), "Writes the clay as a .vdb that a scene's \"start\" continues exactly.")
+        .def_property_readonly("done", [](const PySculptor& p) { return p.sculptor->done(); })
+        .def_property_readonly("frame", [](const PySculptor& p) { return p.sculptor->frame(); })
+        .def_property_readonly("total_frames", [](const PySculptor& p) { return p.sculptor->totalFrames(); })
+        .def_property_readonly("total_mass",
+                               [](PySculptor& p) { return p.sculptor->automaton().totalMass(); });
+}
