@@ -119,7 +119,7 @@ constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 /// Scene::sweep: at most this many sub-steps per frame.
 constexpr int kMaxSweepSubsteps = 256;
 /// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
-constexpr double kReachPerContact = 2.0;
+constexpr double kReachPerContact = 1.0;
 
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88;
 
