@@ -342,7 +342,8 @@ int runScene(const RunArgs& a)
               << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
               << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
               << sculptor.frame() + 1 << ".." << sculptor.totalFrames() << "\n";
-    if (!a.quiet && (scene.push != vdbclay::PushMode::Surface || scene.transport != vdbclay::Transport::Local || scene.sweep))
+    const bool paperModel = scene.push == vdbclay::PushMode::Surface && scene.transport == vdbclay::Transport::Local;
+    if (!a.quiet && (!paperModel || scene.sweep))
         std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "") << ", transport "
                   << vdbclay::transportName(scene.transport) << "\n";
     if (!a.quiet) {
@@ -502,7 +503,8 @@ int main(int argc, char** argv)
                     "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
     run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
     run->add_option("--push", ra.push, "override the scene's push: surface (the paper's) or compress");
-    run->add_option("--transport", ra.transport, "override the scene's transport: local (the paper's automaton) or global");
+    run->add_option("--transport", ra.transport,
+                    "override the scene's transport: local (the paper's automaton) or global");
     run->add_option("--sweep", ra.sweep, "override the scene's sweep: on (push over the volume a tool sweeps) or off");
     run->add_option("--memory-budget", ra.memoryBudget,
                     "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)");

@@ -19,9 +19,9 @@
 // Sources are inside a tool and targets outside all tools, so no voxel is both; the plan depends only
 // on the grid, the tools and the source order: deterministic.
 //
-// The compress push (PushMode::Compress) changes step 3 only. When the march's target is full clay
-// (m * 10 >= 9 Tc, in the grid before the push), the march goes on along the normal, collecting the
-// contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact depth:
+// The compress push (PushMode::Compress) changes step 3 only. When the march's target is clay
+// (m * 10 >= 3 Tc, in the grid before the push: "full" below), the march goes on along the normal,
+// collecting the contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact depth:
 // round(sqrt(voxels that tool entered this push)) in 3D, their number in 2D, at least 1. The
 // source's clay m is shared over those k voxels: m / k each, the remainder m % k as +1 to the
 // first voxels (nearest the tool). So a plate wider than the clay compresses every column of it

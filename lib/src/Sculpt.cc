@@ -110,7 +110,7 @@ constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 /// Scene::sweep: at most this many sub-steps per frame.
 constexpr int kMaxSweepSubsteps = 256;
 /// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
-constexpr double kReachPerContact = 2.0;
+constexpr double kReachPerContact = 1.0;
 
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88;
 
@@ -566,7 +566,8 @@ struct Sculptor::Impl {
                 const Box bb = t.shape.shape->bounds();
                 if (bb.empty()) continue;
                 for (int corner = 0; corner < 8; ++corner) {
-                    const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]), double(corner & 2 ? bb.max[1] : bb.min[1]),
+                    const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]),
+                                  double(corner & 2 ? bb.max[1] : bb.min[1]),
                                   double(corner & 4 ? bb.max[2] : bb.min[2])}};
                     const Vec3 pa = a.apply(p), pb = b.apply(p);
                     const double d = std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +

@@ -55,7 +55,7 @@ struct GlobalTransportReport {
 /// (m >= Tc, connected by faces, not obstacles) to cells with room, in integers: a pressure p
 /// solves the obstacle problem (Laplace p = m - Tc on the full cells and on every cell that would
 /// receive more than its room; p = 0 on the others; no flux into obstacles), by active-set rounds
-/// of Jacobi-preconditioned conjugate gradients; then every solved cell, in order of decreasing p,
+/// of MIC(0)-preconditioned conjugate gradients; then every solved cell, in order of decreasing p,
 /// sends its integer excess to its lower-p face neighbours pro rata of the drop (largest-remainder
 /// rounding). Every solved cell that had excess ends at exactly Tc; mass is exact by construction;
 /// obstacles are never entered or crossed. Deterministic for any thread count. Written through
