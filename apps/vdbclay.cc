@@ -43,7 +43,10 @@ struct DemoArgs {
     std::string out;
 };
 
-std::string printable(const std::string& text) { return vdbclay::printableText(text); }
+std::string printable(const std::string& text)
+{
+    return vdbclay::printableText(text);
+}
 
 /// A file an option names, as messages refer to it: "-o out.vdb".
 struct FileArg {
@@ -65,7 +68,8 @@ std::string fileIdentity(const std::string& path)
     const auto slash = path.find_last_of('/');
     const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
     const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
-    if (::stat(dir.c_str(), &st) == 0) return "d" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino) + "/" + name;
+    if (::stat(dir.c_str(), &st) == 0)
+        return "d" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino) + "/" + name;
     return "p" + path;
 }
 
@@ -81,7 +85,8 @@ void checkWritable(const FileArg& o)
     if (::stat(path.c_str(), &st) == 0) {
         if (S_ISDIR(st.st_mode)) throw vdbclay::Error(o.text() + ": is a directory, expected a file name");
         if (!S_ISREG(st.st_mode)) {
-            if (::access(path.c_str(), W_OK) != 0) throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+            if (::access(path.c_str(), W_OK) != 0)
+                throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
             return;
         }
         if (char* real = ::realpath(path.c_str(), nullptr)) { // a link: the file it points to is replaced
@@ -107,7 +112,8 @@ struct InputArg {
 };
 void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputArg>& inputs)
 {
-    for (const FileArg& o : outputs) checkWritable(o);
+    for (const FileArg& o : outputs)
+        checkWritable(o);
     for (size_t i = 0; i < outputs.size(); ++i) {
         if (outputs[i].path.empty()) continue;
         const std::string id = fileIdentity(outputs[i].path);
@@ -120,8 +126,11 @@ void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputAr
         }
         for (const InputArg& in : inputs) {
             if (in.file.path.empty() || fileIdentity(in.file.path) != id) continue;
-            if (std::find(in.mayReplace.begin(), in.mayReplace.end(), outputs[i].option) != in.mayReplace.end()) continue;
-            throw vdbclay::Error(outputs[i].text() + ": that is " + in.file.text() + "; refusing to write over an input");
+            if (std::find(in.mayReplace.begin(), in.mayReplace.end(), outputs[i].option) !=
+                in.mayReplace.end())
+                continue;
+            throw vdbclay::Error(outputs[i].text() + ": that is " + in.file.text() +
+                                 "; refusing to write over an input");
         }
     }
 }
@@ -132,8 +141,10 @@ void checkMeshName(const FileArg& o)
     if (o.path.empty()) return;
     const auto slash = o.path.find_last_of('/');
     const auto dot = o.path.find_last_of('.');
-    std::string ext = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : o.path.substr(dot);
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    std::string ext =
+        dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : o.path.substr(dot);
+    for (char& c : ext)
+        c = char(std::tolower(static_cast<unsigned char>(c)));
     if (ext != ".obj" && ext != ".ply") {
         throw vdbclay::Error(o.text() + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
     }
@@ -143,7 +154,9 @@ void checkMeshName(const FileArg& o)
 CLI::Validator nonEmpty(const char* what)
 {
     return CLI::Validator(
-        [what](std::string& v) { return v.empty() ? std::string("expected ") + what + ", got an empty string" : std::string(); },
+        [what](std::string& v) {
+            return v.empty() ? std::string("expected ") + what + ", got an empty string" : std::string();
+        },
         "", "non-empty");
 }
 
@@ -161,9 +174,11 @@ CLI::Validator finiteIn(double lo, double hi, bool open = false)
                 used = 0;
             }
             char range[96];
-            std::snprintf(range, sizeof range, open ? "a number in (%g, %g)" : "a number in [%g, %g]", lo, hi);
+            std::snprintf(range, sizeof range, open ? "a number in (%g, %g)" : "a number in [%g, %g]", lo,
+                          hi);
             const bool in = open ? (d > lo && d < hi) : (d >= lo && d <= hi);
-            if (used == 0 || used != v.size() || !std::isfinite(d) || !in) return "expected " + std::string(range) + ", got " + v;
+            if (used == 0 || used != v.size() || !std::isfinite(d) || !in)
+                return "expected " + std::string(range) + ", got " + v;
             return "";
         },
         "", "finite");
@@ -191,8 +206,6 @@ std::string fmtSeconds(double s)
     std::snprintf(buf, sizeof buf, "%.3f s", s);
     return buf;
 }
-
-
 
 /// Refuses a demo whose grids would not fit in the default memory budget, with the estimate of a
 /// scene of the same clay and floor (estimateSceneMemory).
@@ -299,7 +312,8 @@ extern "C" void onStopSignal(int sig)
     if (gStopAtOnce.load() || gStopSignal.load() != 0) {
         vdbclay::removePendingTempFile();
         if (gWriting.load()) {
-            static const char msg[] = "vdbclay: interrupted while writing an output; that file was left as it was\n";
+            static const char msg[] =
+                "vdbclay: interrupted while writing an output; that file was left as it was\n";
             (void)!::write(2, msg, sizeof msg - 1);
         }
         ::signal(sig, SIG_DFL);
@@ -358,11 +372,13 @@ void checkResumeFits(const vdbclay::Scene& scene, const vdbclay::ClayMeta& m, co
 /// @a word quoted for a POSIX shell where it needs to be.
 std::string shellWord(const std::string& word)
 {
-    const bool plain = !word.empty() && word.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
-                                                                 "0123456789_-+=./,:@%") == std::string::npos;
+    const bool plain =
+        !word.empty() && word.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                                "0123456789_-+=./,:@%") == std::string::npos;
     if (plain) return word;
     std::string out = "'";
-    for (char c : word) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    for (char c : word)
+        out += c == '\'' ? std::string("'\\''") : std::string(1, c);
     return out + "'";
 }
 
@@ -396,8 +412,10 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
                       uint64_t frame0, uint64_t steps0, bool tty, const std::string& overBudget = "")
 {
     const int sig = gStopSignal.load();
-    const std::string cause = !overBudget.empty() ? overBudget
-                            : std::string("interrupted by ") + (sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal"));
+    const std::string cause =
+        !overBudget.empty() ? overBudget
+                            : std::string("interrupted by ") +
+                                  (sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal"));
     const char* name = cause.c_str();
     const uint64_t steps = sculptor.automaton().stepCount();
     const vdbclay::ClayMeta meta = sculptor.checkpointMeta();
@@ -415,8 +433,9 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
     } else {
         try {
             vdbclay::writeClayFile(checkpoint, *sculptor.mass(), meta);
-            std::fprintf(stderr, "vdbclay: %s %s (step %llu); checkpoint written to %s "
-                                 "(continue: %s)\n",
+            std::fprintf(stderr,
+                         "vdbclay: %s %s (step %llu); checkpoint written to %s "
+                         "(continue: %s)\n",
                          name, where.c_str(), (unsigned long long)steps, printable(checkpoint).c_str(),
                          printable(continueCommand(a, checkpoint)).c_str());
         } catch (const std::exception& e) {
@@ -457,11 +476,12 @@ int runScene(const RunArgs& a)
     auto named = [](const char* option, const char* field, const std::string& cli) {
         return cli.empty() ? std::string("the scene's outputs.") + field : std::string(option);
     };
-    const std::vector<FileArg> outputs{{named("-o", "vdb", a.out), outVdb},
-                                       {named("--stats", "stats", a.stats), outStats},
-                                       {named("--png", "png", a.png), outPng},
-                                       {named("--mesh", "mesh", a.mesh), outMesh},
-                                       {a.checkpoint.empty() ? "the checkpoint" : "--checkpoint", checkpoint}};
+    const std::vector<FileArg> outputs{
+        {named("-o", "vdb", a.out), outVdb},
+        {named("--stats", "stats", a.stats), outStats},
+        {named("--png", "png", a.png), outPng},
+        {named("--mesh", "mesh", a.mesh), outMesh},
+        {a.checkpoint.empty() ? "the checkpoint" : "--checkpoint", checkpoint}};
     std::vector<InputArg> inputs;
     if (!a.scene.empty()) inputs.push_back({{"the scene file", a.scene}, {}});
     // The start file may be continued in place: -o and the checkpoint may replace it.
@@ -472,9 +492,12 @@ int runScene(const RunArgs& a)
     auto shapeInputs = [&](const vdbclay::ShapeSpec& sh) {
         if (!sh.file.empty()) inputs.push_back({{"the file of " + sh.field, sh.file}, {}});
     };
-    for (const vdbclay::ClaySpec& c : scene.clay) shapeInputs(c.shape);
-    for (const vdbclay::ToolSpec& t : scene.tools) shapeInputs(t.shape);
-    for (const vdbclay::ShapeSpec& o : scene.obstacles) shapeInputs(o);
+    for (const vdbclay::ClaySpec& c : scene.clay)
+        shapeInputs(c.shape);
+    for (const vdbclay::ToolSpec& t : scene.tools)
+        shapeInputs(t.shape);
+    for (const vdbclay::ShapeSpec& o : scene.obstacles)
+        shapeInputs(o);
     checkMeshName(outputs[3]);
     checkOutputs(outputs, inputs);
 
@@ -489,7 +512,8 @@ int runScene(const RunArgs& a)
     const vdbclay::MemoryEstimate startEstimate = vdbclay::estimateSceneMemory(scene);
     if (!a.quiet) {
         std::cout << "memory: " << startEstimate.describe() << "; budget "
-                  << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget)) << "\n";
+                  << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget))
+                  << "\n";
     }
     std::cout.flush();
     const uint64_t total = sculptor.totalFrames();
@@ -540,7 +564,8 @@ int runScene(const RunArgs& a)
         std::string overBudget;
         if (gStopSignal.load() == 0 && grewTo > 0) {
             overBudget = "stopped: the clay outgrew the memory budget of " + vdbclay::formatBytes(budget) +
-                         " (it needs about " + vdbclay::formatBytes(grewTo) + " now; raise --memory-budget to go on)";
+                         " (it needs about " + vdbclay::formatBytes(grewTo) +
+                         " now; raise --memory-budget to go on)";
         }
         return finishInterrupted(sculptor, a, checkpoint, frame0, steps0, tty, overBudget);
     }
@@ -635,20 +660,28 @@ int main(int argc, char** argv)
 
     RunArgs ra;
     CLI::App* run = app.add_subcommand("run", "Run a scene file (or, with none, the built-in default scene)");
-    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene")->check(fileName);
-    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")->check(fileName);
-    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")->check(CLI::Range(0, kMaxThreads));
-    run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata")->check(nonEmpty("a rule name"));
-    run->add_option("--seed", ra.seed, "override the scene's seed")->check(CLI::Range(int64_t(0), int64_t(INT64_MAX)));
+    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene")
+        ->check(fileName);
+    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")
+        ->check(fileName);
+    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")
+        ->check(CLI::Range(0, kMaxThreads));
+    run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata")
+        ->check(nonEmpty("a rule name"));
+    run->add_option("--seed", ra.seed, "override the scene's seed")
+        ->check(CLI::Range(int64_t(0), int64_t(INT64_MAX)));
     run->add_option("--stats", ra.stats, "write run statistics as JSON to this file")->check(fileName);
     run->add_option("--png", ra.png, "also render the result to this PNG")->check(fileName);
     run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply")->check(fileName);
-    run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")")
+    run->add_option("--frames", ra.frames,
+                    "stop after this many frames (the output can be continued with \"start\")")
         ->check(CLI::Range(int64_t(1), int64_t(100000000)));
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
     run->add_option("--checkpoint", ra.checkpoint,
-                    "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)")->check(fileName);
-    run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)")
+                    "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)")
+        ->check(fileName);
+    run->add_option("--resume", ra.resume,
+                    "continue an interrupted run from its checkpoint (same scene and options)")
         ->check(fileName);
     run->add_option("--memory-budget", ra.memoryBudget,
                     "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)")
@@ -666,7 +699,8 @@ int main(int argc, char** argv)
     mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required()->check(fileName);
     mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)")
         ->check(finiteIn(1e-9, 1e9));
-    mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it")->check(CLI::Range(1, INT32_MAX));
+    mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it")
+        ->check(CLI::Range(1, INT32_MAX));
 
     std::string renIn, renOut;
     vdbclay::RenderOptions ro;
@@ -678,9 +712,11 @@ int main(int argc, char** argv)
     ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
     ren->add_option("--height", ro.height, "image height")->check(CLI::Range(1, kMaxImageSide));
     ren->add_option("--azimuth", ro.azimuthDeg, "3D camera azimuth, degrees")->check(finiteIn(-1e6, 1e6));
-    ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees")->check(finiteIn(-89.9, 89.9));
+    ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees")
+        ->check(finiteIn(-89.9, 89.9));
     ren->add_option("--dims", renDims, "2 or 3, if the file does not record it")->check(CLI::Range(2, 3));
-    ren->add_option("--threshold", renTc, "Tc, if the file does not record it")->check(CLI::Range(1, INT32_MAX));
+    ren->add_option("--threshold", renTc, "Tc, if the file does not record it")
+        ->check(CLI::Range(1, INT32_MAX));
 
     std::string impIn, impOut;
     int64_t impMass = 0;
@@ -689,12 +725,15 @@ int main(int argc, char** argv)
     CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
     imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required()->check(fileName);
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required()->check(fileName);
-    imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required()->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
+    imp->add_option("--mass", impMass, "clay per voxel inside the shape")
+        ->required()
+        ->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
     imp->add_option("--voxel-size", impVoxel, "world units per voxel (default 1)")
         ->check(finiteIn(vdbclay::kMinVoxelSize, vdbclay::kMaxVoxelSize));
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
     std::string impBudget;
-    imp->add_option("--memory-budget", impBudget, "refuse a shape estimated to need more (default: 3/4 of memory)")
+    imp->add_option("--memory-budget", impBudget,
+                    "refuse a shape estimated to need more (default: 3/4 of memory)")
         ->check(nonEmpty("a size"));
 
     DemoArgs da;
@@ -706,7 +745,8 @@ int main(int argc, char** argv)
     demo->add_option("--threshold", da.opts.rule.threshold, "Tc")->check(CLI::Range(1, INT32_MAX));
     demo->add_option("--alpha", da.opts.rule.alpha, "arata's rate in (0,1)")->check(finiteIn(0, 1, true));
     demo->add_option("--dims", da.opts.dimensions, "2 or 3")->check(CLI::Range(2, 3));
-    demo->add_option("--threads", da.opts.threads, "worker threads, 0 = all")->check(CLI::Range(0, kMaxThreads));
+    demo->add_option("--threads", da.opts.threads, "worker threads, 0 = all")
+        ->check(CLI::Range(0, kMaxThreads));
     demo->add_option("--seed", da.opts.seed, "remainder hash seed")->check(unsignedInteger);
     demo->add_option("--max-steps", da.maxSteps, "step budget")->check(unsignedInteger);
     demo->add_option("-o,--output", da.out, "write the settled clay to this .vdb")->check(fileName);
@@ -715,7 +755,8 @@ int main(int argc, char** argv)
     if (argc > 1 && argv[1][0] != '-') {
         const std::string word = argv[1];
         bool known = false;
-        for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) known |= sub->check_name(word);
+        for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+            known |= sub->check_name(word);
         if (!known) {
             std::cerr << "vdbclay: error: unknown subcommand \"" << printable(word)
                       << "\" (expected one of: run, info, mesh, render, import, demo; see vdbclay --help)\n";
@@ -763,10 +804,11 @@ int main(int argc, char** argv)
                     throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
                 }
             }
-            if (!isVdb) vdbclay::checkMeshFits(impIn, impVoxel, budget ? budget : vdbclay::defaultMemoryBudget());
+            if (!isVdb)
+                vdbclay::checkMeshFits(impIn, impVoxel, budget ? budget : vdbclay::defaultMemoryBudget());
             const vdbclay::ShapePtr shape =
                 isVdb ? vdbclay::loadLevelSet(impIn, impVoxel) : vdbclay::loadMesh(impIn, impVoxel);
-            {   // the clay makeClay builds must fit the default memory budget
+            { // the clay makeClay builds must fit the default memory budget
                 vdbclay::Scene sc;
                 sc.source = "import " + impIn;
                 sc.dimensions = impDims;
@@ -806,8 +848,9 @@ int main(int argc, char** argv)
             return runDemo(da);
         }
     } catch (const std::bad_alloc&) {
-        std::cerr << "vdbclay: error: out of memory (the memory estimate fell short; lower --memory-budget or "
-                     "shrink the input)\n";
+        std::cerr
+            << "vdbclay: error: out of memory (the memory estimate fell short; lower --memory-budget or "
+               "shrink the input)\n";
         return 1;
     } catch (const std::exception& e) {
         std::cerr << "vdbclay: error: " << printable(e.what()) << "\n";

@@ -504,16 +504,19 @@ TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
 
     // Two lumps far apart are two areas, not one huge box: each 3^3 leaves once grown.
     // (Over Tc, so that they move: clay at most Tc that no tool reaches keeps its leaves.)
-    const Scene apart = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 1200},
-        {"shape": "box", "min": [100000,0,0], "max": [100007,7,7], "mass": 1200}]})", "s.json", "");
+    const Scene apart =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 1200},
+        {"shape": "box", "min": [100000,0,0], "max": [100007,7,7], "mass": 1200}]})",
+                   "s.json", "");
     EXPECT_EQ(estimateSceneMemory(apart).clayLeavesGrown, 2u * 27u);
     // No more leaves than units of mass: each leaf holds at least one.
     const Scene light = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 5}],
         "tools": [{"shape": "box", "min": [0,0,0], "max": [800,800,800], "path": [{"translate": [1,0,0]}]}]})", "s.json", "");
     EXPECT_EQ(estimateSceneMemory(light).clayLeavesGrown, 5u);
     // 2D: one layer of leaves.
-    const Scene flat = parseScene(R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 1200}]})",
-                                  "s.json", "");
+    const Scene flat = parseScene(
+        R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 1200}]})",
+        "s.json", "");
     EXPECT_EQ(estimateSceneMemory(flat).clayLeaves, 4u);
     EXPECT_EQ(estimateSceneMemory(flat).clayLeavesGrown, 16u);
 }
@@ -572,33 +575,39 @@ TEST_F(SceneTest, TypesDuplicatesAndEmptyStringsAreRefusedWithTheField)
     // The same key in different objects is fine.
     EXPECT_NO_THROW(parseScene(R"({"settle": {"max_steps": 5}, "outputs": {"vdb": "a.vdb"},
         "clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5},
-                 {"shape": "box", "min": [5,0,0], "max": [6,1,1], "mass": 5}]})", "s.json", ""));
+                 {"shape": "box", "min": [5,0,0], "max": [6,1,1], "mass": 5}]})",
+                               "s.json", ""));
     expectRefused(R"({"start": ""})", {"start: expected a non-empty string"});
     expectRefused(R"({"outputs": {"vdb": ""}})", {"outputs.vdb: expected a non-empty string"});
     expectRefused(R"({"rule": ""})", {"rule: expected a non-empty string"});
-    expectRefused(R"({"clay": [{"shape": "mesh", "file": "", "mass": 5}]})", {"clay[0].file: expected a non-empty string"});
+    expectRefused(R"({"clay": [{"shape": "mesh", "file": "", "mass": 5}]})",
+                  {"clay[0].file: expected a non-empty string"});
 }
 
 TEST_F(SceneTest, StartAndClayTogetherAreRefused)
 {
-    expectRefused(R"({"start": "a.vdb", "clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5}]})",
-                  {"start: a scene starts either from a file", "not both"});
+    expectRefused(
+        R"({"start": "a.vdb", "clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5}]})",
+        {"start: a scene starts either from a file", "not both"});
     // An empty clay list beside a start file says nothing contrary.
     EXPECT_EQ(parseScene(R"({"start": "a.vdb", "clay": []})", "s.json", "").start, "a.vdb");
 }
 
 TEST_F(SceneTest, NumbersOutOfRangeNameTheirField)
 {
-    expectRefused(R"({"voxel_size": 1e-300})", {"voxel_size: expected a number in [0.0001, 1e+06]", "1e-300"});
+    expectRefused(R"({"voxel_size": 1e-300})",
+                  {"voxel_size: expected a number in [0.0001, 1e+06]", "1e-300"});
     expectRefused(R"({"voxel_size": 1e300})", {"voxel_size: expected a number in"});
     EXPECT_EQ(parseScene(R"({"voxel_size": 0.001})", "s.json", "").voxelSize, 0.001);
     const std::string box = R"("shape": "box", "min": [0,10,0], "max": [4,12,4])";
     expectRefused(R"({"tools": [{)" + box + R"(, "path": [{"rotate": [1e308,0,0], "frames": 2}]}]})",
                   {"tools[0].path[0].rotate[0]: the tool turns at most 1e+09 degrees"});
-    expectRefused(R"({"tools": [{)" + box + R"(, "path": [{"translate": [0,3e9,0]}]}]})",
-                  {"tools[0].path[0].translate[1]: the tool's movement along its path so far must lie within +-2^30"});
+    expectRefused(
+        R"({"tools": [{)" + box + R"(, "path": [{"translate": [0,3e9,0]}]}]})",
+        {"tools[0].path[0].translate[1]: the tool's movement along its path so far must lie within +-2^30"});
     // Movements add up over segments and frames.
-    expectRefused(R"({"tools": [{)" + box + R"(, "path": [{"translate": [6e8,0,0]}, {"translate": [1e6,0,0], "frames": 600}]}]})",
+    expectRefused(R"({"tools": [{)" + box +
+                      R"(, "path": [{"translate": [6e8,0,0]}, {"translate": [1e6,0,0], "frames": 600}]}]})",
                   {"tools[0].path[1].translate[0]"});
     expectRefused(R"({"tools": [{)" + box + R"(, "pivot": [0,5e9,0], "path": [{"translate": [0,-1,0]}]}]})",
                   {"tools[0].pivot[1]: a pivot must lie within +-2^30"});
@@ -606,21 +615,25 @@ TEST_F(SceneTest, NumbersOutOfRangeNameTheirField)
 
 TEST_F(SceneTest, In2DToolsAndObstaclesStayInTheZ0Layer)
 {
-    expectRefused(R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,3], "max": [4,12,5], "path": [{"translate": [0,-1]}]}]})",
-                  {"tools[0]: a 2D scene happens in the z = 0 layer, but this box holds no voxel there"});
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,3], "max": [4,12,5], "path": [{"translate": [0,-1]}]}]})",
+        {"tools[0]: a 2D scene happens in the z = 0 layer, but this box holds no voxel there"});
     // Bounds a voxel loose do not let a box at z 1..5 pass.
     expectRefused(R"({"dimensions": 2, "obstacles": [{"shape": "box", "min": [0,0,1], "max": [4,4,5]}]})",
                   {"obstacles[0]: a 2D scene happens in the z = 0 layer"});
-    expectRefused(R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"translate": [0,0,1]}]}]})",
-                  {"tools[0].path[0].translate[2]: a 2D scene's tools move in the z = 0 plane"});
-    expectRefused(R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"rotate": [0,30,0]}]}]})",
-                  {"tools[0].path[0].rotate: a 2D scene's tools turn about z only"});
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"translate": [0,0,1]}]}]})",
+        {"tools[0].path[0].translate[2]: a 2D scene's tools move in the z = 0 plane"});
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"rotate": [0,30,0]}]}]})",
+        {"tools[0].path[0].rotate: a 2D scene's tools turn about z only"});
     expectRefused(R"({"dimensions": 2, "obstacles": [{"shape": "sphere", "center": [0,0,9], "radius": 2}]})",
                   {"obstacles[0]: a 2D scene happens in the z = 0 layer"});
     // Turning about z, moving in x and y, and shapes that cross z = 0 are what 2D scenes do.
     EXPECT_NO_THROW(parseScene(R"({"dimensions": 2,
         "tools": [{"shape": "box", "min": [0,10,-1], "max": [4,12,1], "path": [{"translate": [1,-1], "rotate": [0,0,5]}]}],
-        "obstacles": [{"shape": "sphere", "center": [0,0,0.5], "radius": 2}]})", "s.json", ""));
+        "obstacles": [{"shape": "sphere", "center": [0,0,0.5], "radius": 2}]})",
+                               "s.json", ""));
 }
 
 TEST_F(SceneTest, SceneFilesThatAreNotFilesAreRefusedBeforeReadingFar)
@@ -631,7 +644,8 @@ TEST_F(SceneTest, SceneFilesThatAreNotFilesAreRefusedBeforeReadingFar)
         loadScene(dir);
         ADD_FAILURE() << "accepted a directory";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("is a directory, expected a scene file"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("is a directory, expected a scene file"), std::string::npos)
+            << e.what();
     }
     ::rmdir(dir.c_str());
     // /dev/zero never ends: refused after 16 MiB, not after memory runs out.
@@ -648,10 +662,14 @@ TEST_F(SceneTest, MemoryEstimateCountsSharedNodesAndLeavesNotBoxes)
     // 20000 copies of one static tool: their cells are one set of cells (it was "122 GiB").
     std::string tools;
     for (int i = 0; i < 20000; ++i) {
-        tools += std::string(i ? "," : "") + R"({"shape": "box", "min": [0,10,0], "max": [9,12,9], "path": [{"translate": [0,0,0]}]})";
+        tools += std::string(i ? "," : "") +
+                 R"({"shape": "box", "min": [0,10,0], "max": [9,12,9], "path": [{"translate": [0,0,0]}]})";
     }
-    const Scene copies = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 800}],
-        "tools": [)" + tools + "]}", "s.json", "");
+    const Scene copies =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 800}],
+        "tools": [)" + tools +
+                       "]}",
+                   "s.json", "");
     const MemoryEstimate c = estimateSceneMemory(copies);
     EXPECT_LE(c.toolVoxels, 12u * 5u * 12u); // one tool's bounds (tightened while the budget lasts)
     EXPECT_LT(c.total(), uint64_t(64) << 20) << c.describe();
@@ -669,18 +687,20 @@ TEST_F(SceneTest, MemoryEstimateCountsSharedNodesAndLeavesNotBoxes)
     EXPECT_LT(d.total(), uint64_t(1) << 30) << d.describe();
 
     // Clay at most Tc per voxel that no tool reaches never moves: its leaves are all it needs.
-    const Scene still = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})",
-                                   "s.json", "");
+    const Scene still = parseScene(
+        R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})", "s.json", "");
     EXPECT_EQ(estimateSceneMemory(still).clayLeavesGrown, 64u);
     // ... unless shapes overlap and add up over Tc.
-    const Scene stacked = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800},
-        {"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})", "s.json", "");
+    const Scene stacked =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800},
+        {"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})",
+                   "s.json", "");
     EXPECT_EQ(estimateSceneMemory(stacked).clayLeavesGrown, 216u);
 
     // A 2x2x2 box at 2^31 - 1 per cell spreads over 8 * (2^31 - 1) / 1000 voxels at least (it was
     // estimated at 10.6 MiB, and peaked at 300-420 MB): 2 * ceil(17179870 / 512) leaves.
-    const Scene dense = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 2147483647}]})",
-                                   "s.json", "");
+    const Scene dense = parseScene(
+        R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 2147483647}]})", "s.json", "");
     const MemoryEstimate e = estimateSceneMemory(dense);
     EXPECT_EQ(e.clayLeavesGrown, 2u * ((17179870u + 511u) / 512u));
     EXPECT_GT(e.total(), uint64_t(40) << 20);
@@ -695,7 +715,8 @@ TEST_F(SceneTest, MemoryEstimateOfFileClayCountsItsRealLeaves)
     auto acc = g->getAccessor();
     for (int i = 0; i < 2000; ++i) {
         const int64_t v = int64_t((uint64_t(i) * 2654435761u) % (1u << 30)) - (1 << 29);
-        acc.setValueOn(openvdb::Coord(int32_t(v), int32_t((v * 7) % (1 << 29)), int32_t((v * 13) % (1 << 29))), 500);
+        acc.setValueOn(
+            openvdb::Coord(int32_t(v), int32_t((v * 7) % (1 << 29)), int32_t((v * 13) % (1 << 29))), 500);
     }
     // Written by OpenVDB alone: writeClayFile's surface level set of 2000 isolated voxels spread
     // over 2^30 takes minutes (levelSetRebuild), and only the mass grid matters here.

@@ -260,7 +260,8 @@ void normalizeClay(openvdb::Int32Grid& grid, const std::string& path, const std:
     if (!box.empty()) {
         for (int a = 0; a < 3; ++a) {
             if (box.min()[a] < -kMaxClayCoord || box.max()[a] > kMaxClayCoord) {
-                throw Error(what + " holds clay from " + coordText(box.min()) + " to " + coordText(box.max()) +
+                throw Error(what + " holds clay from " + coordText(box.min()) + " to " +
+                            coordText(box.max()) +
                             ", outside the coordinate range +-2^30 that vdbclay works in");
             }
         }
@@ -433,7 +434,8 @@ std::string describeVdb(const std::string& path)
         grids = std::make_shared<openvdb::GridPtrVec>();
         for (const auto& g : layout) {
             if (!g.treeChecked) {
-                unread.push_back("grid \"" + printableText(g.baseName()) + "\": type " + printableText(g.type) +
+                unread.push_back("grid \"" + printableText(g.baseName()) + "\": type " +
+                                 printableText(g.type) +
                                  ", not read (vdbclay reads int32, int64, float, double and vec3 "
                                  "grids)\n");
                 continue;

@@ -115,7 +115,8 @@ struct Ctx {
     void text(const json& obj, const char* key, const std::string& field) const
     {
         const json* v = find(obj, key);
-        if (v && !v->is_string()) fail(join(field, key), std::string("expected a string, got ") + v->type_name());
+        if (v && !v->is_string())
+            fail(join(field, key), std::string("expected a string, got ") + v->type_name());
     }
     /// A coordinate (a position, or a movement summed over a path) within the range shapes allow.
     void coordinate(double v, const std::string& field, const std::string& what) const
@@ -260,7 +261,8 @@ void requireInPlane(const Ctx& cx, const ShapeSpec& s, const std::string& field)
     bool reaches = !b.empty() && b.min[2] <= 0 && b.max[2] >= 0;
     // Bounds may be a voxel loose: look for a voxel centre at z = 0 inside the shape (when the
     // layer is too large to look at, the bounds decide).
-    const uint64_t area = reaches ? uint64_t(int64_t(b.max[0]) - b.min[0] + 1) * uint64_t(int64_t(b.max[1]) - b.min[1] + 1) : 0;
+    const uint64_t area =
+        reaches ? uint64_t(int64_t(b.max[0]) - b.min[0] + 1) * uint64_t(int64_t(b.max[1]) - b.min[1] + 1) : 0;
     if (reaches && area <= (uint64_t(1) << 20)) {
         reaches = false;
         for (int32_t x = b.min[0]; x <= b.max[0] && !reaches; ++x)
@@ -319,7 +321,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             const std::string& key = parsed.get_ref<const std::string&>();
             std::vector<std::string>& seen = keysSeen.back();
             if (std::find(seen.begin(), seen.end(), key) != seen.end()) {
-                throw Error(source + ": " + key + ": duplicate field (each field may appear once in an object)");
+                throw Error(source + ": " + key +
+                            ": duplicate field (each field may appear once in an object)");
             }
             seen.push_back(key);
         }
@@ -348,8 +351,9 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     if (const json* v = cx.find(root, "voxel_size")) {
         sc.voxelSize = cx.number(*v, "voxel_size");
         if (!(sc.voxelSize >= kMinVoxelSize && sc.voxelSize <= kMaxVoxelSize)) {
-            cx.fail("voxel_size", "expected a number in [" + Ctx::num(kMinVoxelSize) + ", " + Ctx::num(kMaxVoxelSize) +
-                                      "] (world units per voxel), got " + v->dump());
+            cx.fail("voxel_size", "expected a number in [" + Ctx::num(kMinVoxelSize) + ", " +
+                                      Ctx::num(kMaxVoxelSize) + "] (world units per voxel), got " +
+                                      v->dump());
         }
     }
     cx.voxelSize = sc.voxelSize;
@@ -426,7 +430,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                 if (const json* v = cx.find(seg, "rotate")) s.rotateDeg = cx.vec3(*v, pf + ".rotate");
                 if (const json* v = cx.find(seg, "frames")) s.frames = uint64_t(cx.integer(*v, pf + ".frames", 1, 1000000));
                 if (sc.dimensions == 2 && s.translate[2] != 0) {
-                    cx.fail(pf + ".translate[2]", "a 2D scene's tools move in the z = 0 plane, got " + Ctx::num(s.translate[2]));
+                    cx.fail(pf + ".translate[2]",
+                            "a 2D scene's tools move in the z = 0 plane, got " + Ctx::num(s.translate[2]));
                 }
                 if (sc.dimensions == 2 && (s.rotateDeg[0] != 0 || s.rotateDeg[1] != 0)) {
                     cx.fail(pf + ".rotate", "a 2D scene's tools turn about z only (rotate [0, 0, z]), got " +
@@ -436,10 +441,12 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                     moved[a] += std::fabs(s.translate[a]) * double(s.frames);
                     turned[a] += std::fabs(s.rotateDeg[a]) * double(s.frames);
                     const std::string idx = "[" + std::to_string(a) + "]";
-                    cx.coordinate(moved[a], pf + ".translate" + idx, "the tool's movement along its path so far");
+                    cx.coordinate(moved[a], pf + ".translate" + idx,
+                                  "the tool's movement along its path so far");
                     if (!(turned[a] <= kMaxRotationDeg)) {
                         cx.fail(pf + ".rotate" + idx, "the tool turns at most " + Ctx::num(kMaxRotationDeg) +
-                                                          " degrees about an axis over its path, got " + Ctx::num(turned[a]));
+                                                          " degrees about an axis over its path, got " +
+                                                          Ctx::num(turned[a]));
                     }
                 }
                 t.path.push_back(s);
@@ -447,7 +454,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             if (sc.dimensions == 2) requireInPlane(cx, t.shape, f);
             if (const json* v = cx.find(obj, "pivot")) {
                 t.pivot = cx.vec3(*v, f + ".pivot");
-                for (int a = 0; a < 3; ++a) cx.coordinate(t.pivot[a], f + ".pivot[" + std::to_string(a) + "]", "a pivot");
+                for (int a = 0; a < 3; ++a)
+                    cx.coordinate(t.pivot[a], f + ".pivot[" + std::to_string(a) + "]", "a pivot");
             } else {
                 const Box b = t.shape.shape->bounds();
                 for (int a = 0; a < 3; ++a) t.pivot[a] = 0.5 * (double(b.min[a]) + double(b.max[a]));
@@ -477,8 +485,9 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     if (const json* v = cx.find(root, "start")) {
         sc.start = cx.path(cx.string(*v, "start"));
         if (!sc.clay.empty()) {
-            cx.fail("start", "a scene starts either from a file (\"start\") or from \"clay\", not both; the start "
-                             "file holds the clay (remove \"clay\", or \"start\")");
+            cx.fail("start",
+                    "a scene starts either from a file (\"start\") or from \"clay\", not both; the start "
+                    "file holds the clay (remove \"clay\", or \"start\")");
         }
     }
     if (const json* v = cx.find(root, "memory_budget")) {

@@ -207,7 +207,8 @@ uint64_t distinctNodes(const std::vector<Box>& boxes, int log2)
         if (b.empty()) continue;
         for (int64_t x = leafIndex(b.min[0], log2); x <= leafIndex(b.max[0], log2); ++x)
             for (int64_t y = leafIndex(b.min[1], log2); y <= leafIndex(b.max[1], log2); ++y)
-                for (int64_t z = leafIndex(b.min[2], log2); z <= leafIndex(b.max[2], log2); ++z) keys.push_back({{x, y, z}});
+                for (int64_t z = leafIndex(b.min[2], log2); z <= leafIndex(b.max[2], log2); ++z)
+                    keys.push_back({{x, y, z}});
     }
     std::sort(keys.begin(), keys.end());
     return uint64_t(std::unique(keys.begin(), keys.end()) - keys.begin());
@@ -216,7 +217,7 @@ uint64_t distinctNodes(const std::vector<Box>& boxes, int log2)
 /// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
 /// internal nodes).
 /// Internal nodes are at most @a lowerCap and @a upperCap where more is known (clay from files).
-template<typename TreeT>
+template <typename TreeT>
 uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes, uint64_t lowerCap = UINT64_MAX,
                    uint64_t upperCap = UINT64_MAX)
 {
@@ -230,7 +231,7 @@ uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes, uint64_t lowe
 struct FileGrid {
     Box bounds;
     uint64_t voxels = 0;
-    uint64_t leaves = 0;   ///< leaves its topology really holds (VdbCheck), whatever its metadata says
+    uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
     uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
 };
@@ -420,24 +421,25 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
     struct Area {
         Box box;
-        bool clay;  ///< holds clay (else: a tool's sweep)
-        bool moves; ///< may move: a tool, clay from a file, clay above Tc
+        bool clay;         ///< holds clay (else: a tool's sweep)
+        bool moves;        ///< may move: a tool, clay from a file, clay above Tc
         bool file = false; ///< clay from a file
     };
     std::vector<Area> areas;
     uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
     uint64_t fileTreeBytes = 0;
     uint64_t fileLower = 0, fileUpper = 0; // internal nodes of clay from files
-    std::vector<Box> clayBoxes;    // of the shapes' clay
-    uint64_t fileLeaves = 0;       // of clay from files
-    uint64_t settledVoxels = 0;    // voxels the clay fills at Tc per voxel, once its overload spread
+    std::vector<Box> clayBoxes;            // of the shapes' clay
+    uint64_t fileLeaves = 0;               // of clay from files
+    uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
         const FileGrid g = fileGridStats(path, grid);
         const Box b = clip2D(g.bounds, dims);
         const uint64_t leaves = g.leaves;
         fileLeaves += leaves;
         // Its real nodes when the topology was walked; else from its bounds.
-        const uint64_t real = g.upperNodes ? leaves * leafBytes<MassTreeT>() + g.lowerNodes * lowerNodeBytes<MassTreeT>() +
+        const uint64_t real = g.upperNodes ? leaves * leafBytes<MassTreeT>() +
+                                                 g.lowerNodes * lowerNodeBytes<MassTreeT>() +
                                                  g.upperNodes * upperNodeBytes<MassTreeT>()
                                            : treeBytes<MassTreeT>(leaves, {b});
         fileTreeBytes += std::max(g.memBytes, real);
@@ -460,8 +462,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             const double m = double(c.mass) * double(voxelsIn(b));
             if (massBound != UINT64_MAX) massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
-            const double settled = c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
-            settledVoxels = settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
+            const double settled =
+                c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
+            settledVoxels =
+                settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
         }
     }
     e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
@@ -478,7 +482,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // than their sweeps hold together.
     if (!toolBoxes.empty()) {
         Box all;
-        for (const Box& b : toolBoxes) all = unite(all, b);
+        for (const Box& b : toolBoxes)
+            all = unite(all, b);
         e.toolVoxels = std::min(e.toolVoxels, voxelsIn(all));
         toolLeaves = std::min(toolLeaves, distinctNodes(toolBoxes, 3));
     }
@@ -486,7 +491,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // sweeps that touch clay (directly or through other such boxes), each grown by one leaf.
     uint64_t grown = 0;
     std::vector<Box> boxes, grownBoxes;
-    for (const Area& a : areas) boxes.push_back(growBox(a.box, 8, dims));
+    for (const Area& a : areas)
+        boxes.push_back(growBox(a.box, 8, dims));
     for (const std::vector<size_t>& g : groupsOfTouching(boxes)) {
         if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].clay; })) continue;
         // Clay no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless
@@ -494,14 +500,18 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
         if (!moves) { // overlaps, found by a sweep along x
             std::vector<size_t> order(g);
-            std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return areas[a].box.min[0] < areas[b].box.min[0]; });
+            std::sort(order.begin(), order.end(),
+                      [&](size_t a, size_t b) { return areas[a].box.min[0] < areas[b].box.min[0]; });
             for (size_t i = 0; i < order.size() && !moves; ++i)
-                for (size_t j = i + 1; j < order.size() && areas[order[j]].box.min[0] <= areas[order[i]].box.max[0] && !moves; ++j)
+                for (size_t j = i + 1;
+                     j < order.size() && areas[order[j]].box.min[0] <= areas[order[i]].box.max[0] && !moves;
+                     ++j)
                     moves = touches(areas[order[i]].box, areas[order[j]].box);
         }
         if (!moves) {
             std::vector<Box> own;
-            for (size_t i : g) own.push_back(areas[i].box);
+            for (size_t i : g)
+                own.push_back(areas[i].box);
             grown += distinctNodes(own, 3);
             grownBoxes.insert(grownBoxes.end(), own.begin(), own.end());
             continue;
@@ -516,12 +526,14 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // and overloaded clay spreads over its settled volume (with a leaf of margin all round).
     const uint64_t leafArea = dims == 2 ? 64 : 512; // voxels of a leaf that clay can fill
     const uint64_t aroundLeaves = e.clayLeaves > UINT64_MAX / 27 ? UINT64_MAX : 27 * e.clayLeaves;
-    const uint64_t settledLeaves = settledVoxels == UINT64_MAX ? UINT64_MAX : 2 * ((settledVoxels + leafArea - 1) / leafArea);
-    e.clayLeavesGrown = std::max({e.clayLeaves, std::min({grown, massBound, aroundLeaves}),
-                                  std::min(settledLeaves, massBound)});
+    const uint64_t settledLeaves =
+        settledVoxels == UINT64_MAX ? UINT64_MAX : 2 * ((settledVoxels + leafArea - 1) / leafArea);
+    e.clayLeavesGrown = std::max(
+        {e.clayLeaves, std::min({grown, massBound, aroundLeaves}), std::min(settledLeaves, massBound)});
     if (e.clayLeavesGrown > std::min(grown, massBound)) {
         // Spreading past the boxes: its internal nodes, as for a cube of that many leaves.
-        const double side = (dims == 2 ? std::sqrt(double(e.clayLeavesGrown)) : std::cbrt(double(e.clayLeavesGrown))) * 8;
+        const double side =
+            (dims == 2 ? std::sqrt(double(e.clayLeavesGrown)) : std::cbrt(double(e.clayLeavesGrown))) * 8;
         Box spread;
         for (int a = 0; a < 3; ++a) {
             spread.min[a] = 0;
@@ -544,7 +556,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lowerCap = 2 * fileLower + distinctNodes(others, 7);
         upperCap = 2 * fileUpper + distinctNodes(others, 12);
     }
-    e.clayBytes = std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
+    e.clayBytes =
+        std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
 
     std::vector<Box> obsBoxes;
     for (const ShapeSpec& o : scene.obstacles) {
@@ -561,9 +574,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // over a band around the surface): counted as three float grids on the clay's leaves, plus
     // the partial trees meshToVolume's worker threads build (each starts with its own upper nodes).
     const uint64_t workers = std::max(1u, std::thread::hardware_concurrency());
-    e.outputBytes = 3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
-                    workers * 2 * upperNodeBytes<FloatTreeT>() *
-                        std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
+    e.outputBytes =
+        3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
+        workers * 2 * upperNodeBytes<FloatTreeT>() *
+            std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
     return e;
 }
 
@@ -584,8 +598,8 @@ void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget)
     if (data.size() >= 84) {
         uint32_t n = 0;
         std::memcpy(&n, data.data() + 80, 4);
-        binaryStl = data.size() == 84 + 50 * uint64_t(n) && (data.compare(0, 5, "solid") != 0 ||
-                                                             data.find('\0') != std::string::npos);
+        binaryStl = data.size() == 84 + 50 * uint64_t(n) &&
+                    (data.compare(0, 5, "solid") != 0 || data.find('\0') != std::string::npos);
     }
     if (binaryStl) {
         for (size_t off = 84; off + 50 <= data.size(); off += 50) {
@@ -614,7 +628,8 @@ void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget)
         const double l = lo[a] / voxelSize, h = hi[a] / voxelSize;
         if (!(std::fabs(l) <= double(1 << 30)) || !(std::fabs(h) <= double(1 << 30))) {
             char buf[160];
-            std::snprintf(buf, sizeof buf, "%.6g .. %.6g voxels along axis %d (at voxel size %g)", l, h, a, voxelSize);
+            std::snprintf(buf, sizeof buf, "%.6g .. %.6g voxels along axis %d (at voxel size %g)", l, h, a,
+                          voxelSize);
             throw Error(path + ": the mesh spans " + buf + ", outside the coordinate range +-2^30");
         }
         side[a] = h - l + 1;
@@ -626,11 +641,12 @@ void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget)
     const double bytes = 3 * bandVoxels / 512 * double(leafBytes<FloatTreeT>() + leafBytes<MassTreeT>());
     if (bytes > double(budget)) {
         char surface[96];
-        std::snprintf(surface, sizeof surface, " (a surface of about %.3g voxels at voxel size %g)", bandVoxels / 6,
-                      voxelSize);
+        std::snprintf(surface, sizeof surface, " (a surface of about %.3g voxels at voxel size %g)",
+                      bandVoxels / 6, voxelSize);
         throw Error(path + ": turning the mesh into a level set needs about " +
-                    formatBytes(uint64_t(std::min(bytes, 9e18))) + surface + ", more than the memory budget of " +
-                    formatBytes(budget) + "; use a larger voxel size or raise the budget");
+                    formatBytes(uint64_t(std::min(bytes, 9e18))) + surface +
+                    ", more than the memory budget of " + formatBytes(budget) +
+                    "; use a larger voxel size or raise the budget");
     }
 }
 

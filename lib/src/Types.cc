@@ -12,11 +12,16 @@ std::string printableText(const std::string& text)
     out.reserve(text.size());
     for (const char ch : text) {
         const unsigned char c = static_cast<unsigned char>(ch);
-        if (c == '\n') out += "\\n";
-        else if (c == '\t') out += "\\t";
-        else if (c == '\r') out += "\\r";
-        else if (c < 32 || c == 127) out += std::string("\\x") + hex[c >> 4] + hex[c & 15];
-        else out += ch;
+        if (c == '\n')
+            out += "\\n";
+        else if (c == '\t')
+            out += "\\t";
+        else if (c == '\r')
+            out += "\\r";
+        else if (c < 32 || c == 127)
+            out += std::string("\\x") + hex[c >> 4] + hex[c & 15];
+        else
+            out += ch;
     }
     return out;
 }
