@@ -15,6 +15,7 @@
 #include <openvdb/openvdb.h>
 
 #include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -29,7 +30,11 @@
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <new>
 #include <string>
+#include <thread>
+#include <utility>
+#include <vector>
 
 namespace {
 
@@ -41,37 +46,162 @@ struct DemoArgs {
     std::string out;
 };
 
-/// Writes @a text to @a path through a temporary file and a rename.
-void writeTextAtomically(const std::string& path, const std::string& text)
+std::string printable(const std::string& text)
 {
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
-    {
-        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (!out) throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
-        out << text;
-        out.flush();
-        if (!out) {
-            std::remove(tmp.c_str());
-            throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
-        }
-    }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-        const int err = errno;
-        std::remove(tmp.c_str());
-        throw vdbclay::Error("cannot write " + path + ": " + std::strerror(err));
-    }
+    return vdbclay::printableText(text);
 }
 
-/// Refuses, before any work, an output whose directory does not exist or cannot be written.
-void checkWritable(const std::string& path)
+/// A file an option names, as messages refer to it: "-o out.vdb".
+struct FileArg {
+    std::string option; ///< "-o", "--png", "the scene file", ...
+    std::string path;
+    std::string text() const { return option + " " + path; }
+};
+
+/// What makes two paths the same file: device and inode for an existing regular file, the
+/// directory's device and inode plus the name for a file to be created; "" for an existing file
+/// that is not regular (a device such as /dev/null may take several outputs).
+std::string fileIdentity(const std::string& path)
 {
-    if (path.empty()) return;
+    struct stat st;
+    if (::stat(path.c_str(), &st) == 0) {
+        if (!S_ISREG(st.st_mode)) return "";
+        return "f" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino);
+    }
     const auto slash = path.find_last_of('/');
     const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
+    const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
+    if (::stat(dir.c_str(), &st) == 0)
+        return "d" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino) + "/" + name;
+    return "p" + path;
+}
+
+/// Refuses, before any work, an output that cannot be written: a directory, a path through a
+/// missing directory or a symbolic-link loop, an unwritable directory. A device or FIFO that
+/// exists is written through (never replaced), so it only has to be writable.
+void checkWritable(const FileArg& o)
+{
+    if (o.path.empty()) return;
+    const std::string& path = o.path;
+    struct stat st;
+    std::string dirOf = path;
+    if (::stat(path.c_str(), &st) == 0) {
+        if (S_ISDIR(st.st_mode)) throw vdbclay::Error(o.text() + ": is a directory, expected a file name");
+        if (!S_ISREG(st.st_mode)) {
+            if (::access(path.c_str(), W_OK) != 0)
+                throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+            return;
+        }
+        if (char* real = ::realpath(path.c_str(), nullptr)) { // a link: the file it points to is replaced
+            dirOf = real;
+            std::free(real);
+        }
+    } else if (errno != ENOENT) {
+        throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+    }
+    const auto slash = dirOf.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : dirOf.substr(0, slash));
     if (::access(dir.c_str(), W_OK) != 0) {
         throw vdbclay::Error("cannot write " + path + ": directory " + dir + ": " + std::strerror(errno));
     }
 }
+
+/// Checks every output before any work: each writable (checkWritable), no two the same file, none
+/// of them one of @a inputs. An input whose @a mayReplace flag is set may be written over by the
+/// outputs named in it (a start file continued in place by -o).
+struct InputArg {
+    FileArg file;
+    std::vector<std::string> mayReplace; ///< options of outputs allowed to write over it
+};
+void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputArg>& inputs)
+{
+    for (const FileArg& o : outputs)
+        checkWritable(o);
+    for (size_t i = 0; i < outputs.size(); ++i) {
+        if (outputs[i].path.empty()) continue;
+        const std::string id = fileIdentity(outputs[i].path);
+        if (id.empty()) continue;
+        for (size_t j = 0; j < i; ++j) {
+            if (!outputs[j].path.empty() && fileIdentity(outputs[j].path) == id) {
+                throw vdbclay::Error(outputs[i].text() + ": the same file as " + outputs[j].text() +
+                                     "; give each output its own file");
+            }
+        }
+        for (const InputArg& in : inputs) {
+            if (in.file.path.empty() || fileIdentity(in.file.path) != id) continue;
+            if (std::find(in.mayReplace.begin(), in.mayReplace.end(), outputs[i].option) !=
+                in.mayReplace.end())
+                continue;
+            throw vdbclay::Error(outputs[i].text() + ": that is " + in.file.text() +
+                                 "; refusing to write over an input");
+        }
+    }
+}
+
+/// Refuses a mesh output whose extension names no format vdbclay writes.
+void checkMeshName(const FileArg& o)
+{
+    if (o.path.empty()) return;
+    const auto slash = o.path.find_last_of('/');
+    const auto dot = o.path.find_last_of('.');
+    std::string ext =
+        dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : o.path.substr(dot);
+    for (char& c : ext)
+        c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext != ".obj" && ext != ".ply") {
+        throw vdbclay::Error(o.text() + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
+    }
+}
+
+/// A CLI11 check that an option's value is not an empty string ("" would silently mean "none").
+CLI::Validator nonEmpty(const char* what)
+{
+    return CLI::Validator(
+        [what](std::string& v) {
+            return v.empty() ? std::string("expected ") + what + ", got an empty string" : std::string();
+        },
+        "", "non-empty");
+}
+
+/// A CLI11 check that a number is finite and within [@a lo, @a hi] (open at both ends when @a open):
+/// CLI11's own range checks accept nan and print the limits of double in full.
+CLI::Validator finiteIn(double lo, double hi, bool open = false)
+{
+    return CLI::Validator(
+        [=](std::string& v) -> std::string {
+            double d = 0;
+            size_t used = 0;
+            try {
+                d = std::stod(v, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            char range[96];
+            std::snprintf(range, sizeof range, open ? "a number in (%g, %g)" : "a number in [%g, %g]", lo,
+                          hi);
+            const bool in = open ? (d > lo && d < hi) : (d >= lo && d <= hi);
+            if (used == 0 || used != v.size() || !std::isfinite(d) || !in)
+                return "expected " + std::string(range) + ", got " + v;
+            return "";
+        },
+        "", "finite");
+}
+
+/// A CLI11 check for an unsigned integer option: "-3" is refused, not wrapped around.
+const CLI::Validator unsignedInteger(
+    [](std::string& v) -> std::string {
+        if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos) {
+            return "expected a non-negative integer, got " + v;
+        }
+        return "";
+    },
+    "", "unsigned");
+
+/// Largest image side render accepts (a 16384^2 RGB image is 768 MiB).
+constexpr int kMaxImageSide = 16384;
+
+/// Most worker threads an option may ask for: beyond this TBB only warns and clamps.
+constexpr int kMaxThreads = 256;
 
 std::string fmtSeconds(double s)
 {
@@ -80,7 +210,28 @@ std::string fmtSeconds(double s)
     return buf;
 }
 
-
+/// Refuses a demo whose grids would not fit in the default memory budget, with the estimate of a
+/// scene of the same clay and floor (estimateSceneMemory).
+void checkDemoMemory(const DemoArgs& a)
+{
+    const bool d3 = a.opts.dimensions == 3;
+    const double n = a.size;
+    vdbclay::Scene sc;
+    sc.source = "demo --size " + std::to_string(a.size);
+    sc.dimensions = a.opts.dimensions;
+    vdbclay::ClaySpec clay;
+    clay.shape.kind = "box";
+    clay.shape.field = "demo";
+    clay.shape.shape = vdbclay::makeBox({{0, 0, 0}}, {{n - 1, n - 1, d3 ? n - 1 : 0}});
+    clay.mass = a.opts.rule.threshold;
+    sc.clay.push_back(clay);
+    vdbclay::ShapeSpec floor;
+    floor.kind = "box";
+    floor.field = "floor";
+    floor.shape = vdbclay::makeBox({{-4 * n, -4, d3 ? -4 * n : 0}}, {{5 * n, -1, d3 ? 5 * n : 0}});
+    sc.obstacles.push_back(floor);
+    vdbclay::checkMemoryBudget(sc);
+}
 
 int runDemo(const DemoArgs& a)
 {
@@ -143,7 +294,7 @@ struct RunArgs {
     std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget, push, transport, sweep;
     int threads = 0;
     int64_t seed = -1;
-    uint64_t frames = 0;
+    int64_t frames = 0; ///< 0: all
     bool quiet = false;
     std::string up; ///< --up: empty keeps the scene's
 };
@@ -177,23 +328,44 @@ void applyUp(vdbclay::Scene& scene, const std::string& up)
 }
 
 // ---- interrupts -----------------------------------------------------------------------------------
-// SIGINT and SIGTERM only set this flag (a lock-free atomic store is async-signal-safe); the run
-// polls it between automaton steps, stops where a checkpoint resumes exactly, and writes one.
+// While a scene runs, SIGINT and SIGTERM only set a flag (a lock-free atomic store is
+// async-signal-safe); the run polls it between automaton steps, stops where a checkpoint resumes
+// exactly, and writes one. At any other time (building the scene, writing outputs, a second signal)
+// the signal ends the process at once, as it would without vdbclay's handler, but first removes the
+// temporary file of a write in progress: the file being written keeps its old contents.
 
 std::atomic<int> gStopSignal{0};
+std::atomic<bool> gStopAtOnce{true};
+std::atomic<bool> gWriting{false};
 static_assert(std::atomic<int>::is_always_lock_free, "the signal flag must be lock-free");
 
-extern "C" void onStopSignal(int sig) { gStopSignal.store(sig, std::memory_order_relaxed); }
-
-/// Catches SIGINT and SIGTERM for the run. SA_RESETHAND: a second signal kills at once. A SIGINT
-/// the caller ignores (a background job of a script) stays ignored.
-void catchStopSignals()
+extern "C" void onStopSignal(int sig)
 {
+    if (gStopAtOnce.load() || gStopSignal.load() != 0) {
+        vdbclay::removePendingTempFile();
+        if (gWriting.load()) {
+            static const char msg[] =
+                "vdbclay: interrupted while writing an output; that file was left as it was\n";
+            (void)!::write(2, msg, sizeof msg - 1);
+        }
+        ::signal(sig, SIG_DFL);
+        ::raise(sig); // delivered when this handler returns: the process ends as killed by @a sig
+        return;
+    }
+    gStopSignal.store(sig, std::memory_order_relaxed);
+}
+
+/// Catches SIGINT and SIGTERM (a SIGINT the caller ignores, as in a background job of a script,
+/// stays ignored). SIGXFSZ is ignored, so that a write over the file size limit (ulimit -f) fails
+/// with EFBIG and is reported, instead of killing the process with a temporary file left behind.
+void catchSignals()
+{
+    ::signal(SIGXFSZ, SIG_IGN);
     struct sigaction sa;
     std::memset(&sa, 0, sizeof sa);
     sa.sa_handler = onStopSignal;
     sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESETHAND | SA_RESTART; // no EINTR in the middle of writing a file
+    sa.sa_flags = SA_RESTART; // no EINTR in the middle of writing a file
     for (int sig : {SIGINT, SIGTERM}) {
         struct sigaction old;
         if (::sigaction(sig, nullptr, &old) == 0 && sig == SIGINT && old.sa_handler == SIG_IGN) continue;
@@ -257,13 +429,54 @@ void checkResumeFits(const vdbclay::Scene& scene, const vdbclay::ClayMeta& m, co
     }
 }
 
+/// @a word quoted for a POSIX shell where it needs to be.
+std::string shellWord(const std::string& word)
+{
+    const bool plain =
+        !word.empty() && word.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                                "0123456789_-+=./,:@%") == std::string::npos;
+    if (plain) return word;
+    std::string out = "'";
+    for (char c : word)
+        out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+}
+
+/// The command that continues an interrupted run from @a checkpoint and writes what the
+/// interrupted one would have: the same scene, the options that shaped the result or name its
+/// outputs, and --resume.
+std::string continueCommand(const RunArgs& a, const std::string& checkpoint)
+{
+    std::string cmd = "vdbclay run";
+    if (!a.scene.empty()) cmd += " " + shellWord(a.scene);
+    auto opt = [&](const char* name, const std::string& value) {
+        if (!value.empty()) cmd += std::string(" ") + name + " " + shellWord(value);
+    };
+    opt("--resume", checkpoint);
+    opt("-o", a.out);
+    opt("--stats", a.stats);
+    opt("--png", a.png);
+    opt("--mesh", a.mesh);
+    opt("--rule", a.rule);
+    if (a.seed >= 0) opt("--seed", std::to_string(a.seed));
+    opt("--memory-budget", a.memoryBudget);
+    opt("--checkpoint", a.checkpoint);
+    if (a.threads) opt("--threads", std::to_string(a.threads));
+    if (a.quiet) cmd += " --quiet";
+    return cmd;
+}
+
 /// After a stop request: writes the checkpoint (or nothing when no step ran or there is nowhere to
 /// write it), says so in one line on stderr, returns 128 + the signal number.
 int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::string& checkpoint,
-                      uint64_t frame0, uint64_t steps0, bool tty)
+                      uint64_t frame0, uint64_t steps0, bool tty, const std::string& overBudget = "")
 {
     const int sig = gStopSignal.load();
-    const char* name = sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal");
+    const std::string cause =
+        !overBudget.empty() ? overBudget
+                            : std::string("interrupted by ") +
+                                  (sig == SIGINT ? "SIGINT" : (sig == SIGTERM ? "SIGTERM" : "a signal"));
+    const char* name = cause.c_str();
     const uint64_t steps = sculptor.automaton().stepCount();
     const vdbclay::ClayMeta meta = sculptor.checkpointMeta();
     const std::string where = meta.frameSteps
@@ -273,28 +486,37 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
     if (tty) std::fprintf(stderr, "\n");
     std::fflush(stdout);
     if (sculptor.frame() == frame0 && steps == steps0) {
-        std::fprintf(stderr, "vdbclay: interrupted by %s before any step; nothing written\n", name);
+        std::fprintf(stderr, "vdbclay: %s before any step; nothing written\n", name);
     } else if (checkpoint.empty()) {
-        std::fprintf(stderr, "vdbclay: interrupted by %s %s (step %llu); no checkpoint written (give -o or --checkpoint)\n",
+        std::fprintf(stderr, "vdbclay: %s %s (step %llu); no checkpoint written (give -o or --checkpoint)\n",
                      name, where.c_str(), (unsigned long long)steps);
     } else {
         try {
             vdbclay::writeClayFile(checkpoint, *sculptor.mass(), meta);
-            const std::string scene = a.scene.empty() ? "" : " " + a.scene;
-            std::fprintf(stderr, "vdbclay: interrupted by %s %s (step %llu); checkpoint written to %s "
-                                 "(continue: vdbclay run%s --resume %s)\n",
-                         name, where.c_str(), (unsigned long long)steps, checkpoint.c_str(), scene.c_str(), checkpoint.c_str());
+            std::fprintf(stderr,
+                         "vdbclay: %s %s (step %llu); checkpoint written to %s "
+                         "(continue: %s)\n",
+                         name, where.c_str(), (unsigned long long)steps, printable(checkpoint).c_str(),
+                         printable(continueCommand(a, checkpoint)).c_str());
         } catch (const std::exception& e) {
-            std::fprintf(stderr, "vdbclay: interrupted by %s %s; no checkpoint written: %s\n", name, where.c_str(), e.what());
+            std::fprintf(stderr, "vdbclay: %s %s; no checkpoint written: %s\n", name, where.c_str(),
+                         printable(e.what()).c_str());
         }
     }
+    if (!overBudget.empty()) return 1;
     return 128 + (sig > 0 ? sig : SIGINT);
 }
 
 int runScene(const RunArgs& a)
 {
     vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene);
-    if (!a.rule.empty()) scene.rule.rule = vdbclay::parseRule(a.rule);
+    if (!a.rule.empty()) {
+        try {
+            scene.rule.rule = vdbclay::parseRule(a.rule);
+        } catch (const vdbclay::Error& e) {
+            throw vdbclay::Error(std::string("--rule: ") + e.what());
+        }
+    }
     if (a.seed >= 0) scene.seed = uint64_t(a.seed);
     if (!a.push.empty()) {
         try {
@@ -331,13 +553,38 @@ int runScene(const RunArgs& a)
     const std::string outMesh = a.mesh.empty() ? scene.outputs.mesh : a.mesh;
     const std::string checkpoint = a.checkpoint.empty() ? defaultCheckpointPath(outVdb) : a.checkpoint;
 
+    // Every output is checked before any work (a bad one found after an hour's run costs the hour).
+    auto named = [](const char* option, const char* field, const std::string& cli) {
+        return cli.empty() ? std::string("the scene's outputs.") + field : std::string(option);
+    };
+    const std::vector<FileArg> outputs{
+        {named("-o", "vdb", a.out), outVdb},
+        {named("--stats", "stats", a.stats), outStats},
+        {named("--png", "png", a.png), outPng},
+        {named("--mesh", "mesh", a.mesh), outMesh},
+        {a.checkpoint.empty() ? "the checkpoint" : "--checkpoint", checkpoint}};
+    std::vector<InputArg> inputs;
+    if (!a.scene.empty()) inputs.push_back({{"the scene file", a.scene}, {}});
+    // The start file may be continued in place: -o and the checkpoint may replace it.
+    if (!scene.start.empty()) {
+        inputs.push_back({{a.resume.empty() ? "the scene's start file" : "--resume", scene.start},
+                          {outputs[0].option, outputs[4].option}});
+    }
+    auto shapeInputs = [&](const vdbclay::ShapeSpec& sh) {
+        if (!sh.file.empty()) inputs.push_back({{"the file of " + sh.field, sh.file}, {}});
+    };
+    for (const vdbclay::ClaySpec& c : scene.clay)
+        shapeInputs(c.shape);
+    for (const vdbclay::ToolSpec& t : scene.tools)
+        shapeInputs(t.shape);
+    for (const vdbclay::ShapeSpec& o : scene.obstacles)
+        shapeInputs(o);
+    checkMeshName(outputs[3]);
+    checkOutputs(outputs, inputs);
+
     vdbclay::Sculptor sculptor(scene, a.threads);
     if (!a.resume.empty()) checkResumeFits(scene, sculptor.startMeta(), a.resume);
     const bool tty = ::isatty(2) && !a.quiet;
-    for (const std::string* o : {&outVdb, &outStats, &outPng, &outMesh, &checkpoint}) checkWritable(*o);
-    // From here on SIGINT/SIGTERM stop the run at the next step and save it; before, there is
-    // nothing to save and they end the process as usual.
-    catchStopSignals();
     if (!a.quiet) std::cout << "vdbclay: " << scene.source << ": " << scene.dimensions << "D, Tc " << scene.rule.threshold
               << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
               << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
@@ -346,10 +593,12 @@ int runScene(const RunArgs& a)
     if (!a.quiet && (!paperModel || scene.sweep))
         std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "") << ", transport "
                   << vdbclay::transportName(scene.transport) << "\n";
+    const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
+    const vdbclay::MemoryEstimate startEstimate = vdbclay::estimateSceneMemory(scene);
     if (!a.quiet) {
-        const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
-        std::cout << "memory: " << vdbclay::estimateSceneMemory(scene).describe() << "; budget "
-                  << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget)) << "\n";
+        std::cout << "memory: " << startEstimate.describe() << "; budget "
+                  << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget))
+                  << "\n";
     }
     std::cout.flush();
     const uint64_t total = sculptor.totalFrames();
@@ -377,13 +626,37 @@ int runScene(const RunArgs& a)
     const uint64_t frame0 = sculptor.frame(), steps0 = sculptor.automaton().stepCount();
     const std::function<void(uint64_t)> testSignal = testSignalAtStep();
     vdbclay::Automaton& automaton = sculptor.automaton();
-    sculptor.setStopRequest([&testSignal, &automaton] {
+    // The budget is kept while the run goes on: the estimate may fall short (clay from a file that
+    // spreads far), so every 64 polls the grid is measured, and a run that outgrows the budget
+    // stops where a checkpoint resumes exactly, as on SIGINT.
+    const uint64_t fixedBytes = startEstimate.obstacleBytes + startEstimate.toolBytes;
+    uint64_t polls = 0, grewTo = 0;
+    sculptor.setStopRequest([&] {
         if (testSignal) testSignal(automaton.stepCount());
-        return gStopSignal.load(std::memory_order_relaxed) != 0;
+        if (gStopSignal.load(std::memory_order_relaxed) != 0) return true;
+        if (scene.memoryBudget == vdbclay::kNoMemoryBudget || ++polls % 64 != 0) return false;
+        const uint64_t now = vdbclay::clayMemoryInUse(*sculptor.mass()) + fixedBytes;
+        if (now <= budget) return false;
+        grewTo = now;
+        return true;
     });
-    const vdbclay::RunSummary s = sculptor.run(a.frames, onFrame);
+    // From here to the end of the run SIGINT/SIGTERM stop the run at the next step and save it;
+    // before, there is nothing to save, and after, they end the process (removing a half-written
+    // output's temporary file).
+    gStopAtOnce.store(false);
+    const vdbclay::RunSummary s = sculptor.run(uint64_t(a.frames), onFrame);
+    gWriting.store(true);
+    gStopAtOnce.store(true);
     sculptor.setStopRequest({});
-    if (sculptor.stopped()) return finishInterrupted(sculptor, a, checkpoint, frame0, steps0, tty);
+    if (sculptor.stopped()) {
+        std::string overBudget;
+        if (gStopSignal.load() == 0 && grewTo > 0) {
+            overBudget = "stopped: the clay outgrew the memory budget of " + vdbclay::formatBytes(budget) +
+                         " (it needs about " + vdbclay::formatBytes(grewTo) +
+                         " now; raise --memory-budget to go on)";
+        }
+        return finishInterrupted(sculptor, a, checkpoint, frame0, steps0, tty, overBudget);
+    }
     const bool exact = s.massFinal == s.massInitial;
     std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
@@ -456,7 +729,7 @@ int runScene(const RunArgs& a)
         j["interior_mean_density"] = s.metrics.interiorMeanDensity;
         j["heterogeneity_cv"] = s.metrics.heterogeneityCV;
         j["compaction"] = s.metrics.compaction;
-        writeTextAtomically(outStats, j.dump(2) + "\n");
+        vdbclay::writeTextFile(outStats, j.dump(2) + "\n");
         std::printf("wrote %s\n", outStats.c_str());
     }
     if (!exact) {
@@ -485,42 +758,56 @@ int main(int argc, char** argv)
 {
     CLI::App app{"vdbclay: virtual clay in sparse OpenVDB volumes (Druon, Crosnier, Brigandat 2003)"};
     app.require_subcommand(1);
+    const CLI::Validator fileName = nonEmpty("a file name");
 
     RunArgs ra;
     CLI::App* run = app.add_subcommand("run", "Run a scene file (or, with none, the built-in default scene)");
-    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene");
-    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)");
-    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")->check(CLI::NonNegativeNumber);
-    run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata");
-    run->add_option("--seed", ra.seed, "override the scene's seed")->check(CLI::NonNegativeNumber);
-    run->add_option("--stats", ra.stats, "write run statistics as JSON to this file");
-    run->add_option("--png", ra.png, "also render the result to this PNG");
-    run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply");
-    run->add_option("--frames", ra.frames, "stop after this many frames (the output can be continued with \"start\")");
+    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene")
+        ->check(fileName);
+    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")
+        ->check(fileName);
+    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")
+        ->check(CLI::Range(0, kMaxThreads));
+    run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata")
+        ->check(nonEmpty("a rule name"));
+    run->add_option("--seed", ra.seed, "override the scene's seed")
+        ->check(CLI::Range(int64_t(0), int64_t(INT64_MAX)));
+    run->add_option("--stats", ra.stats, "write run statistics as JSON to this file")->check(fileName);
+    run->add_option("--png", ra.png, "also render the result to this PNG")->check(fileName);
+    run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply")->check(fileName);
+    run->add_option("--frames", ra.frames,
+                    "stop after this many frames (the output can be continued with \"start\")")
+        ->check(CLI::Range(int64_t(1), int64_t(100000000)));
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
     run->add_option("--up", ra.up, "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
     run->add_option("--checkpoint", ra.checkpoint,
-                    "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)");
-    run->add_option("--resume", ra.resume, "continue an interrupted run from its checkpoint (same scene and options)");
+                    "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)")
+        ->check(fileName);
+    run->add_option("--resume", ra.resume,
+                    "continue an interrupted run from its checkpoint (same scene and options)")
+        ->check(fileName);
     run->add_option("--push", ra.push, "override the scene's push: surface (the paper's) or compress");
     run->add_option("--transport", ra.transport,
                     "override the scene's transport: local (the paper's automaton) or global");
     run->add_option("--sweep", ra.sweep, "override the scene's sweep: on (push over the volume a tool sweeps) or off");
     run->add_option("--memory-budget", ra.memoryBudget,
-                    "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)");
+                    "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)")
+        ->check(nonEmpty("a size"));
 
     std::string infoPath;
     CLI::App* inf = app.add_subcommand("info", "Describe a .vdb file: grids, voxels, bounds, total mass, metadata");
-    inf->add_option("file", infoPath, "a .vdb file")->required();
+    inf->add_option("file", infoPath, "a .vdb file")->required()->check(fileName);
 
     std::string meshIn, meshOut;
     double iso = 0.5;
     int32_t meshTc = 0;
     CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ or PLY");
-    mesh->add_option("file", meshIn, "a clay .vdb (grid \"mass\")")->required();
-    mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required();
-    mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)");
-    mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it");
+    mesh->add_option("file", meshIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required()->check(fileName);
+    mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)")
+        ->check(finiteIn(1e-9, 1e9));
+    mesh->add_option("--threshold", meshTc, "Tc, if the file does not record it")
+        ->check(CLI::Range(1, INT32_MAX));
     std::string meshUp;
     mesh->add_option("--up", meshUp, "y or z: orient the mesh for this up axis (default: the file's)");
 
@@ -529,76 +816,100 @@ int main(int argc, char** argv)
     int renDims = 0;
     int32_t renTc = 0;
     CLI::App* ren = app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
-    ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required();
-    ren->add_option("-o,--output", renOut, "OUT.png")->required();
-    ren->add_option("--width", ro.width, "image width")->check(CLI::PositiveNumber);
-    ren->add_option("--height", ro.height, "image height")->check(CLI::PositiveNumber);
-    ren->add_option("--azimuth", ro.azimuthDeg, "3D camera azimuth, degrees");
-    ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees");
+    ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    ren->add_option("-o,--output", renOut, "OUT.png")->required()->check(fileName);
+    ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
+    ren->add_option("--height", ro.height, "image height")->check(CLI::Range(1, kMaxImageSide));
+    ren->add_option("--azimuth", ro.azimuthDeg, "3D camera azimuth, degrees")->check(finiteIn(-1e6, 1e6));
+    ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees")
+        ->check(finiteIn(-89.9, 89.9));
     ren->add_option("--dims", renDims, "2 or 3, if the file does not record it")->check(CLI::Range(2, 3));
-    ren->add_option("--threshold", renTc, "Tc, if the file does not record it");
+    ren->add_option("--threshold", renTc, "Tc, if the file does not record it")
+        ->check(CLI::Range(1, INT32_MAX));
 
     std::string impIn, impOut;
     int64_t impMass = 0;
     double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
     CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
-    imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required();
-    imp->add_option("-o,--output", impOut, "CLAY.vdb")->required();
-    imp->add_option("--mass", impMass, "clay per voxel inside the shape")->required();
+    imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required()->check(fileName);
+    imp->add_option("-o,--output", impOut, "CLAY.vdb")->required()->check(fileName);
+    imp->add_option("--mass", impMass, "clay per voxel inside the shape")
+        ->required()
+        ->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
     imp->add_option("--voxel-size", impVoxel,
-                    "world units per voxel (default: a level set's own voxel size; 1 for meshes)");
+                    "world units per voxel (default: a level set's own voxel size; 1 for meshes)")
+        ->check(finiteIn(vdbclay::kMinVoxelSize, vdbclay::kMaxVoxelSize));
     std::string impGrid;
     imp->add_option("--grid", impGrid, "LEVELSET.vdb: the level set grid to import (default: the first)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
     std::string impUp = "y";
     imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
+    std::string impBudget;
+    imp->add_option("--memory-budget", impBudget,
+                    "refuse a shape estimated to need more (default: 3/4 of memory)")
+        ->check(nonEmpty("a size"));
 
     DemoArgs da;
     std::string demoRule;
     CLI::App* demo = app.add_subcommand("demo", "Settle a built-in overloaded lump of clay (the automaton alone)");
     demo->add_option("--size", da.size, "cube edge in voxels")->check(CLI::Range(2, 4096));
     demo->add_option("--overload", da.overload, "the core holds this many times Tc per voxel")->check(CLI::Range(1, 1000));
-    demo->add_option("--rule", demoRule, "arata, bingham, sorted, prorata");
-    demo->add_option("--threshold", da.opts.rule.threshold, "Tc")->check(CLI::PositiveNumber);
-    demo->add_option("--alpha", da.opts.rule.alpha, "arata's rate in (0,1)");
+    demo->add_option("--rule", demoRule, "arata, bingham, sorted, prorata")->check(nonEmpty("a rule name"));
+    demo->add_option("--threshold", da.opts.rule.threshold, "Tc")->check(CLI::Range(1, INT32_MAX));
+    demo->add_option("--alpha", da.opts.rule.alpha, "arata's rate in (0,1)")->check(finiteIn(0, 1, true));
     demo->add_option("--dims", da.opts.dimensions, "2 or 3")->check(CLI::Range(2, 3));
-    demo->add_option("--threads", da.opts.threads, "worker threads, 0 = all")->check(CLI::NonNegativeNumber);
-    demo->add_option("--seed", da.opts.seed, "remainder hash seed");
-    demo->add_option("--max-steps", da.maxSteps, "step budget");
-    demo->add_option("-o,--output", da.out, "write the settled clay to this .vdb");
+    demo->add_option("--threads", da.opts.threads, "worker threads, 0 = all")
+        ->check(CLI::Range(0, kMaxThreads));
+    demo->add_option("--seed", da.opts.seed, "remainder hash seed")->check(unsignedInteger);
+    demo->add_option("--max-steps", da.maxSteps, "step budget")->check(unsignedInteger);
+    demo->add_option("-o,--output", da.out, "write the settled clay to this .vdb")->check(fileName);
 
+    // CLI11 takes an unknown word for a stray argument and says only "A subcommand is required".
+    if (argc > 1 && argv[1][0] != '-') {
+        const std::string word = argv[1];
+        bool known = false;
+        for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+            known |= sub->check_name(word);
+        if (!known) {
+            std::cerr << "vdbclay: error: unknown subcommand \"" << printable(word)
+                      << "\" (expected one of: run, info, mesh, render, import, demo; see vdbclay --help)\n";
+            return 2;
+        }
+    }
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         if (e.get_exit_code() == 0) return app.exit(e); // --help
-        std::cerr << "vdbclay: error: " << e.what() << " (see vdbclay --help)\n";
+        std::cerr << "vdbclay: error: " << printable(e.what()) << " (see vdbclay --help)\n";
         return e.get_exit_code();
     }
+    catchSignals();
     try {
         openvdb::initialize();
         if (*run) return runScene(ra);
         if (*inf) return info(infoPath);
         if (*mesh) {
+            checkMeshName({"-o", meshOut});
+            checkOutputs({{"-o", meshOut}}, {{{"the input file", meshIn}, {}}});
             const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
             if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
+            gWriting.store(true);
             vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
             std::printf("wrote %s\n", meshOut.c_str());
             return 0;
         }
         if (*ren) {
+            checkOutputs({{"-o", renOut}}, {{{"the input file", renIn}, {}}});
             const vdbclay::ClayFile f = vdbclay::readClayFile(renIn);
             const int dims = renDims ? renDims : f.meta.dimensions;
+            gWriting.store(true);
             vdbclay::renderPng(renOut, *f.mass, thresholdOf(f, renTc), dims, ro);
             std::printf("wrote %s\n", renOut.c_str());
             return 0;
         }
         if (*imp) {
-            if (impMass <= 0 || impMass > INT32_MAX) {
-                throw vdbclay::Error("--mass must be in [1, " + std::to_string(INT32_MAX) + "], got " +
-                                     std::to_string(impMass));
-            }
-            if (!(impVoxel >= 0) || !std::isfinite(impVoxel)) throw vdbclay::Error("--voxel-size must be > 0");
+            checkOutputs({{"-o", impOut}}, {{{"the input file", impIn}, {}}});
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
             if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
             if (impVoxel == 0 && isVdb) {
@@ -619,14 +930,38 @@ int main(int argc, char** argv)
                 f.close();
             }
             if (impVoxel == 0) impVoxel = 1.0;
+            uint64_t budget = 0; // the default
+            if (!impBudget.empty()) {
+                try {
+                    budget = vdbclay::parseByteSize(impBudget);
+                } catch (const vdbclay::Error& e) {
+                    throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
+                }
+            }
+            if (!isVdb)
+                vdbclay::checkMeshFits(impIn, impVoxel, budget ? budget : vdbclay::defaultMemoryBudget());
             const vdbclay::ShapePtr shape =
                 isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, impGrid, upOption(impUp))
                       : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp));
+            { // the clay makeClay builds must fit the default memory budget
+                vdbclay::Scene sc;
+                sc.source = "import " + impIn;
+                sc.dimensions = impDims;
+                vdbclay::ClaySpec c;
+                c.shape.kind = isVdb ? "levelset" : "mesh";
+                c.shape.field = "import";
+                c.shape.shape = shape;
+                c.mass = int32_t(impMass);
+                sc.clay.push_back(c);
+                sc.memoryBudget = budget;
+                vdbclay::checkMemoryBudget(sc);
+            }
             const vdbclay::MassGridPtr clay = vdbclay::makeClay(*shape, int32_t(impMass), impDims);
             vdbclay::ClayMeta meta;
             meta.dimensions = impDims;
             meta.voxelSize = impVoxel;
             meta.up = upOption(impUp);
+            gWriting.store(true);
             vdbclay::writeClayFile(impOut, *clay, meta);
             if (shape->describe().find("winding number") != std::string::npos) {
                 std::printf("note: %s\n", shape->describe().c_str()); // open or non-manifold: how it was filled
@@ -636,15 +971,28 @@ int main(int argc, char** argv)
             return 0;
         }
         if (*demo) {
-            if (!demoRule.empty()) da.opts.rule.rule = vdbclay::parseRule(demoRule);
+            if (!demoRule.empty()) {
+                try {
+                    da.opts.rule.rule = vdbclay::parseRule(demoRule);
+                } catch (const vdbclay::Error& e) {
+                    throw vdbclay::Error(std::string("--rule: ") + e.what());
+                }
+            }
             vdbclay::validate(da.opts.rule);
             if (int64_t(da.overload) * da.opts.rule.threshold > INT32_MAX) {
                 throw vdbclay::Error("--overload x --threshold exceeds the int32 range of a cell");
             }
+            checkOutputs({{"-o", da.out}}, {});
+            checkDemoMemory(da);
             return runDemo(da);
         }
+    } catch (const std::bad_alloc&) {
+        std::cerr
+            << "vdbclay: error: out of memory (the memory estimate fell short; lower --memory-budget or "
+               "shrink the input)\n";
+        return 1;
     } catch (const std::exception& e) {
-        std::cerr << "vdbclay: error: " << e.what() << "\n";
+        std::cerr << "vdbclay: error: " << printable(e.what()) << "\n";
         return 1;
     }
     return 0;

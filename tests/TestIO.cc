@@ -22,7 +22,11 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
+
+#include <sys/stat.h>
+#include <unistd.h>
 
 using namespace vdbclay;
 using openvdb::Coord;
@@ -819,15 +823,13 @@ TEST_F(IOTest, RenderRefusesBadInput)
 TEST_F(IOTest, OutputGridsFollowTheClayNotTheSpanBetweenLumps)
 {
     // Two 4^3 lumps 1e9 voxels apart: the density and surface grids hold exactly twice the voxels
-    // and leaves of one lump's (the output is built from the clay's leaves, not over the span), and
-    // an inactive voxel holding mass is not clay (background), as for the automaton.
+    // and leaves of one lump's (the output is built from the clay's leaves, not over the span).
     auto one = openvdb::Int32Grid::create(0);
     one->tree().fill(openvdb::CoordBBox(Coord(0), Coord(3)), 1000, true);
     one->tree().voxelizeActiveTiles();
     auto two = one->deepCopy();
     two->tree().fill(openvdb::CoordBBox(Coord(1000000000, 0, 0), Coord(1000000003, 3, 3)), 1000, true);
     two->tree().voxelizeActiveTiles();
-    two->tree().setValueOff(Coord(-500000000, 7, 7), 400);
     const std::string p1 = file("one.vdb"), p2 = file("two.vdb");
     writeClayFile(p1, *one, sampleMeta());
     writeClayFile(p2, *two, sampleMeta());
@@ -841,5 +843,113 @@ TEST_F(IOTest, OutputGridsFollowTheClayNotTheSpanBetweenLumps)
     }
     auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(p2, "density"));
     EXPECT_EQ(density->tree().activeVoxelCount(), 128u);
-    EXPECT_FALSE(density->tree().isValueOn(Coord(-500000000, 7, 7)));
+    // Every non-zero value is clay, active or not (one definition everywhere): an inactive voxel
+    // holding mass has its density too.
+    two->tree().setValueOff(Coord(-500000000, 7, 7), 400);
+    writeClayFile(p2, *two, sampleMeta());
+    density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(p2, "density"));
+    EXPECT_EQ(density->tree().activeVoxelCount(), 129u);
+    EXPECT_FLOAT_EQ(density->tree().getValue(Coord(-500000000, 7, 7)), 0.4f);
+}
+
+// ---- issue 11: one definition of the clay in a file; coordinates; outputs that are not files ---
+
+namespace {
+
+/// Writes @a grid as a plain OpenVDB file (no vdbclay metadata), as another tool would.
+void writePlainVdb(const std::string& path, openvdb::Int32Grid::Ptr grid)
+{
+    grid->setName("mass");
+    openvdb::io::File out(path);
+    out.write({grid});
+    out.close();
+}
+
+} // namespace
+
+TEST_F(IOTest, ClayInAFileIsEveryNonZeroValueForEveryCommand)
+{
+    // An inactive 8^3 tile at 700 beside active voxels, and one inactive voxel holding mass: "info"
+    // counted them, "run" dropped them. Now they are clay everywhere: read as active voxels.
+    auto g = openvdb::Int32Grid::create(0);
+    g->tree().addTile(1, Coord(64, 0, 0), 700, false);
+    g->tree().setValueOn(Coord(0, 0, 0), 900);
+    g->tree().setValueOff(Coord(3, 0, 0), 300);
+    const int64_t expected = 512 * 700 + 900 + 300;
+    ASSERT_EQ(totalMass(*g), expected);
+    writePlainVdb(file("tile.vdb"), g);
+    const ClayFile f = readClayFile(file("tile.vdb"));
+    EXPECT_EQ(totalMass(*f.mass), expected);
+    EXPECT_EQ(f.mass->activeVoxelCount(), 514u);
+    EXPECT_EQ(clayVoxelCount(*f.mass), 514u);
+    EXPECT_EQ(f.mass->tree().activeTileCount(), 0u);
+    EXPECT_TRUE(contains(describeVdb(file("tile.vdb")), "total mass: " + std::to_string(expected)));
+}
+
+TEST_F(IOTest, NonZeroBackgroundIsRefusedAndNotCountedAsClay)
+{
+    auto g = openvdb::Int32Grid::create(5);
+    g->tree().setValueOn(Coord(0, 0, 0), 900);
+    writePlainVdb(file("bg.vdb"), g);
+    const std::string m = errorOf([&] { readClayFile(file("bg.vdb")); });
+    EXPECT_TRUE(contains(m, "grid \"mass\" has background value 5, expected 0")) << m;
+    // info said 343597841920 for such a file: now it says why there is no total.
+    const std::string d = describeVdb(file("bg.vdb"));
+    EXPECT_TRUE(contains(d, "total mass: none (the background is 5")) << d;
+}
+
+TEST_F(IOTest, ClayOutsideTheCoordinateRangeIsRefusedOnReading)
+{
+    for (const int32_t far : {INT32_MAX, INT32_MIN, (1 << 30) + 1}) {
+        auto g = openvdb::Int32Grid::create(0);
+        g->tree().setValueOn(Coord(0, 0, 0), 900);
+        g->tree().setValueOn(Coord(far, 0, 0), 900);
+        writePlainVdb(file("far.vdb"), g);
+        const std::string m = errorOf([&] { readClayFile(file("far.vdb")); });
+        EXPECT_TRUE(contains(m, "outside the coordinate range +-2^30")) << far << ": " << m;
+    }
+    auto ok = openvdb::Int32Grid::create(0);
+    ok->tree().setValueOn(Coord(1 << 30, -(1 << 30), 0), 900);
+    writePlainVdb(file("edge.vdb"), ok);
+    EXPECT_NO_THROW(readClayFile(file("edge.vdb")));
+}
+
+TEST_F(IOTest, OutputsThatAreNotRegularFilesAreWrittenThroughNeverReplaced)
+{
+    // A FIFO: a reader gets every byte, and the FIFO stays a FIFO.
+    const std::string fifo = file("pipe");
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+    std::string got;
+    std::thread reader([&] { got = slurp(fifo); });
+    writeTextFile(fifo, "through the pipe\n");
+    reader.join();
+    EXPECT_EQ(got, "through the pipe\n");
+    struct stat st;
+    ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISFIFO(st.st_mode));
+    // A full device: the failure is reported (it used to be replaced by a regular file).
+    if (::access("/dev/full", W_OK) == 0) {
+        const std::string m = errorOf([&] { writeClayFile("/dev/full", *sampleClay(), ClayMeta{}); });
+        EXPECT_TRUE(contains(m, "cannot write /dev/full: write failed: No space left on device")) << m;
+        ASSERT_EQ(::stat("/dev/full", &st), 0);
+        EXPECT_TRUE(S_ISCHR(st.st_mode));
+    }
+    // A symbolic link stays a link; the file it points to gets the new contents.
+    spit(file("target.txt"), "old");
+    ASSERT_EQ(::symlink("target.txt", file("link.txt").c_str()), 0);
+    writeTextFile(file("link.txt"), "new");
+    EXPECT_EQ(slurp(file("target.txt")), "new");
+    ASSERT_EQ(::lstat(file("link.txt").c_str(), &st), 0);
+    EXPECT_TRUE(S_ISLNK(st.st_mode));
+    EXPECT_EQ(listing(), (std::set<std::string>{"pipe", "target.txt", "link.txt"}));
+    removePendingTempFile(); // nothing pending: does nothing
+}
+
+TEST_F(IOTest, FilesThatAreNotVdbFilesAreNamedForWhatTheyAre)
+{
+    EXPECT_TRUE(contains(errorOf([] { readClayFile("/dev/zero"); }), "/dev/zero is not a regular file"));
+    ASSERT_EQ(::symlink("loop-b", file("loop-a").c_str()), 0);
+    ASSERT_EQ(::symlink("loop-a", file("loop-b").c_str()), 0);
+    const std::string m = errorOf([&] { readClayFile(file("loop-a")); });
+    EXPECT_TRUE(contains(m, "Too many levels of symbolic links")) << m;
 }

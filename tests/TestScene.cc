@@ -4,6 +4,7 @@
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
@@ -13,6 +14,7 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <sys/stat.h>
 #include <unistd.h>
 
 using namespace vdbclay;
@@ -57,7 +59,9 @@ const std::string kPlate =
 
 std::string scene(const std::string& extra, const std::string& tools = "[" + kPlate + "]")
 {
-    return R"({"threshold": 100, "clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 90}], "tools": )" +
+    // A field given in @a extra replaces the default's (a duplicate key is refused).
+    const std::string tc = extra.find("\"threshold\"") == std::string::npos ? R"("threshold": 100, )" : "";
+    return "{" + tc + R"("clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 90}], "tools": )" +
            tools + (extra.empty() ? "" : ", " + extra) + "}";
 }
 
@@ -472,16 +476,15 @@ TEST_F(SceneTest, ByteSizesParseExactlyAndNonsenseIsRefused)
 
 TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
 {
-    // A 32^3 cube is 4^3 = 64 leaves. With no tool its area grows by one leaf on every side:
-    // voxels -8..39, leaves -1..4, 6^3 = 216. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
+    // A 32^3 cube is 4^3 = 64 leaves. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
     const Scene still = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}],
         "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}]})", "s.json", "");
     const MemoryEstimate a = estimateSceneMemory(still);
     EXPECT_EQ(a.clayLeaves, 64u);
-    EXPECT_EQ(a.clayLeavesGrown, 216u);
+    EXPECT_EQ(a.clayLeavesGrown, 64u); // at 800 < Tc with no tool it never moves (issue 11, item 5)
     EXPECT_EQ(a.obstacleLeaves, 21u * 21u);
     EXPECT_EQ(a.toolVoxels, 0u);
-    EXPECT_GE(a.clayBytes, 216u * (512u * 4u));
+    EXPECT_GE(a.clayBytes, 64u * (512u * 4u));
     EXPECT_EQ(a.total(), a.clayBytes + a.obstacleBytes + a.toolBytes + a.automatonBytes + a.outputBytes);
 
     // The default scene: the plate -8..39 x 32..40 x -8..39 (48 x 9 x 48 voxels) sweeps down to
@@ -501,16 +504,20 @@ TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
     EXPECT_LE(sc.automaton().obstacles()->memUsage(), d.obstacleBytes + d.toolBytes);
 
     // Two lumps far apart are two areas, not one huge box: each 3^3 leaves once grown.
-    const Scene apart = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 800},
-        {"shape": "box", "min": [100000,0,0], "max": [100007,7,7], "mass": 800}]})", "s.json", "");
+    // (Over Tc, so that they move: clay at most Tc that no tool reaches keeps its leaves.)
+    const Scene apart =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 1200},
+        {"shape": "box", "min": [100000,0,0], "max": [100007,7,7], "mass": 1200}]})",
+                   "s.json", "");
     EXPECT_EQ(estimateSceneMemory(apart).clayLeavesGrown, 2u * 27u);
     // No more leaves than units of mass: each leaf holds at least one.
     const Scene light = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 5}],
         "tools": [{"shape": "box", "min": [0,0,0], "max": [800,800,800], "path": [{"translate": [1,0,0]}]}]})", "s.json", "");
     EXPECT_EQ(estimateSceneMemory(light).clayLeavesGrown, 5u);
     // 2D: one layer of leaves.
-    const Scene flat = parseScene(R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 8}]})",
-                                  "s.json", "");
+    const Scene flat = parseScene(
+        R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 1200}]})",
+        "s.json", "");
     EXPECT_EQ(estimateSceneMemory(flat).clayLeaves, 4u);
     EXPECT_EQ(estimateSceneMemory(flat).clayLeavesGrown, 16u);
 }
@@ -554,4 +561,178 @@ TEST_F(SceneTest, ASceneOverItsMemoryBudgetIsRefusedBeforeAnyWork)
     EXPECT_THROW(Sculptor{def}, Error);
     def.memoryBudget += 1;
     EXPECT_NO_THROW(Sculptor{def});
+}
+
+// ---- issue 11: bad input in scene files, and the memory estimate from what is built -------------
+
+TEST_F(SceneTest, TypesDuplicatesAndEmptyStringsAreRefusedWithTheField)
+{
+    expectRefused(R"({"description": {"a": [1]}})", {"description: expected a string, got object"});
+    expectRefused(R"({"comment": 5})", {"comment: expected a string, got number"});
+    expectRefused(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5, "name": [1]}]})",
+                  {"clay[0].name: expected a string, got array"});
+    // nlohmann keeps the last duplicate: Tc would silently be 5.
+    expectRefused(R"({"threshold": 1000, "threshold": 5})", {"threshold: duplicate field"});
+    expectRefused(R"({"settle": {"max_steps": 5, "max_steps": 6}})", {"max_steps: duplicate field"});
+    // The same key in different objects is fine.
+    EXPECT_NO_THROW(parseScene(R"({"settle": {"max_steps": 5}, "outputs": {"vdb": "a.vdb"},
+        "clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5},
+                 {"shape": "box", "min": [5,0,0], "max": [6,1,1], "mass": 5}]})",
+                               "s.json", ""));
+    expectRefused(R"({"start": ""})", {"start: expected a non-empty string"});
+    expectRefused(R"({"outputs": {"vdb": ""}})", {"outputs.vdb: expected a non-empty string"});
+    expectRefused(R"({"rule": ""})", {"rule: expected a non-empty string"});
+    expectRefused(R"({"clay": [{"shape": "mesh", "file": "", "mass": 5}]})",
+                  {"clay[0].file: expected a non-empty string"});
+}
+
+TEST_F(SceneTest, StartAndClayTogetherAreRefused)
+{
+    expectRefused(
+        R"({"start": "a.vdb", "clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5}]})",
+        {"start: a scene starts either from a file", "not both"});
+    // An empty clay list beside a start file says nothing contrary.
+    EXPECT_EQ(parseScene(R"({"start": "a.vdb", "clay": []})", "s.json", "").start, "a.vdb");
+}
+
+TEST_F(SceneTest, NumbersOutOfRangeNameTheirField)
+{
+    expectRefused(R"({"voxel_size": 1e-300})",
+                  {"voxel_size: expected a number in [0.0001, 1e+06]", "1e-300"});
+    expectRefused(R"({"voxel_size": 1e300})", {"voxel_size: expected a number in"});
+    EXPECT_EQ(parseScene(R"({"voxel_size": 0.001})", "s.json", "").voxelSize, 0.001);
+    const std::string box = R"("shape": "box", "min": [0,10,0], "max": [4,12,4])";
+    expectRefused(R"({"tools": [{)" + box + R"(, "path": [{"rotate": [1e308,0,0], "frames": 2}]}]})",
+                  {"tools[0].path[0].rotate[0]: the tool turns at most 1e+09 degrees"});
+    expectRefused(
+        R"({"tools": [{)" + box + R"(, "path": [{"translate": [0,3e9,0]}]}]})",
+        {"tools[0].path[0].translate[1]: the tool's movement along its path so far must lie within +-2^30"});
+    // Movements add up over segments and frames.
+    expectRefused(R"({"tools": [{)" + box +
+                      R"(, "path": [{"translate": [6e8,0,0]}, {"translate": [1e6,0,0], "frames": 600}]}]})",
+                  {"tools[0].path[1].translate[0]"});
+    expectRefused(R"({"tools": [{)" + box + R"(, "pivot": [0,5e9,0], "path": [{"translate": [0,-1,0]}]}]})",
+                  {"tools[0].pivot[1]: a pivot must lie within +-2^30"});
+}
+
+TEST_F(SceneTest, In2DToolsAndObstaclesStayInTheZ0Layer)
+{
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,3], "max": [4,12,5], "path": [{"translate": [0,-1]}]}]})",
+        {"tools[0]: a 2D scene happens in the z = 0 layer, but this box holds no voxel there"});
+    // Bounds a voxel loose do not let a box at z 1..5 pass.
+    expectRefused(R"({"dimensions": 2, "obstacles": [{"shape": "box", "min": [0,0,1], "max": [4,4,5]}]})",
+                  {"obstacles[0]: a 2D scene happens in the z = 0 layer"});
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"translate": [0,0,1]}]}]})",
+        {"tools[0].path[0].translate[2]: a 2D scene's tools move in the z = 0 plane"});
+    expectRefused(
+        R"({"dimensions": 2, "tools": [{"shape": "box", "min": [0,10,0], "max": [4,12,0], "path": [{"rotate": [0,30,0]}]}]})",
+        {"tools[0].path[0].rotate: a 2D scene's tools turn about z only"});
+    expectRefused(R"({"dimensions": 2, "obstacles": [{"shape": "sphere", "center": [0,0,9], "radius": 2}]})",
+                  {"obstacles[0]: a 2D scene happens in the z = 0 layer"});
+    // Turning about z, moving in x and y, and shapes that cross z = 0 are what 2D scenes do.
+    EXPECT_NO_THROW(parseScene(R"({"dimensions": 2,
+        "tools": [{"shape": "box", "min": [0,10,-1], "max": [4,12,1], "path": [{"translate": [1,-1], "rotate": [0,0,5]}]}],
+        "obstacles": [{"shape": "sphere", "center": [0,0,0.5], "radius": 2}]})",
+                               "s.json", ""));
+}
+
+TEST_F(SceneTest, SceneFilesThatAreNotFilesAreRefusedBeforeReadingFar)
+{
+    const std::string dir = "/tmp/vdbclay-scene-dir-" + std::to_string(::getpid());
+    ASSERT_EQ(::mkdir(dir.c_str(), 0755), 0);
+    try {
+        loadScene(dir);
+        ADD_FAILURE() << "accepted a directory";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("is a directory, expected a scene file"), std::string::npos)
+            << e.what();
+    }
+    ::rmdir(dir.c_str());
+    // /dev/zero never ends: refused after 16 MiB, not after memory runs out.
+    try {
+        loadScene("/dev/zero");
+        ADD_FAILURE() << "accepted /dev/zero";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("/dev/zero: more than 16.0 MiB"), std::string::npos) << e.what();
+    }
+}
+
+TEST_F(SceneTest, MemoryEstimateCountsSharedNodesAndLeavesNotBoxes)
+{
+    // 20000 copies of one static tool: their cells are one set of cells (it was "122 GiB").
+    std::string tools;
+    for (int i = 0; i < 20000; ++i) {
+        tools += std::string(i ? "," : "") +
+                 R"({"shape": "box", "min": [0,10,0], "max": [9,12,9], "path": [{"translate": [0,0,0]}]})";
+    }
+    const Scene copies =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 800}],
+        "tools": [)" + tools +
+                       "]}",
+                   "s.json", "");
+    const MemoryEstimate c = estimateSceneMemory(copies);
+    EXPECT_LE(c.toolVoxels, 12u * 5u * 12u); // one tool's bounds (tightened while the budget lasts)
+    EXPECT_LT(c.total(), uint64_t(64) << 20) << c.describe();
+
+    // 20000 one-voxel boxes 10 voxels apart: 20000 leaves, not 20000 upper nodes (it was "566 GiB").
+    std::string boxes;
+    for (int i = 0; i < 20000; ++i) {
+        const std::string x = std::to_string(10 * i);
+        boxes += std::string(i ? "," : "") + R"({"shape": "box", "min": [)" + x + ",0,0], \"max\": [" + x +
+                 R"(,0,0], "mass": 800})";
+    }
+    const Scene dots = parseScene(R"({"clay": [)" + boxes + "]}", "s.json", "");
+    const MemoryEstimate d = estimateSceneMemory(dots);
+    EXPECT_EQ(d.clayLeaves, 20000u);
+    EXPECT_LT(d.total(), uint64_t(1) << 30) << d.describe();
+
+    // Clay at most Tc per voxel that no tool reaches never moves: its leaves are all it needs.
+    const Scene still = parseScene(
+        R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})", "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(still).clayLeavesGrown, 64u);
+    // ... unless shapes overlap and add up over Tc.
+    const Scene stacked =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800},
+        {"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})",
+                   "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(stacked).clayLeavesGrown, 216u);
+
+    // A 2x2x2 box at 2^31 - 1 per cell spreads over 8 * (2^31 - 1) / 1000 voxels at least (it was
+    // estimated at 10.6 MiB, and peaked at 300-420 MB): 2 * ceil(17179870 / 512) leaves.
+    const Scene dense = parseScene(
+        R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 2147483647}]})", "s.json", "");
+    const MemoryEstimate e = estimateSceneMemory(dense);
+    EXPECT_EQ(e.clayLeavesGrown, 2u * ((17179870u + 511u) / 512u));
+    EXPECT_GT(e.total(), uint64_t(40) << 20);
+}
+
+TEST_F(SceneTest, MemoryEstimateOfFileClayCountsItsRealLeaves)
+{
+    // 2000 voxels scattered over +-2^29: 2000 leaves (it was "13.4 EiB", from their bounding box).
+    const std::string path = "/tmp/vdbclay-scattered-" + std::to_string(::getpid()) + ".vdb";
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("mass");
+    auto acc = g->getAccessor();
+    for (int i = 0; i < 2000; ++i) {
+        const int64_t v = int64_t((uint64_t(i) * 2654435761u) % (1u << 30)) - (1 << 29);
+        acc.setValueOn(
+            openvdb::Coord(int32_t(v), int32_t((v * 7) % (1 << 29)), int32_t((v * 13) % (1 << 29))), 500);
+    }
+    // Written by OpenVDB alone: writeClayFile's surface level set of 2000 isolated voxels spread
+    // over 2^30 takes minutes (levelSetRebuild), and only the mass grid matters here.
+    {
+        openvdb::io::File out(path);
+        out.write({g});
+        out.close();
+    }
+    const Scene sc = parseScene(R"({"clay": [{"shape": "vdb", "file": ")" + path + R"("}]})", "s.json", "");
+    const MemoryEstimate e = estimateSceneMemory(sc);
+    EXPECT_EQ(e.clayLeaves, g->tree().leafCount());
+    // Each scattered voxel really holds its own internal nodes (about 300 KiB): the grid alone is
+    // about 600 MB. The estimate counts those nodes, twice for growth, and the output grids.
+    EXPECT_GE(e.clayBytes, uint64_t(g->memUsage()));
+    EXPECT_LT(e.total(), uint64_t(16) << 30) << e.describe();
+    std::remove(path.c_str());
 }

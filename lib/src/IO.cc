@@ -18,8 +18,12 @@
 #include <openvdb/io/io.h>
 #include <openvdb/openvdb.h>
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -120,8 +124,21 @@ std::string valueTypeOf(const std::string& treeType)
 std::vector<io_internal::VdbGridLayout> openChecked(openvdb::io::File& file, const std::string& path)
 {
     struct stat st;
-    if (::stat(path.c_str(), &st) != 0) throw Error(path + ": no such file");
+    if (::stat(path.c_str(), &st) != 0) {
+        const int err = errno;
+        throw Error(path + ": " + (err == ENOENT ? std::string("no such file") : std::strerror(err)));
+    }
     if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
+    // A .vdb is read by seeking (grid offsets): a device or pipe cannot be, and /dev/zero never ends.
+    if (!S_ISREG(st.st_mode)) throw Error(path + " is not a regular file (a .vdb is read by seeking in it)");
+    {
+        const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd < 0) {
+            const int err = errno;
+            throw Error(path + ": cannot open it: " + std::strerror(err));
+        }
+        ::close(fd);
+    }
     const std::string prefix = damaged(path);
     std::vector<io_internal::VdbGridLayout> grids;
     try {
@@ -200,6 +217,56 @@ std::string coordText(const openvdb::Coord& c)
     std::ostringstream s;
     s << "(" << c.x() << ", " << c.y() << ", " << c.z() << ")";
     return s.str();
+}
+
+/// Clay voxels may lie at most this far from the origin along each axis: shapes' bounds (Shapes.h)
+/// and the automaton's search margins stay inside int32 from there.
+constexpr int32_t kMaxClayCoord = 1 << 30;
+/// Tiles of clay are expanded into voxels on reading, up to this many voxels in all.
+constexpr uint64_t kMaxTileVoxels = uint64_t(1) << 26;
+
+/// One definition of "the clay in a file", used by every command: every voxel holding a non-zero
+/// value, active or not, is clay, as totalMass() and clayVoxelCount() count it. So inactive voxels
+/// holding mass become active, tiles become voxels (a file may hold at most kMaxTileVoxels
+/// voxels of them), and a non-zero background (clay in all of space) is refused, as is clay
+/// outside +-2^30.
+void normalizeClay(openvdb::Int32Grid& grid, const std::string& path, const std::string& gridName)
+{
+    const std::string what = path + ": grid \"" + gridName + "\"";
+    if (grid.background() != 0) {
+        throw Error(what + " has background value " + std::to_string(grid.background()) +
+                    ", expected 0 (a non-zero background puts clay in every voxel of space)");
+    }
+    uint64_t tileVoxels = 0;
+    bool inactive = false;
+    for (auto it = grid.tree().cbeginValueAll(); it; ++it) {
+        if (*it == 0) continue;
+        if (!it.isVoxelValue()) {
+            tileVoxels += it.getVoxelCount();
+            if (tileVoxels > kMaxTileVoxels) {
+                throw Error(what + " holds tiles of clay of more than " + std::to_string(kMaxTileVoxels) +
+                            " voxels in all (a tile at " + coordText(it.getCoord()) + " of " +
+                            std::to_string(it.getVoxelCount()) + "); vdbclay expands tiles into voxels");
+            }
+        }
+        if (!it.isValueOn()) inactive = true;
+    }
+    if (inactive) {
+        for (auto it = grid.tree().beginValueAll(); it; ++it) {
+            if (*it != 0 && !it.isValueOn()) it.setActiveState(true);
+        }
+    }
+    if (tileVoxels > 0) grid.tree().voxelizeActiveTiles();
+    const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+    if (!box.empty()) {
+        for (int a = 0; a < 3; ++a) {
+            if (box.min()[a] < -kMaxClayCoord || box.max()[a] > kMaxClayCoord) {
+                throw Error(what + " holds clay from " + coordText(box.min()) + " to " +
+                            coordText(box.max()) +
+                            ", outside the coordinate range +-2^30 that vdbclay works in");
+            }
+        }
+    }
 }
 
 } // namespace
@@ -293,6 +360,7 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
                         std::to_string(*it) + " at voxel " + coordText(it.getCoord()));
         }
     }
+    normalizeClay(*out.mass, path, gridName);
 
     const openvdb::GridBase& g = *out.mass;
     ClayMeta& m = out.meta;
@@ -384,7 +452,8 @@ std::string describeVdb(const std::string& path)
         grids = std::make_shared<openvdb::GridPtrVec>();
         for (const auto& g : layout) {
             if (!g.treeChecked) {
-                unread.push_back("grid \"" + g.baseName() + "\": type " + g.type +
+                unread.push_back("grid \"" + printableText(g.baseName()) + "\": type " +
+                                 printableText(g.type) +
                                  ", not read (vdbclay reads int32, int64, float, double and vec3 "
                                  "grids)\n");
                 continue;
@@ -401,13 +470,13 @@ std::string describeVdb(const std::string& path)
     file.close();
 
     std::ostringstream s;
-    s << path << ": OpenVDB file (format " << version << "), " << layout.size()
+    s << printableText(path) << ": OpenVDB file (format " << printableText(version) << "), " << layout.size()
       << (layout.size() == 1 ? " grid" : " grids") << "\n";
     auto printMeta = [&s](const openvdb::MetaMap& meta, const char* indent) {
         for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
             if (it->first == openvdb::GridBase::META_GRID_NAME) continue;
-            s << indent << it->first << " (" << it->second->typeName()
-              << ") = " << it->second->str() << "\n";
+            s << indent << printableText(it->first) << " (" << printableText(it->second->typeName())
+              << ") = " << printableText(it->second->str()) << "\n";
         }
     };
     if (fileMeta && fileMeta->metaCount() > 0) {
@@ -416,7 +485,7 @@ std::string describeVdb(const std::string& path)
     }
     for (const auto& g : *grids) {
         if (!g) continue;
-        s << "grid \"" << g->getName() << "\": type " << g->valueType() << ", class "
+        s << "grid \"" << printableText(g->getName()) << "\": type " << g->valueType() << ", class "
           << openvdb::GridBase::gridClassToString(g->getGridClass()) << "\n";
         s << "  active voxels: " << g->activeVoxelCount() << "\n";
         const openvdb::CoordBBox box = g->evalActiveVoxelBoundingBox();
@@ -433,21 +502,26 @@ std::string describeVdb(const std::string& path)
         s << "\n";
         if (auto ig = openvdb::gridConstPtrCast<openvdb::Int32Grid>(g)) {
             // A damaged or foreign file may hold tiles, or more mass than 64 bits count: say so.
-            try {
-                const int64_t total = totalMass(*ig);
-                s << "  total mass: " << total << "\n";
-            } catch (const Error&) {
-                s << "  total mass: more than 64 bits count\n";
+            if (ig->background() != 0) {
+                s << "  total mass: none (the background is " << ig->background()
+                  << ", not 0: clay in every voxel of space; vdbclay refuses it as clay)\n";
+            } else {
+                try {
+                    const int64_t total = totalMass(*ig);
+                    s << "  total mass: " << total << "\n";
+                } catch (const Error&) {
+                    s << "  total mass: more than 64 bits count\n";
+                }
+                try {
+                    const uint64_t h = contentHash(*ig);
+                    char hash[32];
+                    std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
+                    s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
+                } catch (const Error&) {
+                    s << "  content hash: none (the grid holds tiles of clay, not voxels)\n";
+                }
+                describeClayMetrics(s, *ig, path);
             }
-            try {
-                const uint64_t h = contentHash(*ig);
-                char hash[32];
-                std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
-                s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
-            } catch (const Error&) {
-                s << "  content hash: none (the grid holds tiles of clay, not voxels)\n";
-            }
-            describeClayMetrics(s, *ig, path);
         }
         if (g->metaCount() > 1) {
             s << "  metadata:\n";

@@ -1,10 +1,16 @@
 // Scene files: JSON (nlohmann/json, header-only, so no hand-written parser) to Scene.
 #include "vdbclay/Scene.h"
 
+#include "vdbclay/Sculpt.h" // checkMeshFits, defaultMemoryBudget
+
 #include <nlohmann/json.hpp>
+
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <climits>
@@ -18,12 +24,20 @@ namespace {
 
 using nlohmann::json;
 
+/// Positions and movements stay within +-2^30 voxels, the range of shape bounds (Shapes.h).
+constexpr double kMaxCoordinate = double(1 << 30);
+/// A tool turns at most this many degrees about an axis over its whole path.
+constexpr double kMaxRotationDeg = 1e9;
+/// Scene files are small; a larger one is a mistake (or /dev/zero), refused before it fills memory.
+constexpr uint64_t kMaxSceneBytes = uint64_t(16) << 20;
+
 struct Ctx {
     std::string source;
     std::string baseDir;
     int dims = 3;
     double voxelSize = 1.0;
     UpAxis up = UpAxis::Y;
+    uint64_t meshBudget = kNoMemoryBudget; ///< for meshes: the scene's memory_budget, else the default
 
     [[noreturn]] void fail(const std::string& field, const std::string& what) const
     {
@@ -92,10 +106,32 @@ struct Ctx {
     {
         return "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + got;
     }
+    /// A string field; "" is refused (it would silently mean "none").
     std::string string(const json& v, const std::string& field) const
     {
         if (!v.is_string()) fail(field, std::string("expected a string, got ") + v.type_name());
+        if (v.get_ref<const std::string&>().empty()) fail(field, "expected a non-empty string, got \"\"");
         return v.get<std::string>();
+    }
+    /// A free-text field (description, comment, name): any string, nothing else.
+    void text(const json& obj, const char* key, const std::string& field) const
+    {
+        const json* v = find(obj, key);
+        if (v && !v->is_string())
+            fail(join(field, key), std::string("expected a string, got ") + v->type_name());
+    }
+    /// A coordinate (a position, or a movement summed over a path) within the range shapes allow.
+    void coordinate(double v, const std::string& field, const std::string& what) const
+    {
+        if (!(std::fabs(v) <= kMaxCoordinate)) {
+            fail(field, what + " must lie within +-2^30 voxels, got " + num(v));
+        }
+    }
+    static std::string num(double v)
+    {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.6g", v);
+        return buf;
     }
     Vec3 vec3(const json& v, const std::string& field) const
     {
@@ -123,6 +159,8 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     s.field = field;
     s.kind = string(need(obj, field, "shape"), join(field, "shape"));
     // Fields every shape of a list may carry besides its geometry.
+    text(obj, "name", field);
+    text(obj, "comment", field);
     std::vector<const char*> extra;
     if (forClay) extra = {"mass", "transform"};
     else extra = {"path", "pivot", "transform"};
@@ -223,7 +261,11 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     } else if (s.kind == "mesh") {
         allowed({"file"});
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
-        s.shape = wrap([&] { return loadMesh(s.file, voxelSize, up, place ? *place : Placement()); });
+        // Bounds and the level set's size are checked before the mesh is voxelized.
+        s.shape = wrap([&] {
+            checkMeshFits(s.file, voxelSize, meshBudget);
+            return loadMesh(s.file, voxelSize, up, place ? *place : Placement());
+        });
     } else if (s.kind == "vdb" && forClay) {
         extra.clear(); // exact masses come from the file
         allowed({"file", "grid"});
@@ -236,6 +278,27 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     }
     if (place && s.kind != "mesh") s.shape = wrap([&] { return makePlaced(s.shape, *place); });
     return s;
+}
+
+/// In 2D only the z = 0 layer exists: a tool or obstacle that does not reach it would do nothing.
+void requireInPlane(const Ctx& cx, const ShapeSpec& s, const std::string& field)
+{
+    if (!s.shape) return;
+    const Box b = s.shape->bounds();
+    bool reaches = !b.empty() && b.min[2] <= 0 && b.max[2] >= 0;
+    // Bounds may be a voxel loose: look for a voxel centre at z = 0 inside the shape (when the
+    // layer is too large to look at, the bounds decide).
+    const uint64_t area =
+        reaches ? uint64_t(int64_t(b.max[0]) - b.min[0] + 1) * uint64_t(int64_t(b.max[1]) - b.min[1] + 1) : 0;
+    if (reaches && area <= (uint64_t(1) << 20)) {
+        reaches = false;
+        for (int32_t x = b.min[0]; x <= b.max[0] && !reaches; ++x)
+            for (int32_t y = b.min[1]; y <= b.max[1] && !reaches; ++y)
+                reaches = s.shape->distance(Vec3{{double(x), double(y), 0.0}}) < 0;
+    }
+    if (!reaches) {
+        cx.fail(field, "a 2D scene happens in the z = 0 layer, but this " + s.kind + " holds no voxel there");
+    }
 }
 
 } // namespace
@@ -274,8 +337,26 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     cx.source = source;
     cx.baseDir = baseDir;
     json root;
+    // nlohmann keeps the last of duplicate keys; a scene that says "threshold" twice is refused.
+    std::vector<std::vector<std::string>> keysSeen; // per open object, its keys so far
+    const json::parser_callback_t noDuplicates = [&](int, json::parse_event_t event, json& parsed) {
+        if (event == json::parse_event_t::object_start) {
+            keysSeen.emplace_back();
+        } else if (event == json::parse_event_t::object_end) {
+            if (!keysSeen.empty()) keysSeen.pop_back();
+        } else if (event == json::parse_event_t::key && !keysSeen.empty()) {
+            const std::string& key = parsed.get_ref<const std::string&>();
+            std::vector<std::string>& seen = keysSeen.back();
+            if (std::find(seen.begin(), seen.end(), key) != seen.end()) {
+                throw Error(source + ": " + key +
+                            ": duplicate field (each field may appear once in an object)");
+            }
+            seen.push_back(key);
+        }
+        return true;
+    };
     try {
-        root = json::parse(text);
+        root = json::parse(text, noDuplicates);
     } catch (const json::exception& e) {
         // e.g. "[json.exception.parse_error.101] parse error at line 2, column 12: ..." or
         // "[json.exception.out_of_range.406] number overflow parsing '1e999'": keep what follows "] ".
@@ -286,6 +367,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
                        "obstacles", "settle", "frames", "start", "outputs", "memory_budget", "description",
                        "comment", "push", "transport", "sweep", "up"});
+    cx.text(root, "description", "");
+    cx.text(root, "comment", "");
     Scene sc;
     sc.source = source;
     if (const json* v = cx.find(root, "dimensions")) {
@@ -294,7 +377,11 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     cx.dims = sc.dimensions;
     if (const json* v = cx.find(root, "voxel_size")) {
         sc.voxelSize = cx.number(*v, "voxel_size");
-        if (!(sc.voxelSize > 0)) cx.fail("voxel_size", "must be > 0, got " + v->dump());
+        if (!(sc.voxelSize >= kMinVoxelSize && sc.voxelSize <= kMaxVoxelSize)) {
+            cx.fail("voxel_size", "expected a number in [" + Ctx::num(kMinVoxelSize) + ", " +
+                                      Ctx::num(kMaxVoxelSize) + "] (world units per voxel), got " +
+                                      v->dump());
+        }
     }
     cx.voxelSize = sc.voxelSize;
     if (const json* v = cx.find(root, "up")) {
@@ -305,6 +392,16 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         }
     }
     cx.up = sc.up;
+    // Meshes are voxelized as they are read, below: they get the scene's budget (a malformed one is
+    // reported further down), or the default.
+    cx.meshBudget = defaultMemoryBudget();
+    if (const json* v = cx.find(root, "memory_budget")) {
+        try {
+            cx.meshBudget = v->is_string() ? parseByteSize(v->get<std::string>())
+                                           : (v->is_number_unsigned() ? v->get<uint64_t>() : cx.meshBudget);
+        } catch (const Error&) {
+        }
+    }
     if (const json* v = cx.find(root, "threshold")) {
         if (v->is_number() && v->get<double>() <= 0) cx.fail("threshold", "Tc must be > 0, got " + v->dump());
         sc.rule.threshold = int32_t(cx.integer(*v, "threshold", 1, INT32_MAX));
@@ -376,6 +473,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             if (!path) cx.fail(f, "missing field \"path\" (a tool moves; shapes that never move are obstacles)");
             if (!path->is_array()) cx.fail(f + ".path", std::string("expected an array, got ") + path->type_name());
             if (path->empty()) cx.fail(f + ".path", "empty path: give at least one segment");
+            double moved[3] = {0, 0, 0}, turned[3] = {0, 0, 0};
             for (size_t k = 0; k < path->size(); ++k) {
                 const std::string pf = f + ".path[" + std::to_string(k) + "]";
                 const json& seg = (*path)[k];
@@ -384,10 +482,33 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                 if (const json* v = cx.find(seg, "translate")) s.translate = cx.vec3(*v, pf + ".translate");
                 if (const json* v = cx.find(seg, "rotate")) s.rotateDeg = cx.vec3(*v, pf + ".rotate");
                 if (const json* v = cx.find(seg, "frames")) s.frames = uint64_t(cx.integer(*v, pf + ".frames", 1, 1000000));
+                if (sc.dimensions == 2 && s.translate[2] != 0) {
+                    cx.fail(pf + ".translate[2]",
+                            "a 2D scene's tools move in the z = 0 plane, got " + Ctx::num(s.translate[2]));
+                }
+                if (sc.dimensions == 2 && (s.rotateDeg[0] != 0 || s.rotateDeg[1] != 0)) {
+                    cx.fail(pf + ".rotate", "a 2D scene's tools turn about z only (rotate [0, 0, z]), got " +
+                                                (*cx.find(seg, "rotate")).dump());
+                }
+                for (int a = 0; a < 3; ++a) {
+                    moved[a] += std::fabs(s.translate[a]) * double(s.frames);
+                    turned[a] += std::fabs(s.rotateDeg[a]) * double(s.frames);
+                    const std::string idx = "[" + std::to_string(a) + "]";
+                    cx.coordinate(moved[a], pf + ".translate" + idx,
+                                  "the tool's movement along its path so far");
+                    if (!(turned[a] <= kMaxRotationDeg)) {
+                        cx.fail(pf + ".rotate" + idx, "the tool turns at most " + Ctx::num(kMaxRotationDeg) +
+                                                          " degrees about an axis over its path, got " +
+                                                          Ctx::num(turned[a]));
+                    }
+                }
                 t.path.push_back(s);
             }
+            if (sc.dimensions == 2) requireInPlane(cx, t.shape, f);
             if (const json* v = cx.find(obj, "pivot")) {
                 t.pivot = cx.vec3(*v, f + ".pivot");
+                for (int a = 0; a < 3; ++a)
+                    cx.coordinate(t.pivot[a], f + ".pivot[" + std::to_string(a) + "]", "a pivot");
             } else {
                 const Box b = t.shape.shape->bounds();
                 for (int a = 0; a < 3; ++a) t.pivot[a] = 0.5 * (double(b.min[a]) + double(b.max[a]));
@@ -401,6 +522,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             const json& obj = (*arr)[i];
             if (obj.is_object() && obj.contains("path")) cx.fail(f + ".path", "obstacles never move; moving shapes are tools");
             ShapeSpec s = cx.shape(obj, f, false);
+            if (sc.dimensions == 2) requireInPlane(cx, s, f);
             sc.obstacles.push_back(std::move(s));
         }
     }
@@ -413,7 +535,14 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     for (const ToolSpec& t : sc.tools) longest = std::max(longest, t.pathFrames());
     sc.frames = std::max<uint64_t>(longest, 1);
     if (const json* v = cx.find(root, "frames")) sc.frames = uint64_t(cx.integer(*v, "frames", 1, 100000000));
-    if (const json* v = cx.find(root, "start")) sc.start = cx.path(cx.string(*v, "start"));
+    if (const json* v = cx.find(root, "start")) {
+        sc.start = cx.path(cx.string(*v, "start"));
+        if (!sc.clay.empty()) {
+            cx.fail("start",
+                    "a scene starts either from a file (\"start\") or from \"clay\", not both; the start "
+                    "file holds the clay (remove \"clay\", or \"start\")");
+        }
+    }
     if (const json* v = cx.find(root, "memory_budget")) {
         if (v->is_string()) {
             try {
@@ -440,14 +569,39 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
 
 Scene loadScene(const std::string& path)
 {
+    // Any path: a FIFO or process substitution (<(...)) is a fine scene; a directory, a device that
+    // never ends (/dev/zero) or a huge file is not, and is refused before it fills memory.
+    struct stat st;
+    if (::stat(path.c_str(), &st) != 0) {
+        const int err = errno;
+        throw Error(path + ": cannot open scene file: " + std::strerror(err));
+    }
+    if (S_ISDIR(st.st_mode)) throw Error(path + ": is a directory, expected a scene file (JSON)");
+    if (S_ISREG(st.st_mode) && uint64_t(st.st_size) > kMaxSceneBytes) {
+        throw Error(path + ": " + std::to_string(st.st_size) + " bytes, more than a scene file may hold (" +
+                    formatBytes(kMaxSceneBytes) + ")");
+    }
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path + ": cannot open scene file");
-    std::stringstream ss;
-    ss << in.rdbuf();
-    if (in.bad()) throw Error(path + ": cannot read scene file");
+    if (!in) {
+        const int err = errno;
+        throw Error(path + ": cannot open scene file: " + std::strerror(err));
+    }
+    std::string text;
+    char buf[65536];
+    while (in.read(buf, sizeof buf) || in.gcount() > 0) {
+        text.append(buf, size_t(in.gcount()));
+        if (text.size() > kMaxSceneBytes) {
+            throw Error(path + ": more than " + formatBytes(kMaxSceneBytes) +
+                        " of data, more than a scene file may hold (is it a scene file?)");
+        }
+    }
+    if (in.bad()) {
+        const int err = errno;
+        throw Error(path + ": cannot read scene file: " + std::strerror(err));
+    }
     const auto slash = path.find_last_of('/');
     const std::string base = slash == std::string::npos ? std::string() : path.substr(0, slash);
-    return parseScene(ss.str(), path, base);
+    return parseScene(text, path, base);
 }
 
 const char* defaultSceneJson()

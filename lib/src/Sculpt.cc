@@ -5,16 +5,20 @@
 #include "vdbclay/Metrics.h"
 
 #include "Format.h"
+#include "VdbCheck.h"
 
 #include <openvdb/openvdb.h>
 
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <climits>
 #include <cmath>
+#include <cstring>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <thread>
 
@@ -183,16 +187,40 @@ constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
 
 bool touches(const Box& a, const Box& b) { return !intersect(a, b).empty(); }
 
+/// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
+/// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
+/// 100000 one-voxel boxes in a few leaves), else bounded by their sum and by their bounding box.
+uint64_t distinctNodes(const std::vector<Box>& boxes, int log2)
+{
+    uint64_t sum = 0;
+    Box all;
+    for (const Box& b : boxes) {
+        sum += nodesIn(b, log2);
+        all = unite(all, b);
+    }
+    if (sum > (uint64_t(1) << 20)) return std::min(sum, nodesIn(all, log2));
+    std::vector<std::array<int64_t, 3>> keys;
+    keys.reserve(size_t(sum));
+    for (const Box& b : boxes) {
+        if (b.empty()) continue;
+        for (int64_t x = leafIndex(b.min[0], log2); x <= leafIndex(b.max[0], log2); ++x)
+            for (int64_t y = leafIndex(b.min[1], log2); y <= leafIndex(b.max[1], log2); ++y)
+                for (int64_t z = leafIndex(b.min[2], log2); z <= leafIndex(b.max[2], log2); ++z)
+                    keys.push_back({{x, y, z}});
+    }
+    std::sort(keys.begin(), keys.end());
+    return uint64_t(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
 /// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
 /// internal nodes).
-template<typename TreeT>
-uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes)
+/// Internal nodes are at most @a lowerCap and @a upperCap where more is known (clay from files).
+template <typename TreeT>
+uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes, uint64_t lowerCap = UINT64_MAX,
+                   uint64_t upperCap = UINT64_MAX)
 {
-    uint64_t lower = 0, upper = 0;
-    for (const Box& b : boxes) {
-        lower += std::min(nodesIn(b, 7), std::max<uint64_t>(leaves, 1));
-        upper += std::min(nodesIn(b, 12), std::max<uint64_t>(leaves, 1));
-    }
+    const uint64_t lower = std::min({distinctNodes(boxes, 7), std::max<uint64_t>(leaves, 1), lowerCap});
+    const uint64_t upper = std::min({distinctNodes(boxes, 12), std::max<uint64_t>(leaves, 1), upperCap});
     return leaves * leafBytes<TreeT>() + lower * lowerNodeBytes<TreeT>() + upper * upperNodeBytes<TreeT>();
 }
 
@@ -201,9 +229,38 @@ uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes)
 struct FileGrid {
     Box bounds;
     uint64_t voxels = 0;
+    uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
+    uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
 };
+FileGrid fileGridMetadata(const std::string& path, const std::string& gridName);
+
+/// The grid @a gridName of @a path as the estimate sees it, without reading its voxels.
 FileGrid fileGridStats(const std::string& path, const std::string& gridName)
+{
+    FileGrid out = fileGridMetadata(path, gridName);
+    // Metadata is only what the writer claimed (a forged voxel count or bounding box would shrink
+    // the estimate): the leaves come from the topology itself, walked by the layout check.
+    std::vector<io_internal::VdbGridLayout> layout;
+    try {
+        layout = io_internal::checkVdbLayout(path);
+    } catch (const Error&) {
+        (void)readClayFile(path, gridName); // throws, naming the file and what is wrong with it
+    }
+    bool found = false;
+    for (const auto& g : layout) {
+        if (g.baseName() == gridName && g.treeChecked) {
+            out.leaves = g.leaves;
+            out.lowerNodes = g.lowerNodes;
+            out.upperNodes = g.upperNodes;
+            found = true;
+        }
+    }
+    if (!found) out.leaves = std::min(nodesIn(out.bounds, 3), out.voxels);
+    return out;
+}
+
+FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
 {
     FileGrid out;
     openvdb::GridBase::Ptr g;
@@ -254,9 +311,10 @@ std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
         while (parent[i] != i) i = parent[i] = parent[parent[i]];
         return i;
     };
+    // Pairwise: beyond 4000 boxes (16 million pairs) they are taken as one group.
     for (size_t i = 0; i < boxes.size(); ++i)
         for (size_t j = i + 1; j < boxes.size(); ++j)
-            if (touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
+            if (boxes.size() > 4000 || touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
     std::vector<std::vector<size_t>> groups(boxes.size());
     for (size_t i = 0; i < boxes.size(); ++i) groups[root(i)].push_back(i);
     groups.erase(std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
@@ -265,7 +323,7 @@ std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
 }
 
 /// Leaves (8^3 voxels) touched by the union of @a boxes, counted exactly on the grid the boxes'
-/// leaf-aligned faces cut (at most 40 boxes; more: the leaves of their bounding box).
+/// leaf-aligned faces cut (at most 40 boxes; more: distinctNodes()).
 uint64_t unionLeaves(const std::vector<Box>& boxes)
 {
     struct LeafBox {
@@ -283,7 +341,7 @@ uint64_t unionLeaves(const std::vector<Box>& boxes)
         }
         lb.push_back(l);
     }
-    if (lb.size() > 40) return nodesIn(all, 3);
+    if (lb.size() > 40) return distinctNodes(boxes, 3);
     std::vector<int64_t> cuts[3];
     for (int a = 0; a < 3; ++a) {
         for (const LeafBox& l : lb) {
@@ -360,16 +418,33 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     const int dims = scene.dimensions;
     MemoryEstimate e;
     uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
-    std::vector<std::pair<Box, bool>> areas; // (box, holds clay)
+    struct Area {
+        Box box;
+        bool clay;         ///< holds clay (else: a tool's sweep)
+        bool moves;        ///< may move: a tool, clay from a file, clay above Tc
+        bool file = false; ///< clay from a file
+    };
+    std::vector<Area> areas;
     uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
     uint64_t fileTreeBytes = 0;
+    uint64_t fileLower = 0, fileUpper = 0; // internal nodes of clay from files
+    std::vector<Box> clayBoxes;            // of the shapes' clay
+    uint64_t fileLeaves = 0;               // of clay from files
+    uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
         const FileGrid g = fileGridStats(path, grid);
         const Box b = clip2D(g.bounds, dims);
-        const uint64_t leaves = std::min(nodesIn(b, 3), g.voxels);
-        e.clayLeaves += leaves;
-        fileTreeBytes += std::max(g.memBytes, treeBytes<MassTreeT>(leaves, {b}));
-        areas.push_back({b, true});
+        const uint64_t leaves = g.leaves;
+        fileLeaves += leaves;
+        // Its real nodes when the topology was walked; else from its bounds.
+        const uint64_t real = g.upperNodes ? leaves * leafBytes<MassTreeT>() +
+                                                 g.lowerNodes * lowerNodeBytes<MassTreeT>() +
+                                                 g.upperNodes * upperNodeBytes<MassTreeT>()
+                                           : treeBytes<MassTreeT>(leaves, {b});
+        fileTreeBytes += std::max(g.memBytes, real);
+        fileLower += g.upperNodes ? g.lowerNodes : UINT64_MAX / 4;
+        fileUpper += g.upperNodes ? g.upperNodes : UINT64_MAX / 4;
+        areas.push_back({b, true, true, true});
         massBound = UINT64_MAX;
     };
     if (!scene.start.empty()) {
@@ -381,36 +456,107 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 continue;
             }
             const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
-            e.clayLeaves += nodesIn(b, 3);
-                areas.push_back({b, true});
+            clayBoxes.push_back(b);
+            areas.push_back({b, true, c.mass > scene.rule.threshold});
             const double m = double(c.mass) * double(voxelsIn(b));
             if (massBound != UINT64_MAX) massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
+            // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
+            const double settled =
+                c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
+            settledVoxels =
+                settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
         }
     }
+    e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
     uint64_t toolLeaves = 0;
     std::vector<Box> toolBoxes;
     for (const ToolSpec& t : scene.tools) {
         const auto sw = sweep(t, scene.frames, dims, toolBudget);
-        areas.push_back({sw.first, false});
+        areas.push_back({sw.first, false, true});
         e.toolVoxels += sw.second;
         toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
         toolBoxes.push_back(sw.first);
+    }
+    // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and leaves
+    // than their sweeps hold together.
+    if (!toolBoxes.empty()) {
+        Box all;
+        for (const Box& b : toolBoxes)
+            all = unite(all, b);
+        e.toolVoxels = std::min(e.toolVoxels, voxelsIn(all));
+        toolLeaves = std::min(toolLeaves, distinctNodes(toolBoxes, 3));
     }
     // Clay spreads around itself and where tools push it: over the clay's boxes and the tools'
     // sweeps that touch clay (directly or through other such boxes), each grown by one leaf.
     uint64_t grown = 0;
     std::vector<Box> boxes, grownBoxes;
-    for (const auto& a : areas) boxes.push_back(growBox(a.first, 8, dims));
+    for (const Area& a : areas)
+        boxes.push_back(growBox(a.box, 8, dims));
     for (const std::vector<size_t>& g : groupsOfTouching(boxes)) {
-        if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].second; })) continue;
+        if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].clay; })) continue;
+        // Clay no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless
+        // shapes overlap and add up: it keeps its own leaves.
+        bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
+        if (!moves) { // overlaps, found by a sweep along x
+            std::vector<size_t> order(g);
+            std::sort(order.begin(), order.end(),
+                      [&](size_t a, size_t b) { return areas[a].box.min[0] < areas[b].box.min[0]; });
+            for (size_t i = 0; i < order.size() && !moves; ++i)
+                for (size_t j = i + 1;
+                     j < order.size() && areas[order[j]].box.min[0] <= areas[order[i]].box.max[0] && !moves;
+                     ++j)
+                    moves = touches(areas[order[i]].box, areas[order[j]].box);
+        }
+        if (!moves) {
+            std::vector<Box> own;
+            for (size_t i : g)
+                own.push_back(areas[i].box);
+            grown += distinctNodes(own, 3);
+            grownBoxes.insert(grownBoxes.end(), own.begin(), own.end());
+            continue;
+        }
         std::vector<Box> members;
         for (size_t i : g) members.push_back(boxes[i]);
         grown += unionLeaves(members);
         grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
     }
-    e.clayLeavesGrown = std::max(e.clayLeaves, std::min(grown, massBound));
+    // Leaves, not boxes: settling grows clay by at most one leaf on every side of each leaf it holds
+    // (27 per leaf, a bound that counts scattered voxels for what they are, not their bounding box),
+    // and overloaded clay spreads over its settled volume (with a leaf of margin all round).
+    const uint64_t leafArea = dims == 2 ? 64 : 512; // voxels of a leaf that clay can fill
+    const uint64_t aroundLeaves = e.clayLeaves > UINT64_MAX / 27 ? UINT64_MAX : 27 * e.clayLeaves;
+    const uint64_t settledLeaves =
+        settledVoxels == UINT64_MAX ? UINT64_MAX : 2 * ((settledVoxels + leafArea - 1) / leafArea);
+    e.clayLeavesGrown = std::max(
+        {e.clayLeaves, std::min({grown, massBound, aroundLeaves}), std::min(settledLeaves, massBound)});
+    if (e.clayLeavesGrown > std::min(grown, massBound)) {
+        // Spreading past the boxes: its internal nodes, as for a cube of that many leaves.
+        const double side =
+            (dims == 2 ? std::sqrt(double(e.clayLeavesGrown)) : std::cbrt(double(e.clayLeavesGrown))) * 8;
+        Box spread;
+        for (int a = 0; a < 3; ++a) {
+            spread.min[a] = 0;
+            spread.max[a] = int32_t(std::min(side, 1e9));
+        }
+        if (dims == 2) spread.max[2] = 0;
+        grownBoxes.push_back(spread);
+    }
     // A file's own figure (its tree's size when written) when that is more.
-    e.clayBytes = std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes), fileTreeBytes);
+    // With clay from files, the nodes grown clay needs: the files' own, twice (growth by a leaf
+    // rarely crosses into another internal node), and those of the shapes' and tools' areas.
+    uint64_t lowerCap = UINT64_MAX, upperCap = UINT64_MAX;
+    if (fileLeaves > 0 && fileLower < UINT64_MAX / 8 && fileUpper < UINT64_MAX / 8) {
+        std::vector<Box> others;
+        for (const Area& a : areas) {
+            if (!a.file) {
+                others.push_back(growBox(a.box, 8, dims));
+            }
+        }
+        lowerCap = 2 * fileLower + distinctNodes(others, 7);
+        upperCap = 2 * fileUpper + distinctNodes(others, 12);
+    }
+    e.clayBytes =
+        std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
 
     std::vector<Box> obsBoxes;
     for (const ShapeSpec& o : scene.obstacles) {
@@ -432,9 +578,86 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // over a band around the surface): counted as three float grids on the clay's leaves, plus
     // the partial trees meshToVolume's worker threads build (each starts with its own upper nodes).
     const uint64_t workers = std::max(1u, std::thread::hardware_concurrency());
-    e.outputBytes = 3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes) +
-                    workers * 2 * upperNodeBytes<FloatTreeT>() * std::max<uint64_t>(1, grownBoxes.size());
+    e.outputBytes =
+        3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
+        workers * 2 * upperNodeBytes<FloatTreeT>() *
+            std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
     return e;
+}
+
+void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return; // loadMesh says what is wrong with it
+    std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    auto add = [&](const double* v) {
+        for (int a = 0; a < 3; ++a) {
+            if (!std::isfinite(v[a])) continue; // loadMesh refuses it with the line
+            lo[a] = std::min(lo[a], v[a]);
+            hi[a] = std::max(hi[a], v[a]);
+        }
+    };
+    bool binaryStl = false;
+    if (data.size() >= 84) {
+        uint32_t n = 0;
+        std::memcpy(&n, data.data() + 80, 4);
+        binaryStl = data.size() == 84 + 50 * uint64_t(n) &&
+                    (data.compare(0, 5, "solid") != 0 || data.find('\0') != std::string::npos);
+    }
+    if (binaryStl) {
+        for (size_t off = 84; off + 50 <= data.size(); off += 50) {
+            for (int k = 1; k <= 3; ++k) {
+                float f[3];
+                std::memcpy(f, data.data() + off + 12 * k, 12);
+                const double v[3] = {f[0], f[1], f[2]};
+                add(v);
+            }
+        }
+    } else {
+        std::istringstream text(data);
+        std::string line;
+        while (std::getline(text, line)) {
+            std::istringstream ls(line);
+            std::string word;
+            ls >> word;
+            if (word != "v" && word != "vertex") continue;
+            double v[3];
+            if (ls >> v[0] >> v[1] >> v[2]) add(v);
+        }
+    }
+    if (!(lo[0] <= hi[0]) || !(lo[1] <= hi[1]) || !(lo[2] <= hi[2])) return; // no vertices: loadMesh says so
+    double side[3];
+    for (int a = 0; a < 3; ++a) {
+        const double l = lo[a] / voxelSize, h = hi[a] / voxelSize;
+        if (!(std::fabs(l) <= double(1 << 30)) || !(std::fabs(h) <= double(1 << 30))) {
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "%.6g .. %.6g voxels along axis %d (at voxel size %g)", l, h, a,
+                          voxelSize);
+            throw Error(path + ": the mesh spans " + buf + ", outside the coordinate range +-2^30");
+        }
+        side[a] = h - l + 1;
+    }
+    if (budget == kNoMemoryBudget) return;
+    // meshToLevelSet: a float distance and an Int32 index grid over the band, each built in
+    // partial copies by the worker threads and merged (counted three times), plus leaf overhead.
+    const double bandVoxels = 2 * (side[0] * side[1] + side[1] * side[2] + side[0] * side[2]) * 6;
+    const double bytes = 3 * bandVoxels / 512 * double(leafBytes<FloatTreeT>() + leafBytes<MassTreeT>());
+    if (bytes > double(budget)) {
+        char surface[96];
+        std::snprintf(surface, sizeof surface, " (a surface of about %.3g voxels at voxel size %g)",
+                      bandVoxels / 6, voxelSize);
+        throw Error(path + ": turning the mesh into a level set needs about " +
+                    formatBytes(uint64_t(std::min(bytes, 9e18))) + surface +
+                    ", more than the memory budget of " + formatBytes(budget) +
+                    "; use a larger voxel size or raise the budget");
+    }
+}
+
+uint64_t clayMemoryInUse(const MassGrid& mass)
+{
+    const uint64_t leaves = mass.tree().leafCount();
+    return uint64_t(mass.tree().memUsage()) + leaves * (kAutomatonBytesPerLeaf + 3 * leafBytes<FloatTreeT>());
 }
 
 uint64_t defaultMemoryBudget()

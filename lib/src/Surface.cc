@@ -44,21 +44,23 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
         const MassGrid::TreeType::LeafNodeType* in = mass.tree().probeConstLeaf(leaf.origin());
         for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
             const int32_t m = in->getValue(i);
-            if (m == 0 || !in->isValueOn(i)) {
+            if (m == 0) {
                 leaf.setValueOff(i, 0.f);
             } else {
                 leaf.setValueOn(i, float(double(m) / tc));
             }
         }
     });
-    // Active tiles (the automaton voxelizes them; a file may hold some): their density. Only the
-    // levels above the leaves, and only active values: inactive tiles are background already.
-    auto it = mass.tree().cbeginValueOn();
+    // Tiles holding mass (the automaton voxelizes them; a file may hold some), active or not: every
+    // non-zero value is clay. Only the levels above the leaves are visited, and only non-zero tiles
+    // are filled.
+    auto it = mass.tree().cbeginValueAll();
     it.setMaxDepth(it.getLeafDepth() - 1); // tiles only: the voxels were done above
     for (; it; ++it) {
+        if (*it == 0) continue;
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
-        tree->fill(box, *it == 0 ? 0.f : float(double(*it) / tc), /*active=*/*it != 0);
+        tree->fill(box, float(double(*it) / tc), /*active=*/true);
     }
     openvdb::tools::pruneInactive(*tree); // leaves that held no clay (inactive or zero values only)
     auto density = openvdb::FloatGrid::create(tree);

@@ -5,6 +5,27 @@
 
 namespace vdbclay {
 
+std::string printableText(const std::string& text)
+{
+    static const char* hex = "0123456789abcdef";
+    std::string out;
+    out.reserve(text.size());
+    for (const char ch : text) {
+        const unsigned char c = static_cast<unsigned char>(ch);
+        if (c == '\n')
+            out += "\\n";
+        else if (c == '\t')
+            out += "\\t";
+        else if (c == '\r')
+            out += "\\r";
+        else if (c < 32 || c == 127)
+            out += std::string("\\x") + hex[c >> 4] + hex[c & 15];
+        else
+            out += ch;
+    }
+    return out;
+}
+
 const char* ruleName(Rule rule)
 {
     switch (rule) {

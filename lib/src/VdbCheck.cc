@@ -310,8 +310,12 @@ private:
         if (!instance && valueLayout(g.type, layout)) {
             mValue = layout;
             mHalf = half && layout.halfSize != 0;
+            mLowerNodes = mUpperNodes = 0;
             tree(grid, uint64_t(blockPos), uint64_t(endPos));
             g.treeChecked = true;
+            g.leaves = mLeafActive.size();
+            g.lowerNodes = mLowerNodes;
+            g.upperNodes = mUpperNodes;
         } else {
             g.treeChecked = instance && valueLayout(g.type, layout);
         }
@@ -375,6 +379,7 @@ private:
             // Buffers are read in the root's key order: children must come in that order.
             if (i > 0 && !(previous < k)) mIn.fail(what + " is out of order");
             previous = k;
+            ++mUpperNodes;
             internalTopology(what, 5);
         }
         if (mIn.pos() != blockPos) {
@@ -404,6 +409,7 @@ private:
         const uint32_t children = popcount(childMask);
         for (uint32_t i = 0; i < children; ++i) {
             if (log2 == 5) {
+                ++mLowerNodes;
                 internalTopology(what + " > child " + std::to_string(i + 1), 4);
             } else {
                 std::vector<uint64_t> mask(8);
@@ -467,6 +473,7 @@ private:
     ValueLayout mValue;
     bool mHalf = false;
     std::vector<uint32_t> mLeafActive; ///< active voxels of each leaf, in file order
+    uint64_t mLowerNodes = 0, mUpperNodes = 0; ///< internal nodes of the tree being walked
 };
 
 } // namespace

@@ -21,6 +21,8 @@ struct VdbGridLayout {
     std::string name;
     std::string type;     ///< OpenVDB's tree type name, e.g. "Tree_int32_5_4_3"
     bool treeChecked = false; ///< its tree was walked (a value type checkVdbLayout knows)
+    /// When treeChecked: the nodes its topology really holds (not what its metadata claims).
+    uint64_t leaves = 0, lowerNodes = 0, upperNodes = 0;
     /// The name OpenVDB looks the grid up by: the unique name up to its "\x1e" suffix.
     std::string baseName() const { return name.substr(0, name.find('\x1e')); }
 };

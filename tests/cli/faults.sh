@@ -35,7 +35,7 @@ refused full-disk-png "cannot write old.png" full 4 run --frames 2 --quiet --png
 # The stats file is under 1 KiB, ulimit's unit: prlimit sets the limit in bytes (300: the error
 # line still fits on stderr, the 557-byte stats do not).
 if command -v prlimit > /dev/null; then
-  refused full-disk-stats "cannot write old.json: File too large" \
+  refused full-disk-stats "cannot write old.json: write failed: File too large" \
     bash -c 'trap "" XFSZ; exec prlimit --fsize=300 "$0" "$@"' "$bin" run --frames 2 --quiet --stats old.json
 else
   echo "SKIP full-disk-stats: no prlimit"
@@ -81,5 +81,37 @@ refused budget-bad "--memory-budget: \"lots\" is not a size" "$bin" run small.js
 "$bin" run small.json --memory-budget none --quiet > /dev/null 2> err.txt || fail "--memory-budget none: $(cat err.txt)"
 "$bin" run small.json --memory-budget 64M --quiet > /dev/null 2> err.txt || fail "--memory-budget 64M: $(cat err.txt)"
 no_temp_files budget
+
+# 5. Meshes are checked before they are voxelized (issue 11, item 3): a 12-triangle cube of side 5000
+#    (its level set alone needs tens of GiB) and one spanning 0..8e9 are refused at once, as clay,
+#    as a tool and in import. Each names a budget: the default one depends on the machine.
+cube() { # SIDE FILE: a closed cube of 12 triangles
+  local s=$1
+  printf 'v 0 0 0\nv %s 0 0\nv %s %s 0\nv 0 %s 0\nv 0 0 %s\nv %s 0 %s\nv %s %s %s\nv 0 %s %s\n' \
+    "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" > "$2"
+  printf 'f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n' >> "$2"
+}
+cube 5000 big-cube.obj
+cube 8e9 far-cube.obj
+printf '{"memory_budget": "1G", "clay": [{"shape": "mesh", "file": "big-cube.obj", "mass": 800}]}' > mesh-clay.json
+printf '{"memory_budget": "1G", "tools": [{"shape": "mesh", "file": "big-cube.obj", "path": [{"translate": [0,-1,0]}]}]}' > mesh-tool.json
+printf '{"clay": [{"shape": "mesh", "file": "far-cube.obj", "mass": 800}]}' > mesh-far.json
+refused mesh-clay-too-big "clay\[0\]: big-cube.obj: turning the mesh into a level set needs about" "$bin" run mesh-clay.json -o big.vdb
+refused mesh-tool-too-big "tools\[0\]: big-cube.obj: turning the mesh into a level set" "$bin" run mesh-tool.json -o big.vdb
+refused mesh-far "far-cube.obj: the mesh spans 0 .. 8e+09 voxels along axis 0 (at voxel size 1), outside the coordinate range" \
+  "$bin" run mesh-far.json -o big.vdb
+refused import-too-big "big-cube.obj: turning the mesh into a level set" "$bin" import big-cube.obj -o big.vdb --mass 100 --memory-budget 1G
+[ -e big.vdb ] && fail "mesh checks: an output was written"
+
+# 6. The budget is kept while the run goes on (item 5): clay read from a file at 2^31 - 1 per voxel
+#    spreads far beyond what the estimate can see in the file, and the run stops with a checkpoint
+#    once its grids outgrow the budget, instead of growing until the machine runs out.
+cube 3 small-cube.obj
+"$bin" import small-cube.obj -o dense.vdb --mass 2147483647 > /dev/null || fail "import of dense clay"
+printf '{"memory_budget": "40M", "settle": {"max_steps": 400}, "clay": [{"shape": "vdb", "file": "dense.vdb"}]}' > dense.json
+refused budget-while-running "stopped: the clay outgrew the memory budget of 40.0 MiB" "$bin" run dense.json -q -o dense-out.vdb
+[ -e dense-out.vdb ] && fail "budget while running: the output was written"
+"$bin" info dense-out.checkpoint.vdb > /dev/null 2>&1 || fail "budget while running: no checkpoint"
+no_temp_files budget-while-running
 
 [ $fails -eq 0 ] && echo "FAULTS HANDLED" || { echo "$fails failed"; exit 1; }

@@ -65,6 +65,14 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
 /// @a up (Shapes.h: UpAxis).
 void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up);
 
+/// Writes @a text to @a path as writeClayFile writes a .vdb: atomically for a regular file, through
+/// it for a device or FIFO (never replacing it). @throw Error "cannot write PATH: REASON".
+void writeTextFile(const std::string& path, const std::string& text);
+
+/// For a signal handler that ends the process during a write: removes the temporary file of the
+/// write in progress, if any. Async-signal-safe (one unlink(2) of a name kept in a fixed buffer).
+void removePendingTempFile() noexcept;
+
 /// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0).
 /// @throw Error if massPerVoxel <= 0 or the shape is empty.
 MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);

@@ -59,6 +59,10 @@ struct OutputSpec {
 
 /// Scene::memoryBudget: no budget at all.
 constexpr uint64_t kNoMemoryBudget = UINT64_MAX;
+/// The voxel sizes (world units per voxel) a scene or import may use: OpenVDB refuses a transform
+/// whose scale is near zero, and beyond these a world unit is no longer a useful measure.
+constexpr double kMinVoxelSize = 1e-4;
+constexpr double kMaxVoxelSize = 1e6;
 
 struct Scene {
     std::string source;  ///< the file (or "<built-in>") for messages

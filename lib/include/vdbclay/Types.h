@@ -16,6 +16,11 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// @a text fit for one line on a terminal: newline, tab, ESC and the other control characters
+/// escaped (\n, \t, \x1b), so that a name read from a file can neither split a message into lines
+/// nor send terminal escape sequences. Other bytes (UTF-8 included) are kept.
+std::string printableText(const std::string& text);
+
 /// The four repartition rules of the paper.
 enum class Rule {
     Arata,   ///< Arata et al. 1999: each over cell gives the fraction alpha of its mass.

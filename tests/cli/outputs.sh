@@ -1,0 +1,152 @@
+#!/usr/bin/env bash
+# Outputs that are not plain new files: devices, FIFOs and symbolic links are written through and
+# never replaced; an output that is an input, or another output, is refused before any work; a bad
+# output is found before the run, not after it; a file size limit (SIGXFSZ not ignored) and a signal
+# during a write end the run with a message and no temporary file. No sleeps: every wait is on an
+# event (a FIFO's reader, a pipe that fills).
+# usage: outputs.sh VDBCLAY WORKDIR
+set -uo pipefail
+bin=$1; work=$2
+rm -rf "$work"; mkdir -p "$work"; cd "$work"
+fails=0
+fail() { echo "FAIL $*"; fails=$((fails+1)); }
+# refused NAME NEEDLE COMMAND...: non-zero exit, one stderr line holding NEEDLE.
+refused() {
+  local name=$1 needle=$2; shift 2
+  "$@" > out.txt 2> err.txt; local rc=$?
+  if [ $rc -eq 0 ] || [ "$(wc -l < err.txt)" -ne 1 ] || ! grep -q -- "$needle" err.txt; then
+    fail "$name: rc=$rc, needle '$needle', stderr: $(cat err.txt)"
+  else
+    echo "PASS $name: $(cat err.txt)"
+  fi
+}
+no_temp_files() { ls ./*.tmp* > /dev/null 2>&1 && fail "$1: temporary files left: $(ls ./*.tmp*)"; }
+run1() { "$bin" run --frames 1 --quiet "$@"; }
+
+# 1. A FIFO as an output is written through (a reader gets a complete .vdb) and stays a FIFO.
+mkfifo pipe.vdb
+cat pipe.vdb > through-fifo.vdb &
+reader=$!
+run1 -o pipe.vdb > /dev/null 2> err.txt || fail "fifo output: $(cat err.txt)"
+wait $reader
+[ -p pipe.vdb ] || fail "fifo output: pipe.vdb is no longer a FIFO"
+"$bin" info through-fifo.vdb > info.txt 2>&1 && grep -q 'grid "mass"' info.txt || fail "fifo output: the reader got no .vdb: $(head -3 info.txt)"
+run1 -o direct.vdb > /dev/null || fail "direct output"
+[ "$(grep 'content hash' info.txt)" = "$("$bin" info direct.vdb | grep 'content hash')" ] || fail "fifo output: other clay"
+# A full device: the write fails and says so (it used to replace the path and report success).
+if [ -w /dev/full ]; then
+  refused full-device-vdb "cannot write /dev/full: write failed: No space left on device" run1 -o /dev/full
+  refused full-device-stats "cannot write /dev/full: write failed: No space left on device" run1 --stats /dev/full
+  refused full-device-png "cannot write /dev/full" run1 --png /dev/full
+  refused full-device-demo "cannot write /dev/full" "$bin" demo --size 8 -o /dev/full
+  refused full-device-render "cannot write /dev/full" "$bin" render direct.vdb -o /dev/full
+fi
+# A character device made here (as root): several outputs may go to it, and it stays a device.
+if [ "$(id -u)" -eq 0 ] && mknod null c 1 3 2> /dev/null; then
+  run1 -o null --png null --stats null --mesh null.obj > /dev/null 2> err.txt || fail "device output: $(cat err.txt)"
+  [ -c null ] || fail "device output: ./null is no longer a character device"
+else
+  echo "SKIP device output: not root"
+fi
+# A symbolic link stays a link; the file it points to is replaced.
+mkdir real && cp direct.vdb real/target.vdb && ln -s real/target.vdb link.vdb
+"$bin" run --frames 2 --quiet -o link.vdb > /dev/null || fail "symlink output"
+[ -L link.vdb ] || fail "symlink output: link.vdb is no longer a link"
+cmp -s real/target.vdb direct.vdb && fail "symlink output: the target was not rewritten"
+no_temp_files devices
+
+# 7. Writing over an input, or two outputs to one file, is refused before any work.
+printf '{"frames": 1}' > s.json
+cp s.json s.json.copy
+refused over-scene "-o s.json: that is the scene file s.json; refusing to write over an input" "$bin" run s.json -o s.json
+refused over-scene-stats "--stats s.json: that is the scene file" "$bin" run s.json --stats s.json
+refused over-scene-checkpoint "--checkpoint s.json: that is the scene file" "$bin" run s.json --checkpoint s.json
+refused over-scene-link "that is the scene file" "$bin" run s.json -o ./real/../s.json
+cmp -s s.json s.json.copy || fail "the scene file changed"
+refused vdb-and-png "--png X: the same file as -o X" run1 -o X --png X
+[ -e X ] && fail "vdb-and-png: X was written"
+refused png-and-stats "--png same: the same file as --stats same" run1 --png same --stats same
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' > m.obj
+cp m.obj m.obj.copy
+refused import-over-input "-o m.obj: that is the input file m.obj; refusing to write over an input" "$bin" import m.obj -o m.obj --mass 100
+cp direct.vdb clay.obj
+refused mesh-over-input "-o clay.obj: that is the input file clay.obj" "$bin" mesh clay.obj -o clay.obj
+cmp -s clay.obj direct.vdb || fail "mesh over its input: clay.obj changed"
+refused render-over-input "-o direct.vdb: that is the input file direct.vdb" "$bin" render direct.vdb -o direct.vdb
+cmp -s m.obj m.obj.copy || fail "m.obj changed"
+printf '{"clay": [{"shape": "mesh", "file": "m.obj", "mass": 100}], "frames": 1}' > ms.json
+refused over-shape-file "--mesh m.obj: that is the file of clay\[0\]" "$bin" run ms.json --mesh m.obj
+# The start file may be continued in place (-o over it): that is a legitimate use.
+run1 -o cont.vdb > /dev/null
+printf '{"start": "cont.vdb", "frames": 2}' > cont.json
+"$bin" run cont.json --quiet -o cont.vdb > /dev/null 2> err.txt || fail "continue in place: $(cat err.txt)"
+
+# 8. Every output is checked before the work: nothing is written when the last one is bad.
+refused mesh-format-first "--mesh out.stl: unknown mesh format \".stl\"" run1 -o first.vdb --mesh out.stl
+[ -e first.vdb ] && fail "mesh-format-first: first.vdb was written before the mesh was refused"
+mkdir adir
+refused output-dir-first "--stats adir: is a directory" run1 -o first.vdb --stats adir
+[ -e first.vdb ] && fail "output-dir-first: first.vdb was written"
+refused png-missing-dir-first "cannot write nodir/x.png" run1 -o first.vdb --png nodir/x.png
+[ -e first.vdb ] && fail "png-missing-dir-first: first.vdb was written"
+refused mesh-subcommand-format "-o out.stl: unknown mesh format" "$bin" mesh direct.vdb -o out.stl
+
+# 15. A file size limit with SIGXFSZ at its default action: reported, nothing left behind.
+cp direct.vdb before.vdb
+refused sigxfsz "cannot write before.vdb: write failed: File too large" bash -c 'ulimit -f 16; exec "$0" run --frames 1 --quiet -o before.vdb' "$bin"
+cmp -s before.vdb direct.vdb || fail "sigxfsz: before.vdb changed"
+no_temp_files sigxfsz
+
+# 6. SIGTERM while an output is written ends the process at once (it used to be swallowed and the
+#    write went on). The output is a FIFO: once the reader has some bytes, the write is under way,
+#    and it cannot finish while the reader waits.
+mkfifo slow.vdb
+"$bin" run --frames 1 --quiet -o slow.vdb > /dev/null 2> sig-err.txt &
+writer=$!
+exec 3< slow.vdb
+head -c 4096 <&3 > /dev/null
+kill -TERM $writer
+wait $writer; rc=$?
+exec 3<&-
+[ $rc -eq 143 ] || fail "signal during write: exit code $rc, expected 143"
+grep -q "interrupted while writing an output" sig-err.txt || fail "signal during write: no message: $(cat sig-err.txt)"
+echo "PASS signal during write: rc $rc, $(tr '\n' ' ' < sig-err.txt)"
+
+# 13. The continue hint of an interrupted run names -o (and the other outputs), so that running it
+#     as printed writes them. The run's stdout is a pipe of 4 KiB that is read up to the first
+#     frame's line and then left full: the signal arrives while the run is still in its frames.
+printf '{"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 900}], "frames": 400,
+  "tools": [{"shape": "box", "min": [-2,9,-2], "max": [9,10,9], "path": [{"translate": [0,0,0], "frames": 400}]}]}' > long.json
+/usr/bin/python3 - "$bin" > hint.txt 2>&1 <<'EOF' || fail "continue hint: $(cat hint.txt)"
+import fcntl, os, shlex, signal, subprocess, sys
+binary = sys.argv[1]
+r, w = os.pipe()
+fcntl.fcntl(w, 1031, 4096)  # F_SETPIPE_SZ: the pipe fills after a few frame lines
+p = subprocess.Popen([binary, "run", "long.json", "-o", "long.vdb", "--stats", "long-stats.json"],
+                     stdout=w, stderr=subprocess.PIPE)
+os.close(w)
+out = os.fdopen(r, "rb")
+while not out.readline().startswith(b"frame 1/"):
+    pass
+p.send_signal(signal.SIGINT)      # the run is in its frames: it cannot print 400 lines into 4 KiB
+rest = out.read()
+err = p.stderr.read().decode()
+rc = p.wait()
+if rc != 130: sys.exit("rc %d, expected 130: %s" % (rc, err))
+if "continue: " not in err: sys.exit("no continue hint: " + err)
+hint = err.split("continue: ", 1)[1].rsplit(")", 1)[0]
+args = shlex.split(hint)
+for need in ["-o", "long.vdb", "--stats", "long-stats.json", "--resume"]:
+    if need not in args: sys.exit("the hint lacks %s: %s" % (need, hint))
+if os.path.exists("long.vdb"): sys.exit("long.vdb written by the interrupted run")
+args[0] = binary
+done = subprocess.run(args + ["--quiet"], capture_output=True)
+if done.returncode != 0: sys.exit("the hint as printed failed: " + done.stderr.decode())
+if not (os.path.exists("long.vdb") and os.path.exists("long-stats.json")):
+    sys.exit("the hint as printed wrote no output")
+print("hint ok:", hint)
+EOF
+grep -q "hint ok" hint.txt && echo "PASS continue hint: $(cat hint.txt)"
+no_temp_files end
+
+[ $fails -eq 0 ] && echo "OUTPUTS HANDLED" || { echo "$fails failed"; exit 1; }
