@@ -266,8 +266,8 @@ int runDemo(const DemoArgs& a)
     const int64_t m1 = vdbclay::totalMass(*mass);
     std::printf("  steps %llu (%s), %.3f s, %.2f us/step\n", (unsigned long long)r.steps,
                 vdbclay::stopReasonName(r.reason), secs, r.steps ? 1e6 * secs / double(r.steps) : 0.0);
-    std::printf("  blocks visited %llu, updated %llu, grown %llu; leaves created %llu\n",
-                (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksUpdated,
+    std::printf("  blocks examined %llu, with a cell over Tc %llu, updated %llu, grown %llu; leaves created %llu\n",
+                (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksOverTc, (unsigned long long)r.blocksUpdated,
                 (unsigned long long)r.blocksGrown, (unsigned long long)r.leavesCreated);
     std::printf("  stages: gather %.3f s, repartition %.3f s, grow %.3f s, bookkeeping %.3f s\n",
                 r.seconds.gather, r.seconds.repartition, r.seconds.grow, r.seconds.bookkeeping);
@@ -718,7 +718,8 @@ int runScene(const RunArgs& a)
         j["settled"] = s.settled;
         j["frames_unsettled"] = s.framesUnsettled;
         j["mass_trapped"] = s.massTrapped;
-        j["blocks_visited"] = s.blocksVisited;
+        j["blocks_visited"] = s.blocksVisited; // candidates examined, before any filter
+        j["blocks_over_tc"] = s.blocksOverTc;
         j["blocks_updated"] = s.blocksUpdated;
         j["clay_voxels"] = vdbclay::clayVoxelCount(*sculptor.mass());
         j["frames_no_room"] = s.framesNoRoom;

@@ -1033,6 +1033,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         ++s.frames;
         s.steps += r.settle.steps;
         s.blocksVisited += r.settle.blocksVisited;
+        s.blocksOverTc += r.settle.blocksOverTc;
         s.blocksUpdated += r.settle.blocksUpdated;
         if (!resumedOpen) s.massTrapped = r.push.massTrapped; // clay inside tools now (retried every frame)
         if (r.finished && (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom))

@@ -42,7 +42,8 @@ struct RunSummary {
     uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget or had no room
     uint64_t framesNoRoom = 0;  ///< of those, frames stopped because the overload had no room (NoRoom)
     int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
-    uint64_t blocksVisited = 0, blocksUpdated = 0;
+    /// Candidate blocks examined (before any filter), of those with a cell over Tc, and updated.
+    uint64_t blocksVisited = 0, blocksOverTc = 0, blocksUpdated = 0;
     double pushSeconds = 0;     ///< everything but the automaton's steps: push and global transport
     double transportSeconds = 0; ///< of that, the global layer (Scene::transport global)
     uint64_t transportSolves = 0, transportIterations = 0;
