@@ -249,14 +249,14 @@ int runDemo(const DemoArgs& a)
     mass->tree().voxelizeActiveTiles();
     MaskGrid::Ptr floor = MaskGrid::create(false);
     floor->setName("obstacles");
-    floor->tree().fill(CoordBBox(Coord(-4 * n, -4, d3 ? -4 * n : 0), Coord(5 * n, -1, d3 ? 5 * n : 0)),
-                       true, true);
+    floor->tree().fill(CoordBBox(Coord(-4 * n, -4, d3 ? -4 * n : 0), Coord(5 * n, -1, d3 ? 5 * n : 0)), true,
+                       true);
 
     vdbclay::Automaton automaton(mass, a.opts, floor);
     const int64_t m0 = vdbclay::totalMass(*mass);
-    std::cout << "vdbclay demo: " << (d3 ? "3D " : "2D ") << n << (d3 ? "^3" : "^2")
-              << " lump at Tc=" << tc << ", core " << q << (d3 ? "^3" : "^2") << " at " << a.overload
-              << "xTc, rule " << vdbclay::ruleName(a.opts.rule.rule) << ", threads "
+    std::cout << "vdbclay demo: " << (d3 ? "3D " : "2D ") << n << (d3 ? "^3" : "^2") << " lump at Tc=" << tc
+              << ", core " << q << (d3 ? "^3" : "^2") << " at " << a.overload << "xTc, rule "
+              << vdbclay::ruleName(a.opts.rule.rule) << ", threads "
               << (a.opts.threads ? std::to_string(a.opts.threads) : std::string("all")) << "\n";
     std::cout << "  initial: mass " << m0 << ", overload " << automaton.residualOverload() << ", "
               << vdbclay::clayVoxelCount(*mass) << " clay voxels\n";
@@ -266,9 +266,11 @@ int runDemo(const DemoArgs& a)
     const int64_t m1 = vdbclay::totalMass(*mass);
     std::printf("  steps %llu (%s), %.3f s, %.2f us/step\n", (unsigned long long)r.steps,
                 vdbclay::stopReasonName(r.reason), secs, r.steps ? 1e6 * secs / double(r.steps) : 0.0);
-    std::printf("  blocks examined %llu, with a cell over Tc %llu, updated %llu, grown %llu; leaves created %llu\n",
-                (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksOverTc, (unsigned long long)r.blocksUpdated,
-                (unsigned long long)r.blocksGrown, (unsigned long long)r.leavesCreated);
+    std::printf(
+        "  blocks examined %llu, with a cell over Tc %llu, updated %llu, grown %llu; leaves created %llu\n",
+        (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksOverTc,
+        (unsigned long long)r.blocksUpdated, (unsigned long long)r.blocksGrown,
+        (unsigned long long)r.leavesCreated);
     std::printf("  stages: gather %.3f s, repartition %.3f s, grow %.3f s, bookkeeping %.3f s\n",
                 r.seconds.gather, r.seconds.repartition, r.seconds.grow, r.seconds.bookkeeping);
     std::printf("  final: mass %lld (%s), residual overload %lld, settled %s, %llu clay voxels, "
@@ -288,7 +290,6 @@ int runDemo(const DemoArgs& a)
     }
     return m1 == m0 ? 0 : 3;
 }
-
 
 struct RunArgs {
     std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget, push, transport, sweep;
@@ -317,12 +318,16 @@ void applyUp(vdbclay::Scene& scene, const std::string& up)
     if (axis == scene.up) return;
     auto readWithUp = [](const vdbclay::ShapeSpec& s) { return s.kind == "mesh" || s.kind == "levelset"; };
     bool files = false;
-    for (const auto& c : scene.clay) files |= readWithUp(c.shape);
-    for (const auto& t : scene.tools) files |= readWithUp(t.shape);
-    for (const auto& o : scene.obstacles) files |= readWithUp(o);
+    for (const auto& c : scene.clay)
+        files |= readWithUp(c.shape);
+    for (const auto& t : scene.tools)
+        files |= readWithUp(t.shape);
+    for (const auto& o : scene.obstacles)
+        files |= readWithUp(o);
     if (files) {
-        throw vdbclay::Error("--up " + up + ": " + scene.source + " reads its meshes and level sets with up " +
-                             vdbclay::upAxisName(scene.up) + "; set \"up\": \"" + up + "\" in the scene instead");
+        throw vdbclay::Error("--up " + up + ": " + scene.source +
+                             " reads its meshes and level sets with up " + vdbclay::upAxisName(scene.up) +
+                             "; set \"up\": \"" + up + "\" in the scene instead");
     }
     scene.up = axis;
 }
@@ -391,7 +396,8 @@ std::function<void(uint64_t)> testSignalAtStep()
     const unsigned long long step = at == std::string::npos ? 0 : std::strtoull(s.c_str() + at + 1, &end, 10);
     if (sig == 0 || at == std::string::npos || at + 1 == s.size() || *end != '\0' || errno != 0 ||
         s[at + 1] == '-') {
-        throw vdbclay::Error("VDBCLAY_TEST_RAISE: expected SIGNAL@STEP with SIGNAL INT or TERM, e.g. INT@1000");
+        throw vdbclay::Error(
+            "VDBCLAY_TEST_RAISE: expected SIGNAL@STEP with SIGNAL INT or TERM, e.g. INT@1000");
     }
     auto raised = std::make_shared<bool>(false);
     return [sig, step, raised](uint64_t steps) {
@@ -417,12 +423,17 @@ void checkResumeFits(const vdbclay::Scene& scene, const vdbclay::ClayMeta& m, co
 {
     auto differs = [&](const char* what, const std::string& file, const std::string& here) {
         throw vdbclay::Error("--resume " + path + ": it was written with " + what + " " + file + " but " +
-                             scene.source + " has " + here + " (give the same scene and options as the run it came from)");
+                             scene.source + " has " + here +
+                             " (give the same scene and options as the run it came from)");
     };
-    if (m.version.empty()) throw vdbclay::Error("--resume " + path + ": not written by vdbclay (no vdbclay metadata)");
-    if (m.dimensions != scene.dimensions) differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
-    if (m.rule.rule != scene.rule.rule) differs("rule", vdbclay::ruleName(m.rule.rule), vdbclay::ruleName(scene.rule.rule));
-    if (m.rule.threshold != scene.rule.threshold) differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
+    if (m.version.empty())
+        throw vdbclay::Error("--resume " + path + ": not written by vdbclay (no vdbclay metadata)");
+    if (m.dimensions != scene.dimensions)
+        differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
+    if (m.rule.rule != scene.rule.rule)
+        differs("rule", vdbclay::ruleName(m.rule.rule), vdbclay::ruleName(scene.rule.rule));
+    if (m.rule.threshold != scene.rule.threshold)
+        differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
     if (m.seed != scene.seed) differs("seed", std::to_string(m.seed), std::to_string(scene.seed));
     if (m.frames > scene.frames) {
         differs("frames", std::to_string(m.frames) + " done", std::to_string(scene.frames) + " frames");
@@ -479,10 +490,11 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
     const char* name = cause.c_str();
     const uint64_t steps = sculptor.automaton().stepCount();
     const vdbclay::ClayMeta meta = sculptor.checkpointMeta();
-    const std::string where = meta.frameSteps
-                            ? "in frame " + std::to_string(meta.frames + 1) + "/" + std::to_string(sculptor.totalFrames()) +
-                                  " after " + std::to_string(meta.frameSteps) + " of its settling steps"
-                            : "after frame " + std::to_string(meta.frames) + "/" + std::to_string(sculptor.totalFrames());
+    const std::string where =
+        meta.frameSteps
+            ? "in frame " + std::to_string(meta.frames + 1) + "/" + std::to_string(sculptor.totalFrames()) +
+                  " after " + std::to_string(meta.frameSteps) + " of its settling steps"
+            : "after frame " + std::to_string(meta.frames) + "/" + std::to_string(sculptor.totalFrames());
     if (tty) std::fprintf(stderr, "\n");
     std::fflush(stdout);
     if (sculptor.frame() == frame0 && steps == steps0) {
@@ -585,14 +597,17 @@ int runScene(const RunArgs& a)
     vdbclay::Sculptor sculptor(scene, a.threads);
     if (!a.resume.empty()) checkResumeFits(scene, sculptor.startMeta(), a.resume);
     const bool tty = ::isatty(2) && !a.quiet;
-    if (!a.quiet) std::cout << "vdbclay: " << scene.source << ": " << scene.dimensions << "D, Tc " << scene.rule.threshold
-              << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", " << scene.clay.size() << " clay, "
-              << scene.tools.size() << " tools, " << scene.obstacles.size() << " obstacles, frames "
-              << sculptor.frame() + 1 << ".." << sculptor.totalFrames() << "\n";
-    const bool paperModel = scene.push == vdbclay::PushMode::Surface && scene.transport == vdbclay::Transport::Local;
+    if (!a.quiet)
+        std::cout << "vdbclay: " << scene.source << ": " << scene.dimensions << "D, Tc "
+                  << scene.rule.threshold << ", rule " << vdbclay::ruleName(scene.rule.rule) << ", "
+                  << scene.clay.size() << " clay, " << scene.tools.size() << " tools, "
+                  << scene.obstacles.size() << " obstacles, frames " << sculptor.frame() + 1 << ".."
+                  << sculptor.totalFrames() << "\n";
+    const bool paperModel =
+        scene.push == vdbclay::PushMode::Surface && scene.transport == vdbclay::Transport::Local;
     if (!a.quiet && (!paperModel || scene.sweep))
-        std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "") << ", transport "
-                  << vdbclay::transportName(scene.transport) << "\n";
+        std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "")
+                  << ", transport " << vdbclay::transportName(scene.transport) << "\n";
     const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
     const vdbclay::MemoryEstimate startEstimate = vdbclay::estimateSceneMemory(scene);
     if (!a.quiet) {
@@ -614,12 +629,12 @@ int runScene(const RunArgs& a)
             if (r.frame == total && r.finished) std::fprintf(stderr, "\n");
         } else {
             std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
-                         "residual overload %lld\n",
-                         (unsigned long long)r.frame, (unsigned long long)total,
-                         (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
-                         (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
-                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
-                         (long long)r.settle.residualOverload);
+                        "residual overload %lld\n",
+                        (unsigned long long)r.frame, (unsigned long long)total,
+                        (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
+                        (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
+                        r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
+                        (long long)r.settle.residualOverload);
             std::fflush(stdout); // a log file follows the run frame by frame
         }
     };
@@ -661,13 +676,15 @@ int runScene(const RunArgs& a)
     std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
                 fmtSeconds(s.stages.total()).c_str());
-    std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s", (long long)s.massInitial,
-                (long long)s.massFinal, exact ? "exact" : "DRIFT", (long long)s.residualOverload,
-                s.settled ? "yes" : "no");
+    std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s",
+                (long long)s.massInitial, (long long)s.massFinal, exact ? "exact" : "DRIFT",
+                (long long)s.residualOverload, s.settled ? "yes" : "no");
     if (s.framesUnsettled > s.framesNoRoom) {
-        std::printf(" (%llu frames hit the step budget)", (unsigned long long)(s.framesUnsettled - s.framesNoRoom));
+        std::printf(" (%llu frames hit the step budget)",
+                    (unsigned long long)(s.framesUnsettled - s.framesNoRoom));
     }
-    if (s.framesNoRoom) std::printf(" (%llu frames had no room for their overload)", (unsigned long long)s.framesNoRoom);
+    if (s.framesNoRoom)
+        std::printf(" (%llu frames had no room for their overload)", (unsigned long long)s.framesNoRoom);
     if (s.massTrapped) std::printf("; %lld clay trapped in tools", (long long)s.massTrapped);
     std::printf("\n");
     if (scene.transport == vdbclay::Transport::Global) {
@@ -676,9 +693,10 @@ int runScene(const RunArgs& a)
                     (unsigned long long)s.transportIterations, (long long)s.transportMassMoved,
                     s.framesTransportNoRoom ? " (some clay walled in with no room)" : "");
     }
-    std::printf("clay %llu voxels, %llu interior (mean density %.4f, heterogeneity CV %.4f), compaction %.4f\n",
-                (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,
-                s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
+    std::printf(
+        "clay %llu voxels, %llu interior (mean density %.4f, heterogeneity CV %.4f), compaction %.4f\n",
+        (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,
+        s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
 
     if (!outVdb.empty()) {
         vdbclay::writeClayFile(outVdb, *sculptor.mass(), sculptor.checkpointMeta());
@@ -710,8 +728,10 @@ int runScene(const RunArgs& a)
         j["transport_iterations"] = s.transportIterations;
         j["transport_mass_moved"] = s.transportMassMoved;
         j["frames_transport_no_room"] = s.framesTransportNoRoom;
-        j["stage_seconds"] = {{"gather", s.stages.gather}, {"repartition", s.stages.repartition},
-                              {"grow", s.stages.grow}, {"bookkeeping", s.stages.bookkeeping}};
+        j["stage_seconds"] = {{"gather", s.stages.gather},
+                              {"repartition", s.stages.repartition},
+                              {"grow", s.stages.grow},
+                              {"bookkeeping", s.stages.bookkeeping}};
         j["mass_initial"] = s.massInitial;
         j["mass_final"] = s.massFinal;
         j["residual_overload"] = s.residualOverload;
@@ -780,7 +800,8 @@ int main(int argc, char** argv)
                     "stop after this many frames (the output can be continued with \"start\")")
         ->check(CLI::Range(int64_t(1), int64_t(100000000)));
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
-    run->add_option("--up", ra.up, "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
+    run->add_option("--up", ra.up,
+                    "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
     run->add_option("--checkpoint", ra.checkpoint,
                     "on SIGINT/SIGTERM, save the run here (default: OUT.checkpoint.vdb beside -o OUT.vdb)")
         ->check(fileName);
@@ -790,13 +811,15 @@ int main(int argc, char** argv)
     run->add_option("--push", ra.push, "override the scene's push: surface (the paper's) or compress");
     run->add_option("--transport", ra.transport,
                     "override the scene's transport: local (the paper's automaton) or global");
-    run->add_option("--sweep", ra.sweep, "override the scene's sweep: on (push over the volume a tool sweeps) or off");
+    run->add_option("--sweep", ra.sweep,
+                    "override the scene's sweep: on (push over the volume a tool sweeps) or off");
     run->add_option("--memory-budget", ra.memoryBudget,
                     "refuse a scene estimated to need more, e.g. 8G, 512M, none (default: 3/4 of memory)")
         ->check(nonEmpty("a size"));
 
     std::string infoPath;
-    CLI::App* inf = app.add_subcommand("info", "Describe a .vdb file: grids, voxels, bounds, total mass, metadata");
+    CLI::App* inf =
+        app.add_subcommand("info", "Describe a .vdb file: grids, voxels, bounds, total mass, metadata");
     inf->add_option("file", infoPath, "a .vdb file")->required()->check(fileName);
 
     std::string meshIn, meshOut;
@@ -816,7 +839,8 @@ int main(int argc, char** argv)
     vdbclay::RenderOptions ro;
     int renDims = 0;
     int32_t renTc = 0;
-    CLI::App* ren = app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
+    CLI::App* ren =
+        app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
     ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
     ren->add_option("-o,--output", renOut, "OUT.png")->required()->check(fileName);
     ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
@@ -832,7 +856,8 @@ int main(int argc, char** argv)
     int64_t impMass = 0;
     double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
-    CLI::App* imp = app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
+    CLI::App* imp =
+        app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
     imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required()->check(fileName);
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required()->check(fileName);
     imp->add_option("--mass", impMass, "clay per voxel inside the shape")
@@ -853,9 +878,11 @@ int main(int argc, char** argv)
 
     DemoArgs da;
     std::string demoRule;
-    CLI::App* demo = app.add_subcommand("demo", "Settle a built-in overloaded lump of clay (the automaton alone)");
+    CLI::App* demo =
+        app.add_subcommand("demo", "Settle a built-in overloaded lump of clay (the automaton alone)");
     demo->add_option("--size", da.size, "cube edge in voxels")->check(CLI::Range(2, 4096));
-    demo->add_option("--overload", da.overload, "the core holds this many times Tc per voxel")->check(CLI::Range(1, 1000));
+    demo->add_option("--overload", da.overload, "the core holds this many times Tc per voxel")
+        ->check(CLI::Range(1, 1000));
     demo->add_option("--rule", demoRule, "arata, bingham, sorted, prorata")->check(nonEmpty("a rule name"));
     demo->add_option("--threshold", da.opts.rule.threshold, "Tc")->check(CLI::Range(1, INT32_MAX));
     demo->add_option("--alpha", da.opts.rule.alpha, "arata's rate in (0,1)")->check(finiteIn(0, 1, true));
@@ -912,7 +939,8 @@ int main(int argc, char** argv)
         if (*imp) {
             checkOutputs({{"-o", impOut}}, {{{"the input file", impIn}, {}}});
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
-            if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
+            if (!isVdb && !impGrid.empty())
+                throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
             if (impVoxel == 0 && isVdb) {
                 // The level set's own voxel size; loadLevelSet checks the file before OpenVDB reads it.
                 vdbclay::loadLevelSet(impIn, 1.0, impGrid, upOption(impUp));
@@ -965,10 +993,12 @@ int main(int argc, char** argv)
             gWriting.store(true);
             vdbclay::writeClayFile(impOut, *clay, meta);
             if (shape->describe().find("winding number") != std::string::npos) {
-                std::printf("note: %s\n", shape->describe().c_str()); // open or non-manifold: how it was filled
+                std::printf("note: %s\n",
+                            shape->describe().c_str()); // open or non-manifold: how it was filled
             }
             std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
-                        (unsigned long long)vdbclay::clayVoxelCount(*clay), (long long)vdbclay::totalMass(*clay));
+                        (unsigned long long)vdbclay::clayVoxelCount(*clay),
+                        (long long)vdbclay::totalMass(*clay));
             return 0;
         }
         if (*demo) {

@@ -55,7 +55,10 @@ using namespace vdbclay;
 using openvdb::Coord;
 using Clock = std::chrono::steady_clock;
 
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double since(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 
 const double kPi = 3.14159265358979323846;
 const Rule kRules[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
@@ -71,7 +74,8 @@ struct Options {
 /// A CSV file: header first, then rows; flushed per row so an interrupted study keeps what it did.
 class Csv {
 public:
-    Csv(const std::string& path, const std::string& header) : mFile(std::fopen(path.c_str(), "w")), mPath(path)
+    Csv(const std::string& path, const std::string& header)
+        : mFile(std::fopen(path.c_str(), "w")), mPath(path)
     {
         if (!mFile) throw Error("cannot write " + path);
         std::fprintf(mFile, "%s\n", header.c_str());
@@ -109,14 +113,14 @@ std::string fmt(const char* f, ...)
 /// One squeeze run: the scene's parameters.
 struct SqueezeCase {
     Rule rule = Rule::Prorata;
-    int r0 = 8;             ///< initial radius, voxels
-    int h0 = 16;            ///< initial height, voxels (clay in y = 0 .. h0 - 1)
-    int h = 8;              ///< final height
-    int32_t m0 = 950;       ///< initial mass per voxel
-    int32_t tc = 1000;      ///< threshold
-    int travel = 1;         ///< plate travel per frame, voxels (divides h0 - h)
+    int r0 = 8;                 ///< initial radius, voxels
+    int h0 = 16;                ///< initial height, voxels (clay in y = 0 .. h0 - 1)
+    int h = 8;                  ///< final height
+    int32_t m0 = 950;           ///< initial mass per voxel
+    int32_t tc = 1000;          ///< threshold
+    int travel = 1;             ///< plate travel per frame, voxels (divides h0 - h)
     uint64_t maxSteps = 100000; ///< step budget per frame
-    int64_t tolerance = 0;  ///< settle tolerance per frame (0: settle fully)
+    int64_t tolerance = 0;      ///< settle tolerance per frame (0: settle fully)
 };
 
 SqueezeCase baseCase(Rule rule, int r0)
@@ -135,12 +139,12 @@ struct SqueezeResult {
     uint64_t frames = 0, steps = 0, framesUnsettled = 0, blocksVisited = 0, blocksUpdated = 0;
     uint64_t initialVoxels = 0; ///< voxels of the rasterised cylinder (the clay at frame 0)
     ClayMetrics m;
-    ShapeError shape;           ///< against the analytic squeezed cylinder
-    double volumeRef = 0;       ///< pi R0^2 H0
-    double volumeMass = 0;      ///< mass / Tc
-    double radiusRef = 0;       ///< R0 sqrt(H0 / H)
-    double radiusMid = 0;       ///< sqrt(occupied cells of the mid-height layer / pi)
-    double radiusMean = 0;      ///< sqrt(occupied cells between the plates / (pi H))
+    ShapeError shape;             ///< against the analytic squeezed cylinder
+    double volumeRef = 0;         ///< pi R0^2 H0
+    double volumeMass = 0;        ///< mass / Tc
+    double radiusRef = 0;         ///< R0 sqrt(H0 / H)
+    double radiusMid = 0;         ///< sqrt(occupied cells of the mid-height layer / pi)
+    double radiusMean = 0;        ///< sqrt(occupied cells between the plates / (pi H))
     uint64_t occupiedOutside = 0; ///< occupied cells not between floor and plate (should be 0)
     std::vector<uint64_t> layers; ///< occupied cells per layer y = 0 .. h - 1
     double relErr(double v, double ref) const { return (v - ref) / ref; }
@@ -150,7 +154,8 @@ std::string squeezeJson(const SqueezeCase& c)
 {
     const int travel = c.h0 - c.h;
     if (c.travel <= 0 || travel % c.travel != 0) {
-        throw Error(fmt("squeeze: travel per frame %d does not divide the total travel %d", c.travel, travel));
+        throw Error(
+            fmt("squeeze: travel per frame %d does not divide the total travel %d", c.travel, travel));
     }
     const int frames = travel / c.travel;
     const int w = 3 * c.r0 + 8;                      // plates wider than the squeezed clay can spread
@@ -158,13 +163,14 @@ std::string squeezeJson(const SqueezeCase& c)
     std::ostringstream js;
     js << "{\"dimensions\": 3, \"threshold\": " << c.tc << ", \"rule\": \"" << ruleName(c.rule)
        << "\", \"alpha\": 0.5, \"seed\": 1,\n"
-       << " \"clay\": [{\"shape\": \"cylinder\", \"center\": [0, " << 0.5 * (c.h0 - 1) << ", 0], \"radius\": " << c.r0
-       << ", \"height\": " << c.h0 << ", \"axis\": \"y\", \"mass\": " << c.m0 << "}],\n"
-       << " \"tools\": [{\"name\": \"top plate\", \"shape\": \"box\", \"min\": [" << -w << ", " << c.h0 << ", " << -w
-       << "], \"max\": [" << w << ", " << c.h0 + thick - 1 << ", " << w << "], \"path\": [{\"translate\": [0, "
-       << -c.travel << ", 0], \"frames\": " << frames << "}]}],\n"
-       << " \"obstacles\": [{\"name\": \"bottom plate\", \"shape\": \"box\", \"min\": [" << -w << ", -3, " << -w
-       << "], \"max\": [" << w << ", -1, " << w << "]}],\n"
+       << " \"clay\": [{\"shape\": \"cylinder\", \"center\": [0, " << 0.5 * (c.h0 - 1)
+       << ", 0], \"radius\": " << c.r0 << ", \"height\": " << c.h0 << ", \"axis\": \"y\", \"mass\": " << c.m0
+       << "}],\n"
+       << " \"tools\": [{\"name\": \"top plate\", \"shape\": \"box\", \"min\": [" << -w << ", " << c.h0
+       << ", " << -w << "], \"max\": [" << w << ", " << c.h0 + thick - 1 << ", " << w
+       << "], \"path\": [{\"translate\": [0, " << -c.travel << ", 0], \"frames\": " << frames << "}]}],\n"
+       << " \"obstacles\": [{\"name\": \"bottom plate\", \"shape\": \"box\", \"min\": [" << -w << ", -3, "
+       << -w << "], \"max\": [" << w << ", -1, " << w << "]}],\n"
        << " \"settle\": {\"max_steps\": " << c.maxSteps << ", \"tolerance\": " << c.tolerance << "}}";
     return js.str();
 }
@@ -213,40 +219,46 @@ SqueezeResult runSqueeze(const SqueezeCase& c)
 
 const char* kSqueezeHeader =
     "study,rule,knob,value,r0,h0,h,m0,tc,travel,frames,max_steps,tolerance,seconds,steps,frames_unsettled,"
-    "blocks_visited,blocks_updated,mass,initial_voxels,volume_ref,volume_mass,volume_mass_err,occupied_voxels,"
-    "volume_occupied_err,volume_mass_err_n0,volume_occupied_err_n0,clay_voxels,radius_ref,radius_ref_voxels,radius_mid,radius_mid_err,radius_mean,radius_mean_err,"
+    "blocks_visited,blocks_updated,mass,initial_voxels,volume_ref,volume_mass,volume_mass_err,occupied_"
+    "voxels,"
+    "volume_occupied_err,volume_mass_err_n0,volume_occupied_err_n0,clay_voxels,radius_ref,radius_ref_voxels,"
+    "radius_mid,radius_mid_err,radius_mean,radius_mean_err,"
     "occupied_outside,residual_overload,residual_rel,heterogeneity_cv,compaction,interior_mean_density,"
     "max_cell,iou,mean_surface_distance,max_surface_distance";
 
 std::string squeezeRow(const std::string& study, const std::string& knob, const std::string& value,
                        const SqueezeCase& c, const SqueezeResult& r)
 {
-    return fmt("%s,%s,%s,%s,%d,%d,%d,%d,%d,%d,%llu,%llu,%lld,%.6f,%llu,%llu,%llu,%llu,%lld,%llu,%.2f,%.2f,%.6f,"
-               "%llu,%.6f,%.6f,%.6f,%llu,%.4f,%.4f,%.4f,%.6f,%.4f,%.6f,%llu,%lld,%.3e,%.6f,%.6f,%.6f,%d,%.6f,%.4f,%.4f",
-               study.c_str(), ruleName(c.rule), knob.c_str(), value.c_str(), c.r0, c.h0, c.h, c.m0, c.tc, c.travel,
-               (unsigned long long)r.frames, (unsigned long long)c.maxSteps, (long long)c.tolerance, r.seconds,
-               (unsigned long long)r.steps, (unsigned long long)r.framesUnsettled,
-               (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksUpdated, (long long)r.m.mass,
-               (unsigned long long)r.initialVoxels, r.volumeRef, r.volumeMass, r.relErr(r.volumeMass, r.volumeRef),
-               (unsigned long long)r.m.occupiedVoxels, r.relErr(double(r.m.occupiedVoxels), r.volumeRef),
-               r.relErr(r.volumeMass, double(r.initialVoxels)),
-               r.relErr(double(r.m.occupiedVoxels), double(r.initialVoxels)), (unsigned long long)r.m.clayVoxels,
-               r.radiusRef, std::sqrt(double(r.shape.referenceVoxels) / (kPi * c.h)), r.radiusMid, r.relErr(r.radiusMid, r.radiusRef),
-               r.radiusMean, r.relErr(r.radiusMean, r.radiusRef), (unsigned long long)r.occupiedOutside,
-               (long long)r.m.residualOverload, double(r.m.residualOverload) / double(std::max<int64_t>(1, r.m.mass)),
-               r.m.heterogeneityCV, r.m.compaction, r.m.interiorMeanDensity, r.m.maxCell, r.shape.iou,
-               r.shape.meanSurfaceDistance, r.shape.maxSurfaceDistance);
+    return fmt(
+        "%s,%s,%s,%s,%d,%d,%d,%d,%d,%d,%llu,%llu,%lld,%.6f,%llu,%llu,%llu,%llu,%lld,%llu,%.2f,%.2f,%.6f,"
+        "%llu,%.6f,%.6f,%.6f,%llu,%.4f,%.4f,%.4f,%.6f,%.4f,%.6f,%llu,%lld,%.3e,%.6f,%.6f,%.6f,%d,%.6f,%.4f,%."
+        "4f",
+        study.c_str(), ruleName(c.rule), knob.c_str(), value.c_str(), c.r0, c.h0, c.h, c.m0, c.tc, c.travel,
+        (unsigned long long)r.frames, (unsigned long long)c.maxSteps, (long long)c.tolerance, r.seconds,
+        (unsigned long long)r.steps, (unsigned long long)r.framesUnsettled,
+        (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksUpdated, (long long)r.m.mass,
+        (unsigned long long)r.initialVoxels, r.volumeRef, r.volumeMass, r.relErr(r.volumeMass, r.volumeRef),
+        (unsigned long long)r.m.occupiedVoxels, r.relErr(double(r.m.occupiedVoxels), r.volumeRef),
+        r.relErr(r.volumeMass, double(r.initialVoxels)),
+        r.relErr(double(r.m.occupiedVoxels), double(r.initialVoxels)), (unsigned long long)r.m.clayVoxels,
+        r.radiusRef, std::sqrt(double(r.shape.referenceVoxels) / (kPi * c.h)), r.radiusMid,
+        r.relErr(r.radiusMid, r.radiusRef), r.radiusMean, r.relErr(r.radiusMean, r.radiusRef),
+        (unsigned long long)r.occupiedOutside, (long long)r.m.residualOverload,
+        double(r.m.residualOverload) / double(std::max<int64_t>(1, r.m.mass)), r.m.heterogeneityCV,
+        r.m.compaction, r.m.interiorMeanDensity, r.m.maxCell, r.shape.iou, r.shape.meanSurfaceDistance,
+        r.shape.maxSurfaceDistance);
 }
 
 void logSqueeze(const std::string& what, const SqueezeCase& c, const SqueezeResult& r)
 {
-    std::fprintf(stderr,
-                 "  %-8s %-22s %7.2f s %7llu steps  V(occ) %+6.2f%%  V(mass) %+6.2f%%  r_mid %6.2f/%6.2f (%+6.2f%%)  "
-                 "IoU %.3f  dist %.2f  CV %.4f  compaction %.3f  residual %lld\n",
-                 ruleName(c.rule), what.c_str(), r.seconds, (unsigned long long)r.steps,
-                 100 * r.relErr(double(r.m.occupiedVoxels), r.volumeRef), 100 * r.relErr(r.volumeMass, r.volumeRef),
-                 r.radiusMid, r.radiusRef, 100 * r.relErr(r.radiusMid, r.radiusRef), r.shape.iou,
-                 r.shape.meanSurfaceDistance, r.m.heterogeneityCV, r.m.compaction, (long long)r.m.residualOverload);
+    std::fprintf(
+        stderr,
+        "  %-8s %-22s %7.2f s %7llu steps  V(occ) %+6.2f%%  V(mass) %+6.2f%%  r_mid %6.2f/%6.2f (%+6.2f%%)  "
+        "IoU %.3f  dist %.2f  CV %.4f  compaction %.3f  residual %lld\n",
+        ruleName(c.rule), what.c_str(), r.seconds, (unsigned long long)r.steps,
+        100 * r.relErr(double(r.m.occupiedVoxels), r.volumeRef), 100 * r.relErr(r.volumeMass, r.volumeRef),
+        r.radiusMid, r.radiusRef, 100 * r.relErr(r.radiusMid, r.radiusRef), r.shape.iou,
+        r.shape.meanSurfaceDistance, r.m.heterogeneityCV, r.m.compaction, (long long)r.m.residualOverload);
 }
 
 void studySqueeze(const Options& opt)
@@ -263,8 +275,8 @@ void studySqueeze(const Options& opt)
             csv.row(squeezeRow("squeeze", "r0", std::to_string(r0), c, r));
             for (int y = 0; y < c.h; ++y) {
                 profile.row(fmt("%s,%d,%d,%d,%llu,%.4f,%.4f", ruleName(rule), r0, c.h, y,
-                                (unsigned long long)r.layers[size_t(y)], std::sqrt(double(r.layers[size_t(y)]) / kPi),
-                                r.radiusRef));
+                                (unsigned long long)r.layers[size_t(y)],
+                                std::sqrt(double(r.layers[size_t(y)]) / kPi), r.radiusRef));
             }
         }
     }
@@ -284,22 +296,30 @@ void studySweep(const Options& opt)
         std::function<void(SqueezeCase&, const std::string&)> apply;
     };
     std::vector<Knob> knobs = {
-        {"tolerance", {"0", "1000", "10000", "100000", "1000000"},
+        {"tolerance",
+         {"0", "1000", "10000", "100000", "1000000"},
          [](SqueezeCase& c, const std::string& v) { c.tolerance = std::stoll(v); }},
-        {"max_steps", {"5", "20", "50", "200", "1000"},
+        {"max_steps",
+         {"5", "20", "50", "200", "1000"},
          [](SqueezeCase& c, const std::string& v) { c.maxSteps = std::stoull(v); }},
-        {"travel", {"1", "2", "4", "8"}, [](SqueezeCase& c, const std::string& v) { c.travel = std::stoi(v); }},
-        {"r0", {"6", "8", "12", "16"}, [](SqueezeCase& c, const std::string& v) {
+        {"travel",
+         {"1", "2", "4", "8"},
+         [](SqueezeCase& c, const std::string& v) { c.travel = std::stoi(v); }},
+        {"r0",
+         {"6", "8", "12", "16"},
+         [](SqueezeCase& c, const std::string& v) {
              const SqueezeCase b = baseCase(c.rule, std::stoi(v));
              c.r0 = b.r0;
              c.h0 = b.h0;
              c.h = b.h;
          }},
-        {"m0_over_tc", {"0.5", "0.8", "0.9", "0.95", "1.0"},
+        {"m0_over_tc",
+         {"0.5", "0.8", "0.9", "0.95", "1.0"},
          [tc](SqueezeCase& c, const std::string& v) { c.m0 = int32_t(std::lround(std::stod(v) * tc)); }},
     };
     if (opt.quick) {
-        for (Knob& k : knobs) k.values.resize(2);
+        for (Knob& k : knobs)
+            k.values.resize(2);
     }
     for (Rule rule : kRules) {
         for (const Knob& k : knobs) {
@@ -354,17 +374,19 @@ void studyFig6Library(const Options& opt, Csv& csv, std::map<Rule, uint64_t>& ha
         for (size_t f = 0; f < best.size(); ++f) {
             const FrameReport& r = best[f];
             steps += r.settle.steps;
-            csv.row(fmt("library,%s,%llu,%llu,%.6f,%llu,%llu,%lld,%s", ruleName(rule), (unsigned long long)r.frame,
-                        (unsigned long long)r.settle.steps, bestSecs[f], (unsigned long long)r.settle.blocksVisited,
+            csv.row(fmt("library,%s,%llu,%llu,%.6f,%llu,%llu,%lld,%s", ruleName(rule),
+                        (unsigned long long)r.frame, (unsigned long long)r.settle.steps, bestSecs[f],
+                        (unsigned long long)r.settle.blocksVisited,
                         (unsigned long long)r.settle.blocksUpdated, (long long)r.settle.residualOverload,
                         stopReasonName(r.settle.reason)));
         }
-        std::fprintf(stderr, "  %-8s %2zu frames  %6llu steps  %.4f s (best of %d)  max frame %llu steps\n",
-                     ruleName(rule), best.size(), (unsigned long long)steps, bestTotal, opt.quick ? 1 : 3,
-                     (unsigned long long)std::max_element(best.begin(), best.end(), [](const FrameReport& a,
-                                                                                        const FrameReport& b) {
-                         return a.settle.steps < b.settle.steps;
-                     })->settle.steps);
+        std::fprintf(
+            stderr, "  %-8s %2zu frames  %6llu steps  %.4f s (best of %d)  max frame %llu steps\n",
+            ruleName(rule), best.size(), (unsigned long long)steps, bestTotal, opt.quick ? 1 : 3,
+            (unsigned long long)
+                std::max_element(best.begin(), best.end(), [](const FrameReport& a, const FrameReport& b) {
+                    return a.settle.steps < b.settle.steps;
+                })->settle.steps);
     }
 }
 
@@ -379,7 +401,10 @@ enum class Rule2 {
     Float,       ///< ours in 32-bit floating point (no remainder at all; rounding instead)
     FloatProrata ///< rule 3 in 32-bit floating point, for comparison with Float
 };
-bool isFloat(Rule2 v) { return v == Rule2::Float || v == Rule2::FloatProrata; }
+bool isFloat(Rule2 v)
+{
+    return v == Rule2::Float || v == Rule2::FloatProrata;
+}
 const char* rule2Name(Rule2 v)
 {
     switch (v) {
@@ -402,7 +427,7 @@ struct Rule2Counts {
 
 /// Rule 2 on one block of n cells, in 64-bit integers or in float (T), for the variants other
 /// than Library.
-template<typename T>
+template <typename T>
 void rule2Block(Rule2 v, T tc, int n, const T* m, uint32_t valid, T* out, Rule2Counts& counts)
 {
     uint32_t over = 0, under = 0;
@@ -465,8 +490,7 @@ void rule2Block(Rule2 v, T tc, int n, const T* m, uint32_t valid, T* out, Rule2C
 
 /// The 2D cylinder scene, dense: a box of cells around everything clay can reach, the floor and the
 /// plate as obstacle cells, the plate's push done as Push.h does it for a horizontal plate.
-template<typename T>
-struct Dense2D {
+template <typename T> struct Dense2D {
     int x0 = 0, y0 = 0, nx = 0, ny = 0;
     std::vector<T> m;
     std::vector<uint8_t> fixedObs; ///< the floor
@@ -476,7 +500,7 @@ struct Dense2D {
 struct Rule2Frame {
     uint64_t frame = 0, steps = 0;
     double seconds = 0;
-    double massBefore = 0;        ///< after the push, before settling
+    double massBefore = 0;         ///< after the push, before settling
     double mass = 0, overload = 0; ///< after settling
     bool settled = false;
     Rule2Counts counts;
@@ -485,14 +509,16 @@ struct Rule2Frame {
 /// Runs the cylinder2d scene (parsed from @a scene: clay box, plate box moving down one voxel per
 /// frame, floor box) with rule 2 variant @a v. Returns per-frame reports; @a hash gets the final
 /// content hash (for Library, to check against the library's run).
-template<typename T>
+template <typename T>
 std::vector<Rule2Frame> runRule2Dense(const Scene& scene, Rule2 v, uint64_t maxSteps, uint64_t& hash)
 {
     if (scene.tools.size() != 1 || scene.obstacles.size() != 1 || scene.clay.size() != 1) {
         throw Error(scene.source + ": the dense rule-2 study expects one clay box, one plate and one floor");
     }
     // Shapes' bounds() may hold a margin: the cells are the voxels whose centres are inside.
-    auto inside = [](const Shape& sh, int x, int y) { return sh.distance(Vec3{{double(x), double(y), 0.0}}) < 0; };
+    auto inside = [](const Shape& sh, int x, int y) {
+        return sh.distance(Vec3{{double(x), double(y), 0.0}}) < 0;
+    };
     const Shape& plate = *scene.tools[0].shape.shape;
     const Shape& floor = *scene.obstacles[0].shape;
     const Shape& clay = *scene.clay[0].shape.shape;
@@ -564,9 +590,12 @@ std::vector<Rule2Frame> runRule2Dense(const Scene& scene, Rule2 v, uint64_t maxS
                     }
                     if (!any) continue;
                     if (v == Rule2::Library) {
-                        for (int i = 0; i < 4; ++i) m32[i] = int32_t(mm[i]);
-                        rules_internal::repartition(rule, 4, m32, valid, BlockKey{x, y, 0, step, scene.seed}, out64);
-                        for (int i = 0; i < 4; ++i) out[i] = T(out64[i]);
+                        for (int i = 0; i < 4; ++i)
+                            m32[i] = int32_t(mm[i]);
+                        rules_internal::repartition(rule, 4, m32, valid, BlockKey{x, y, 0, step, scene.seed},
+                                                    out64);
+                        for (int i = 0; i < 4; ++i)
+                            out[i] = T(out64[i]);
                     } else {
                         rule2Block<T>(v, tc, 4, mm, valid, out, fr.counts);
                     }
@@ -585,8 +614,11 @@ std::vector<Rule2Frame> runRule2Dense(const Scene& scene, Rule2 v, uint64_t maxS
                 for (int yy = d.y0; yy < d.y0 + d.ny; ++yy)
                     for (int xx = d.x0; xx < d.x0 + d.nx; ++xx) {
                         const double c = double(d.m[d.idx(xx, yy)]);
-                        if (c > double(tc) && !obs[d.idx(xx, yy)]) std::fprintf(stderr, "step %llu over (%d,%d) %.6f  nbrs %.6f %.6f %.6f %.6f\n", (unsigned long long)step, xx, yy, c,
-                            double(d.m[d.idx(xx-1,yy)]), double(d.m[d.idx(xx+1,yy)]), double(d.m[d.idx(xx,yy-1)]), double(d.m[d.idx(xx,yy+1)]));
+                        if (c > double(tc) && !obs[d.idx(xx, yy)])
+                            std::fprintf(stderr, "step %llu over (%d,%d) %.6f  nbrs %.6f %.6f %.6f %.6f\n",
+                                         (unsigned long long)step, xx, yy, c, double(d.m[d.idx(xx - 1, yy)]),
+                                         double(d.m[d.idx(xx + 1, yy)]), double(d.m[d.idx(xx, yy - 1)]),
+                                         double(d.m[d.idx(xx, yy + 1)]));
                     }
             }
             if (std::is_floating_point<T>::value) { // rounding: recount rather than accumulate
@@ -616,20 +648,25 @@ std::vector<Rule2Frame> runRule2Dense(const Scene& scene, Rule2 v, uint64_t maxS
 
 void studyFig6(const Options& opt)
 {
-    std::fprintf(stderr, "\n== figure 6: the 2D cylinder pressed by a plate, time to stabilise per rule ==\n");
-    Csv csv(opt.out + "/fig6.csv", "impl,rule,frame,steps,seconds,blocks_visited,blocks_updated,residual_overload,stop");
+    std::fprintf(stderr,
+                 "\n== figure 6: the 2D cylinder pressed by a plate, time to stabilise per rule ==\n");
+    Csv csv(opt.out + "/fig6.csv",
+            "impl,rule,frame,steps,seconds,blocks_visited,blocks_updated,residual_overload,stop");
     std::map<Rule, uint64_t> hashes;
     studyFig6Library(opt, csv, hashes);
 
-    std::fprintf(stderr, "  rule 2 (sorted), dense 2D re-implementation, step budget per frame as the scene's:\n");
-    Csv csv2(opt.out + "/fig6-rule2.csv",
-             "variant,frame,steps,seconds,mass,residual_overload,settled,e_over_a_blocks,round_up,round_down");
+    std::fprintf(stderr,
+                 "  rule 2 (sorted), dense 2D re-implementation, step budget per frame as the scene's:\n");
+    Csv csv2(
+        opt.out + "/fig6-rule2.csv",
+        "variant,frame,steps,seconds,mass,residual_overload,settled,e_over_a_blocks,round_up,round_down");
     const Scene scene = loadScene(cylinder2dScene(opt, Rule::Sorted));
     for (Rule2 v : {Rule2::Library, Rule2::AsPrinted, Rule2::Truncated, Rule2::FixedOrder, Rule2::Float,
                     Rule2::FloatProrata}) {
         uint64_t hash = 0;
-        const std::vector<Rule2Frame> frames = isFloat(v) ? runRule2Dense<float>(scene, v, scene.settle.maxSteps, hash)
-                                                          : runRule2Dense<int64_t>(scene, v, scene.settle.maxSteps, hash);
+        const std::vector<Rule2Frame> frames =
+            isFloat(v) ? runRule2Dense<float>(scene, v, scene.settle.maxSteps, hash)
+                       : runRule2Dense<int64_t>(scene, v, scene.settle.maxSteps, hash);
         uint64_t steps = 0, unsettled = 0;
         Rule2Counts counts;
         double secs = 0;
@@ -640,20 +677,22 @@ void studyFig6(const Options& opt)
             counts.eOverA += f.counts.eOverA;
             counts.roundUp += f.counts.roundUp;
             counts.roundDown += f.counts.roundDown;
-            csv2.row(fmt("%s,%llu,%llu,%.6f,%.3f,%.6g,%d,%llu,%llu,%llu", rule2Name(v), (unsigned long long)f.frame,
-                         (unsigned long long)f.steps, f.seconds, f.mass, f.overload, int(f.settled),
-                         (unsigned long long)f.counts.eOverA, (unsigned long long)f.counts.roundUp,
-                         (unsigned long long)f.counts.roundDown));
+            csv2.row(fmt("%s,%llu,%llu,%.6f,%.3f,%.6g,%d,%llu,%llu,%llu", rule2Name(v),
+                         (unsigned long long)f.frame, (unsigned long long)f.steps, f.seconds, f.mass,
+                         f.overload, int(f.settled), (unsigned long long)f.counts.eOverA,
+                         (unsigned long long)f.counts.roundUp, (unsigned long long)f.counts.roundDown));
         }
-        std::fprintf(stderr, "    %-13s %6llu steps  %.3f s  frames unsettled %llu/%zu  mass %.1f -> %.1f  residual %.6g"
-                             "  E>A updates %llu (more clay %llu, less %llu)%s\n",
-                     rule2Name(v), (unsigned long long)steps, secs, (unsigned long long)unsettled, frames.size(),
-                     frames.front().massBefore, frames.back().mass, frames.back().overload,
-                     (unsigned long long)counts.eOverA, (unsigned long long)counts.roundUp,
-                     (unsigned long long)counts.roundDown,
-                     v == Rule2::Library ? (hash == hashes[Rule::Sorted] ? "  (bit-identical to the library)"
-                                                                         : "  (DIFFERS from the library!)")
-                                         : "");
+        std::fprintf(
+            stderr,
+            "    %-13s %6llu steps  %.3f s  frames unsettled %llu/%zu  mass %.1f -> %.1f  residual %.6g"
+            "  E>A updates %llu (more clay %llu, less %llu)%s\n",
+            rule2Name(v), (unsigned long long)steps, secs, (unsigned long long)unsettled, frames.size(),
+            frames.front().massBefore, frames.back().mass, frames.back().overload,
+            (unsigned long long)counts.eOverA, (unsigned long long)counts.roundUp,
+            (unsigned long long)counts.roundDown,
+            v == Rule2::Library ? (hash == hashes[Rule::Sorted] ? "  (bit-identical to the library)"
+                                                                : "  (DIFFERS from the library!)")
+                                : "");
         if (v == Rule2::Library && hash != hashes[Rule::Sorted]) {
             throw Error("the dense rule-2 re-implementation does not reproduce the library's run");
         }
@@ -669,8 +708,8 @@ struct SceneStats {
     double seconds = 0;
     uint64_t activeVoxels = 0, clayVoxels = 0, leaves = 0, bytes = 0, leafBytes = 0, obstacleBytes = 0;
     uint64_t peakActive = 0, peakLeaves = 0, peakBytes = 0;
-    openvdb::CoordBBox clayHull;  ///< every voxel that ever held clay (bounds, over all frames)
-    openvdb::CoordBBox sceneBox;  ///< clay hull + tools along their paths + obstacles
+    openvdb::CoordBBox clayHull; ///< every voxel that ever held clay (bounds, over all frames)
+    openvdb::CoordBBox sceneBox; ///< clay hull + tools along their paths + obstacles
 };
 
 openvdb::CoordBBox toBBox(const Box& b)
@@ -726,13 +765,15 @@ SceneStats measureScene(const std::string& path)
     st.clayVoxels = clayVoxelCount(g);
     st.leaves = g.tree().leafCount();
     st.bytes = g.memUsage();
-    for (auto leaf = g.tree().cbeginLeaf(); leaf; ++leaf) st.leafBytes += leaf->memUsage();
+    for (auto leaf = g.tree().cbeginLeaf(); leaf; ++leaf)
+        st.leafBytes += leaf->memUsage();
     st.obstacleBytes = s.automaton().obstacles() ? s.automaton().obstacles()->memUsage() : 0;
     st.sceneBox = st.clayHull;
     for (const ToolSpec& t : scene.tools)
         for (uint64_t f = 0; f <= scene.frames; ++f)
             st.sceneBox.expand(toBBox(makeTransformed(t.shape.shape, t.poseAt(f))->bounds()));
-    for (const ShapeSpec& o : scene.obstacles) st.sceneBox.expand(toBBox(o.shape->bounds()));
+    for (const ShapeSpec& o : scene.obstacles)
+        st.sceneBox.expand(toBBox(o.shape->bounds()));
     if (st.dims == 2) {
         st.clayHull = openvdb::CoordBBox(Coord(st.clayHull.min().x(), st.clayHull.min().y(), 0),
                                          Coord(st.clayHull.max().x(), st.clayHull.max().y(), 0));
@@ -746,7 +787,8 @@ void studyScenes(const Options& opt)
 {
     std::fprintf(stderr, "\n== model only what a scene needs: every scene in %s ==\n", opt.scenes.c_str());
     Csv csv(opt.out + "/scenes.csv",
-            "scene,dims,frames,steps,seconds,active_voxels,clay_voxels,leaves,grid_bytes,leaf_bytes,obstacle_bytes,peak_active,"
+            "scene,dims,frames,steps,seconds,active_voxels,clay_voxels,leaves,grid_bytes,leaf_bytes,obstacle_"
+            "bytes,peak_active,"
             "peak_leaves,peak_bytes,blocks_visited_per_step,blocks_updated_per_step,hull_voxels,hull_bytes,"
             "hull_blocks_per_step,scene_box_voxels,scene_box_bytes,scene_box_blocks_per_step");
     std::vector<std::string> files;
@@ -759,22 +801,24 @@ void studyScenes(const Options& opt)
         const double perStepU = s.steps ? double(s.blocksUpdated) / double(s.steps) : 0;
         // A dense implementation stores 4 bytes of mass per voxel (plus an obstacle flag, not counted).
         const uint64_t hullV = denseVoxels(s.clayHull, s.dims), boxV = denseVoxels(s.sceneBox, s.dims);
-        csv.row(fmt("%s,%d,%llu,%llu,%.4f,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.1f,%.1f,%llu,%llu,%llu,%llu,%llu,%llu",
-                    s.name.c_str(), s.dims, (unsigned long long)s.frames, (unsigned long long)s.steps, s.seconds,
-                    (unsigned long long)s.activeVoxels, (unsigned long long)s.clayVoxels,
-                    (unsigned long long)s.leaves, (unsigned long long)s.bytes, (unsigned long long)s.leafBytes,
-                    (unsigned long long)s.obstacleBytes,
+        csv.row(fmt("%s,%d,%llu,%llu,%.4f,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.1f,%.1f,%llu,%llu,%"
+                    "llu,%llu,%llu,%llu",
+                    s.name.c_str(), s.dims, (unsigned long long)s.frames, (unsigned long long)s.steps,
+                    s.seconds, (unsigned long long)s.activeVoxels, (unsigned long long)s.clayVoxels,
+                    (unsigned long long)s.leaves, (unsigned long long)s.bytes,
+                    (unsigned long long)s.leafBytes, (unsigned long long)s.obstacleBytes,
                     (unsigned long long)s.peakActive, (unsigned long long)s.peakLeaves,
                     (unsigned long long)s.peakBytes, perStepV, perStepU, (unsigned long long)hullV,
                     (unsigned long long)(4 * hullV), (unsigned long long)denseBlocks(s.clayHull, s.dims),
                     (unsigned long long)boxV, (unsigned long long)(4 * boxV),
                     (unsigned long long)denseBlocks(s.sceneBox, s.dims)));
-        std::fprintf(stderr,
-                     "  %-18s %5llu active voxels %4llu leaves %8llu B | blocks/step %8.1f visited %8.1f updated | "
-                     "dense hull %8llu voxels %8llu blocks/step, scene box %9llu voxels\n",
-                     s.name.c_str(), (unsigned long long)s.activeVoxels, (unsigned long long)s.leaves,
-                     (unsigned long long)s.bytes, perStepV, perStepU, (unsigned long long)hullV,
-                     (unsigned long long)denseBlocks(s.clayHull, s.dims), (unsigned long long)boxV);
+        std::fprintf(
+            stderr,
+            "  %-18s %5llu active voxels %4llu leaves %8llu B | blocks/step %8.1f visited %8.1f updated | "
+            "dense hull %8llu voxels %8llu blocks/step, scene box %9llu voxels\n",
+            s.name.c_str(), (unsigned long long)s.activeVoxels, (unsigned long long)s.leaves,
+            (unsigned long long)s.bytes, perStepV, perStepU, (unsigned long long)hullV,
+            (unsigned long long)denseBlocks(s.clayHull, s.dims), (unsigned long long)boxV);
     }
 }
 
@@ -801,16 +845,22 @@ int main(int argc, char** argv)
                 if (i + 1 >= argc) throw std::runtime_error(a + " needs a value");
                 return argv[++i];
             };
-            if (a == "--quick") opt.quick = true;
-            else if (a == "--out") opt.out = val();
-            else if (a == "--scenes") opt.scenes = val();
+            if (a == "--quick")
+                opt.quick = true;
+            else if (a == "--out")
+                opt.out = val();
+            else if (a == "--scenes")
+                opt.scenes = val();
             else if (a == "--parts") {
                 opt.parts.clear();
                 std::stringstream ss(val());
                 std::string p;
-                while (std::getline(ss, p, ',')) opt.parts.push_back(p);
-            } else if (a == "-h" || a == "--help") return usage(argv[0]);
-            else throw std::runtime_error("unknown option " + a);
+                while (std::getline(ss, p, ','))
+                    opt.parts.push_back(p);
+            } else if (a == "-h" || a == "--help")
+                return usage(argv[0]);
+            else
+                throw std::runtime_error("unknown option " + a);
         }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "accuracy_study: %s\n", e.what());

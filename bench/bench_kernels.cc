@@ -37,8 +37,7 @@ vdbclay::CompiledRule compiled(Rule r)
     return vdbclay::compileRule(p);
 }
 
-template<bool Inline>
-void BM_Block(benchmark::State& state)
+template <bool Inline> void BM_Block(benchmark::State& state)
 {
     const vdbclay::CompiledRule rule = compiled(Rule(state.range(0)));
     const int32_t* mass = kBlocks[state.range(1)];
@@ -49,8 +48,10 @@ void BM_Block(benchmark::State& state)
         ++key.step;
         benchmark::DoNotOptimize(mass);
         uint32_t c;
-        if constexpr (Inline) c = vdbclay::rules_internal::repartition(rule, 8, mass, 0xFFu, key, out);
-        else c = vdbclay::repartitionBlock(rule, 8, mass, 0xFFu, key, out);
+        if constexpr (Inline)
+            c = vdbclay::rules_internal::repartition(rule, 8, mass, 0xFFu, key, out);
+        else
+            c = vdbclay::repartitionBlock(rule, 8, mass, 0xFFu, key, out);
         changed += c;
         benchmark::DoNotOptimize(out);
     }
@@ -65,7 +66,8 @@ void Args(benchmark::internal::Benchmark* b)
 {
     b->ArgNames({"rule", "case"});
     for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 3; ++c) b->Args({r, c});
+        for (int c = 0; c < 3; ++c)
+            b->Args({r, c});
 }
 
 } // namespace

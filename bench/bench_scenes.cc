@@ -65,7 +65,10 @@ using namespace vdbclay;
 using openvdb::Coord;
 using Clock = std::chrono::steady_clock;
 
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double since(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 
 struct Options {
     std::vector<int> press{32, 64, 128};
@@ -75,8 +78,8 @@ struct Options {
     double baselineLimit = 60; ///< seconds; projected longer: stop and estimate
     double vdbLimit = 60;      ///< seconds; vdbclay settling longer than this is stopped
     bool baselines = true;
-    bool layers = false;       ///< also the layer schedules of DENSE (forkjoin, pipe, tblock)
-    uint64_t pressSteps = 0;   ///< 0: settle to rest; K: run K steps only (every implementation)
+    bool layers = false;     ///< also the layer schedules of DENSE (forkjoin, pipe, tblock)
+    uint64_t pressSteps = 0; ///< 0: settle to rest; K: run K steps only (every implementation)
     std::string csv;
 };
 
@@ -86,7 +89,8 @@ std::vector<int> parseList(const std::string& s)
     if (s == "none" || s.empty()) return v;
     std::stringstream ss(s);
     std::string item;
-    while (std::getline(ss, item, ',')) v.push_back(std::stoi(item));
+    while (std::getline(ss, item, ','))
+        v.push_back(std::stoi(item));
     return v;
 }
 
@@ -111,14 +115,16 @@ struct Row {
     {
         char buf[1024];
         auto opt = [](double v) { return v < 0 ? std::string() : std::to_string(v); };
-        std::snprintf(buf, sizeof buf, "%s,%d,%s,%d,%.6f,%llu,%llu,%llu,%.2f,%.6f,%.6f,%.6f,%.6f,%s,%s,%s,%llu,%llu,%s,%s,%016llx,%s,%s",
-                      scene.c_str(), size, impl.c_str(), threads, seconds, (unsigned long long)steps,
-                      (unsigned long long)visited, (unsigned long long)updated,
-                      updated ? 1e9 * seconds / double(updated) : 0.0, stages.gather, stages.repartition,
-                      stages.grow, stages.bookkeeping, opt(medianMs).c_str(), opt(p95Ms).c_str(),
-                      opt(maxMs).c_str(), (unsigned long long)clayVoxels, (unsigned long long)gridBytes,
-                      clayVoxels ? std::to_string(double(gridBytes) / double(clayVoxels)).c_str() : "",
-                      opt(maxrssMb).c_str(), (unsigned long long)hash, identical.c_str(), note.c_str());
+        std::snprintf(
+            buf, sizeof buf,
+            "%s,%d,%s,%d,%.6f,%llu,%llu,%llu,%.2f,%.6f,%.6f,%.6f,%.6f,%s,%s,%s,%llu,%llu,%s,%s,%016llx,%s,%s",
+            scene.c_str(), size, impl.c_str(), threads, seconds, (unsigned long long)steps,
+            (unsigned long long)visited, (unsigned long long)updated,
+            updated ? 1e9 * seconds / double(updated) : 0.0, stages.gather, stages.repartition, stages.grow,
+            stages.bookkeeping, opt(medianMs).c_str(), opt(p95Ms).c_str(), opt(maxMs).c_str(),
+            (unsigned long long)clayVoxels, (unsigned long long)gridBytes,
+            clayVoxels ? std::to_string(double(gridBytes) / double(clayVoxels)).c_str() : "",
+            opt(maxrssMb).c_str(), (unsigned long long)hash, identical.c_str(), note.c_str());
         return buf;
     }
 };
@@ -143,13 +149,13 @@ std::string pressJson(int n)
     const int f = std::max(1, n / 8);
     std::ostringstream js;
     js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
-  "clay": [{"shape": "box", "min": [0, 0, 0], "max": [)" << n - 1 << "," << n - 1 << "," << n - 1
-       << R"(], "mass": 950}],
-  "tools": [{"shape": "box", "min": [)" << -n / 2 << "," << n << "," << -n / 2 << "], \"max\": ["
-       << n + n / 2 - 1 << "," << n + 3 << "," << n + n / 2 - 1
-       << R"(], "path": [{"translate": [0, -1, 0], "frames": )" << f << R"(}]}],
-  "obstacles": [{"shape": "box", "min": [)" << -2 * n << ", -3, " << -2 * n << "], \"max\": [" << 3 * n
-       << ", -1, " << 3 * n << R"(]}],
+  "clay": [{"shape": "box", "min": [0, 0, 0], "max": [)"
+       << n - 1 << "," << n - 1 << "," << n - 1 << R"(], "mass": 950}],
+  "tools": [{"shape": "box", "min": [)"
+       << -n / 2 << "," << n << "," << -n / 2 << "], \"max\": [" << n + n / 2 - 1 << "," << n + 3 << ","
+       << n + n / 2 - 1 << R"(], "path": [{"translate": [0, -1, 0], "frames": )" << f << R"(}]}],
+  "obstacles": [{"shape": "box", "min": [)"
+       << -2 * n << ", -3, " << -2 * n << "], \"max\": [" << 3 * n << ", -1, " << 3 * n << R"(]}],
   "settle": {"max_steps": 0}})";
     return js.str();
 }
@@ -246,7 +252,10 @@ struct Dense {
     int x0, y0, z0, nx, ny, nz;
     std::vector<int32_t> m;
     std::vector<uint8_t> obs;
-    size_t idx(int x, int y, int z) const { return size_t(x) + size_t(nx) * (size_t(y) + size_t(ny) * size_t(z)); }
+    size_t idx(int x, int y, int z) const
+    {
+        return size_t(x) + size_t(nx) * (size_t(y) + size_t(ny) * size_t(z));
+    }
 };
 
 openvdb::CoordBBox clayBounds(const MassGrid& g)
@@ -276,14 +285,16 @@ Dense toDense(const State& st, openvdb::CoordBBox bb)
                 const Coord c = v.getCoord();
                 d.m[d.idx(c.x() - d.x0, c.y() - d.y0, c.z() - d.z0)] = *v;
             }
-    const openvdb::CoordBBox box(Coord(d.x0, d.y0, d.z0), Coord(d.x0 + d.nx - 1, d.y0 + d.ny - 1, d.z0 + d.nz - 1));
+    const openvdb::CoordBBox box(Coord(d.x0, d.y0, d.z0),
+                                 Coord(d.x0 + d.nx - 1, d.y0 + d.ny - 1, d.z0 + d.nz - 1));
     for (auto it = st.obstacles->tree().cbeginValueOn(); it; ++it) {
         openvdb::CoordBBox b = it.getBoundingBox();
         b.intersect(box);
         if (b.empty()) continue;
         for (int z = b.min().z(); z <= b.max().z(); ++z)
             for (int y = b.min().y(); y <= b.max().y(); ++y)
-                for (int x = b.min().x(); x <= b.max().x(); ++x) d.obs[d.idx(x - d.x0, y - d.y0, z - d.z0)] = 1;
+                for (int x = b.min().x(); x <= b.max().x(); ++x)
+                    d.obs[d.idx(x - d.x0, y - d.y0, z - d.z0)] = 1;
     }
     return d;
 }
@@ -301,7 +312,10 @@ MassGridPtr fromDense(const Dense& d)
     return g;
 }
 
-inline int64_t over(int64_t m, int64_t tc) { return m > tc ? m - tc : 0; }
+inline int64_t over(int64_t m, int64_t tc)
+{
+    return m > tc ? m - tc : 0;
+}
 
 /// What one step (or one row of a step) did.
 struct LayerStats {
@@ -339,7 +353,7 @@ inline void denseBlock(Dense& d, const CompiledRule& rule, int x, int y, int z, 
 /// changed nothing (vdbclay's "settled"), or @a cap steps have run.
 struct StopTracker {
     int64_t overload;
-    uint64_t cap;     ///< steps allowed (the budget or a safety cap)
+    uint64_t cap; ///< steps allowed (the budget or a safety cap)
     uint64_t done = 0, updated = 0, visited = 0;
     int quiet = 0;
     bool stopped;
@@ -358,7 +372,8 @@ struct StopTracker {
 
 /// Runs steps until the overload is 0 or two steps in a row change nothing (vdbclay's "settled"),
 /// or the projected time exceeds @a limit (then the time is extrapolated to @a refSteps steps).
-Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit, uint64_t maxSteps)
+Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refSteps, double limit,
+                uint64_t maxSteps)
 {
     Dense d = toDense(st, bounds);
     const CompiledRule rule = compileRule(st.options.rule);
@@ -366,7 +381,8 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
                       maxSteps ? maxSteps : UINT64_MAX);
     uint64_t step = st.step0;
     size_t off[8];
-    for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
+    for (int i = 0; i < 8; ++i)
+        off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
     Result res;
     const auto t0 = Clock::now();
     while (!track.stopped) {
@@ -374,7 +390,8 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
         LayerStats ls;
         for (int z = p; z + 1 < d.nz; z += 2)
             for (int y = p; y + 1 < d.ny; y += 2)
-                for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, y, z, step, st.options.seed, off, ls);
+                for (int x = p; x + 1 < d.nx; x += 2)
+                    denseBlock(d, rule, x, y, z, step, st.options.seed, off, ls);
         track.add(ls);
         ++step;
         if (baselineMustStop(res, track.done, refSteps, since(t0), limit)) break;
@@ -405,7 +422,10 @@ Result runDense(const State& st, const openvdb::CoordBBox& bounds, uint64_t refS
 // of two steps that change nothing. A step begun past that point changes nothing either (a block
 // with a cell over Tc and a cell under it always changes, whatever its key), so stopping late gives
 // the identical grid; the reported step count is where the stop condition first held.
-int layerRows(const Dense& d, int phase) { return std::max(0, (d.ny - phase) / 2); }
+int layerRows(const Dense& d, int phase)
+{
+    return std::max(0, (d.ny - phase) / 2);
+}
 
 /// The rows of the previous step (phase 1 - p) that must be done before row j of phase p runs.
 int rowsNeeded(const Dense& d, int p, int j)
@@ -419,18 +439,21 @@ void denseRow(Dense& d, const CompiledRule& rule, uint64_t step, uint64_t seed, 
 {
     const int p = int(step & 1);
     for (int z = p; z + 1 < d.nz; z += 2)
-        for (int x = p; x + 1 < d.nx; x += 2) denseBlock(d, rule, x, p + 2 * j, z, step, seed, off, st);
+        for (int x = p; x + 1 < d.nx; x += 2)
+            denseBlock(d, rule, x, p + 2 * j, z, step, seed, off, st);
 }
 
 enum class Schedule { Layers, ForkJoin, Pipe, TBlock };
 
-Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_t cap, Schedule sched, int width)
+Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_t cap, Schedule sched,
+                      int width)
 {
     Dense d = toDense(st, bounds);
     const CompiledRule rule = compileRule(st.options.rule);
     const uint64_t seed = st.options.seed, s0 = st.step0;
     size_t off[8];
-    for (int i = 0; i < 8; ++i) off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
+    for (int i = 0; i < 8; ++i)
+        off[i] = d.idx(i & 1, (i >> 1) & 1, i >> 2);
     StopTracker track(residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()), cap);
     Result res;
     const auto t0 = Clock::now();
@@ -438,7 +461,8 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
     if (sched == Schedule::Layers || (sched == Schedule::TBlock && width <= 1)) {
         for (uint64_t s = s0; !track.stopped; ++s) {
             LayerStats ls;
-            for (int j = 0, n = layerRows(d, int(s & 1)); j < n; ++j) denseRow(d, rule, s, seed, j, off, ls);
+            for (int j = 0, n = layerRows(d, int(s & 1)); j < n; ++j)
+                denseRow(d, rule, s, seed, j, off, ls);
             track.add(ls);
         }
     } else if (sched == Schedule::ForkJoin) {
@@ -447,9 +471,11 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
         for (uint64_t s = s0; !track.stopped; ++s) {
             perRow.assign(size_t(layerRows(d, int(s & 1))), LayerStats{});
             arena.execute([&] {
-                tbb::parallel_for(tbb::blocked_range<int>(0, int(perRow.size())), [&](const tbb::blocked_range<int>& r) {
-                    for (int j = r.begin(); j != r.end(); ++j) denseRow(d, rule, s, seed, j, off, perRow[size_t(j)]);
-                });
+                tbb::parallel_for(tbb::blocked_range<int>(0, int(perRow.size())),
+                                  [&](const tbb::blocked_range<int>& r) {
+                                      for (int j = r.begin(); j != r.end(); ++j)
+                                          denseRow(d, rule, s, seed, j, off, perRow[size_t(j)]);
+                                  });
             });
             LayerStats ls;
             for (const LayerStats& r : perRow) {
@@ -473,7 +499,8 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
                     if (j >= 0 && j < layerRows(d, int((s + uint64_t(k)) & 1)))
                         denseRow(d, rule, s + uint64_t(k), seed, j, off, ls[size_t(k)]);
                 }
-            for (int k = 0; k < depth; ++k) track.add(ls[size_t(k)]);
+            for (int k = 0; k < depth; ++k)
+                track.add(ls[size_t(k)]);
         }
     } else {
         // The Petri net: progress[k] = (step - s0) * stride + rows done by thread k's current step.
@@ -481,7 +508,8 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
         const int T = std::max(1, width);
         const int64_t stride = int64_t(std::max(layerRows(d, 0), layerRows(d, 1))) + 2;
         std::vector<std::atomic<int64_t>> progress(static_cast<size_t>(T));
-        for (auto& a : progress) a.store(-1);
+        for (auto& a : progress)
+            a.store(-1);
         std::vector<LayerStats> stats(static_cast<size_t>(track.cap));
         std::atomic<uint64_t> stopAfter{track.stopped ? 0 : UINT64_MAX}; // steps (from s0) worth running
         std::mutex foldMutex;
@@ -503,7 +531,8 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
                     LayerStats& ls = stats[size_t(i)];
                     bool abandoned = false;
                     for (int j = 0, n = layerRows(d, p); j < n && !abandoned; ++j) {
-                        if (i > 0 && !waitFor(i - 1, rowsNeeded(d, p, j))) abandoned = true;
+                        if (i > 0 && !waitFor(i - 1, rowsNeeded(d, p, j)))
+                            abandoned = true;
                         else {
                             denseRow(d, rule, s, seed, j, off, ls);
                             progress[size_t(k)].store(int64_t(i) * stride + j + 1, std::memory_order_release);
@@ -526,9 +555,11 @@ Result runDenseLayers(const State& st, const openvdb::CoordBBox& bounds, uint64_
             }
         };
         std::vector<std::thread> pool;
-        for (int k = 1; k < T; ++k) pool.emplace_back(worker, k);
+        for (int k = 1; k < T; ++k)
+            pool.emplace_back(worker, k);
         worker(0);
-        for (auto& t : pool) t.join();
+        for (auto& t : pool)
+            t.join();
         if (failure) std::rethrow_exception(failure);
     }
     const double secs = since(t0);
@@ -606,7 +637,8 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
     const auto tSetup = Clock::now();
     const State st = makePress(n);
     std::fprintf(stderr, "\npress N=%d%s: set-up %.2f s, %llu clay voxels, overload %lld, step %llu\n", n,
-                 opt.pressSteps ? (" (first " + std::to_string(opt.pressSteps) + " steps)").c_str() : " (settle to rest)",
+                 opt.pressSteps ? (" (first " + std::to_string(opt.pressSteps) + " steps)").c_str()
+                                : " (settle to rest)",
                  since(tSetup), (unsigned long long)clayVoxelCount(*st.mass),
                  (long long)residualOverload(*st.mass, st.options.rule.threshold, st.obstacles.get()),
                  (unsigned long long)st.step0);
@@ -630,8 +662,10 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
     }
     const uint64_t h = vdb.front().hash;
     bool threadsAgree = true;
-    for (const Row& r : vdb) threadsAgree = threadsAgree && r.hash == h;
-    for (Row& r : vdb) r.identical = threadsAgree ? "yes" : "no";
+    for (const Row& r : vdb)
+        threadsAgree = threadsAgree && r.hash == h;
+    for (Row& r : vdb)
+        r.identical = threadsAgree ? "yes" : "no";
     const Row& ref = vdb.front(); // the first thread count (1 by default)
 
     std::vector<Row> base;
@@ -680,15 +714,20 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
     std::fprintf(stderr, "  %-8s %3s %8s %12s %12s %10s %9s %10s %s\n", "impl", "thr", "steps", "visited",
                  "updated", "seconds", "ns/upd", "vs vdb t1", "identical");
     auto line = [&](const Row& r) {
-        std::fprintf(stderr, "  %-8s %3d %8llu %12llu %12llu %10.3f %9.1f %9.2fx %s %s\n", r.impl.c_str(), r.threads,
-                     (unsigned long long)r.steps, (unsigned long long)r.visited, (unsigned long long)r.updated,
-                     r.seconds, r.updated ? 1e9 * r.seconds / double(r.updated) : 0.0, r.seconds / ref.seconds,
+        std::fprintf(stderr, "  %-8s %3d %8llu %12llu %12llu %10.3f %9.1f %9.2fx %s %s\n", r.impl.c_str(),
+                     r.threads, (unsigned long long)r.steps, (unsigned long long)r.visited,
+                     (unsigned long long)r.updated, r.seconds,
+                     r.updated ? 1e9 * r.seconds / double(r.updated) : 0.0, r.seconds / ref.seconds,
                      r.identical.c_str(), r.note.c_str());
     };
-    for (const Row& r : vdb) line(r);
-    for (const Row& r : base) line(r);
     for (const Row& r : vdb)
-        std::fprintf(stderr, "  vdbclay t%d stages: gather %.3f repartition %.3f grow %.3f bookkeeping %.3f (sum %.3f of %.3f s)\n",
+        line(r);
+    for (const Row& r : base)
+        line(r);
+    for (const Row& r : vdb)
+        std::fprintf(stderr,
+                     "  vdbclay t%d stages: gather %.3f repartition %.3f grow %.3f bookkeeping %.3f (sum "
+                     "%.3f of %.3f s)\n",
                      r.threads, r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping,
                      r.stages.total(), r.seconds);
     if (vdb.size() > 1)
@@ -703,15 +742,19 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
 std::string strokeJson(int dia)
 {
     const double r = dia / 2.0, c = dia / 2.0;
-    const double deg = 2.0 / (r + 4.0) * 180.0 / 3.14159265358979323846; // 2 voxels of arc per frame at the tool's centre
+    const double deg =
+        2.0 / (r + 4.0) * 180.0 / 3.14159265358979323846; // 2 voxels of arc per frame at the tool's centre
     std::ostringstream js;
     js.precision(10);
     js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
-  "clay": [{"shape": "sphere", "center": [)" << c << "," << c << "," << c << "], \"radius\": " << r
-       << R"(, "mass": 950}],
-  "tools": [{"shape": "sphere", "center": [)" << c << "," << c + r + 7 << "," << c << R"(], "radius": 6,
-             "pivot": [)" << c << "," << c + 3 << "," << c << R"(],
-             "path": [{"translate": [0, -3, 0], "frames": 1}, {"rotate": [0, 0, )" << deg << R"(], "frames": 9}]}],
+  "clay": [{"shape": "sphere", "center": [)"
+       << c << "," << c << "," << c << "], \"radius\": " << r << R"(, "mass": 950}],
+  "tools": [{"shape": "sphere", "center": [)"
+       << c << "," << c + r + 7 << "," << c << R"(], "radius": 6,
+             "pivot": [)"
+       << c << "," << c + 3 << "," << c << R"(],
+             "path": [{"translate": [0, -3, 0], "frames": 1}, {"rotate": [0, 0, )"
+       << deg << R"(], "frames": 9}]}],
   "settle": {"max_steps": 100000}})";
     return js.str();
 }
@@ -765,7 +808,8 @@ std::vector<Row> strokeChild(int dia, int threads, int repeats)
     r.size = dia;
     r.impl = "vdbclay";
     r.threads = threads;
-    for (double v : firstMs) r.seconds += v / 1e3;
+    for (double v : firstMs)
+        r.seconds += v / 1e3;
     r.steps = steps;
     r.visited = visited;
     r.updated = updated;
@@ -780,13 +824,13 @@ std::vector<Row> strokeChild(int dia, int threads, int repeats)
     r.hash = hash;
     r.note = "setup " + std::to_string(setup) + " s; " + std::to_string(repeats) +
              " run(s) pooled; first run's frames ms:";
-    for (double v : firstMs) r.note += " " + std::to_string(int(std::lround(v)));
+    for (double v : firstMs)
+        r.note += " " + std::to_string(int(std::lround(v)));
     return {r};
 }
 
 /// Runs @a fn in a child process (its own ru_maxrss); its rows come back through a pipe.
-template<typename Fn>
-std::vector<Row> inChild(Fn fn, bool& ok)
+template <typename Fn> std::vector<Row> inChild(Fn fn, bool& ok)
 {
     int fds[2];
     if (pipe(fds) != 0) throw Error("pipe failed");
@@ -801,10 +845,10 @@ std::vector<Row> inChild(Fn fn, bool& ok)
             for (const Row& r : rows) {
                 // fixed binary layout would be fragile; send the fields we need as text
                 std::ostringstream os;
-                os << r.scene << '\t' << r.size << '\t' << r.impl << '\t' << r.threads << '\t' << r.seconds << '\t'
-                   << r.steps << '\t' << r.visited << '\t' << r.updated << '\t' << r.stages.gather << '\t'
-                   << r.stages.repartition << '\t' << r.stages.grow << '\t' << r.stages.bookkeeping << '\t'
-                   << r.medianMs << '\t' << r.p95Ms << '\t' << r.maxMs << '\t' << r.clayVoxels << '\t'
+                os << r.scene << '\t' << r.size << '\t' << r.impl << '\t' << r.threads << '\t' << r.seconds
+                   << '\t' << r.steps << '\t' << r.visited << '\t' << r.updated << '\t' << r.stages.gather
+                   << '\t' << r.stages.repartition << '\t' << r.stages.grow << '\t' << r.stages.bookkeeping
+                   << '\t' << r.medianMs << '\t' << r.p95Ms << '\t' << r.maxMs << '\t' << r.clayVoxels << '\t'
                    << r.gridBytes << '\t' << r.maxrssMb << '\t' << r.hash << '\t' << r.note << '\n';
                 const std::string s = os.str();
                 if (write(fds[1], s.data(), s.size()) != ssize_t(s.size())) code = 3;
@@ -821,7 +865,8 @@ std::vector<Row> inChild(Fn fn, bool& ok)
     std::string text;
     char buf[4096];
     ssize_t k;
-    while ((k = read(fds[0], buf, sizeof buf)) > 0) text.append(buf, size_t(k));
+    while ((k = read(fds[0], buf, sizeof buf)) > 0)
+        text.append(buf, size_t(k));
     close(fds[0]);
     int status = 0;
     waitpid(pid, &status, 0);
@@ -833,7 +878,10 @@ std::vector<Row> inChild(Fn fn, bool& ok)
         std::istringstream f(ln);
         Row r;
         std::string tok;
-        auto next = [&]() { std::getline(f, tok, '\t'); return tok; };
+        auto next = [&]() {
+            std::getline(f, tok, '\t');
+            return tok;
+        };
         r.scene = next();
         r.size = std::stoi(next());
         r.impl = next();
@@ -862,8 +910,8 @@ std::vector<Row> inChild(Fn fn, bool& ok)
 void stroke(const Options& opt, std::vector<Row>& rows)
 {
     std::fprintf(stderr, "\nstroke: sphere of diameter D, tool radius 6, 10 frames\n");
-    std::fprintf(stderr, "  %5s %3s %9s %9s %9s %8s %10s %10s %8s %9s %s\n", "D", "thr", "median", "p95", "max",
-                 "steps", "updated", "clayvox", "B/vox", "rss MB", "identical");
+    std::fprintf(stderr, "  %5s %3s %9s %9s %9s %8s %10s %10s %8s %9s %s\n", "D", "thr", "median", "p95",
+                 "max", "steps", "updated", "clayvox", "B/vox", "rss MB", "identical");
     std::vector<Row> all;
     for (int dia : opt.stroke) {
         std::vector<Row> mine;
@@ -877,15 +925,17 @@ void stroke(const Options& opt, std::vector<Row>& rows)
             mine.insert(mine.end(), got.begin(), got.end());
         }
         bool agree = true;
-        for (const Row& r : mine) agree = agree && r.hash == mine.front().hash;
+        for (const Row& r : mine)
+            agree = agree && r.hash == mine.front().hash;
         for (Row& r : mine) {
             r.identical = agree ? "yes" : "no";
-            std::fprintf(stderr, "  %5d %3d %8.2fms %8.2fms %8.2fms %8llu %10llu %10llu %8.2f %9.1f %s\n", r.size,
-                         r.threads, r.medianMs, r.p95Ms, r.maxMs, (unsigned long long)r.steps,
+            std::fprintf(stderr, "  %5d %3d %8.2fms %8.2fms %8.2fms %8llu %10llu %10llu %8.2f %9.1f %s\n",
+                         r.size, r.threads, r.medianMs, r.p95Ms, r.maxMs, (unsigned long long)r.steps,
                          (unsigned long long)r.updated, (unsigned long long)r.clayVoxels,
                          double(r.gridBytes) / double(r.clayVoxels), r.maxrssMb, r.identical.c_str());
-            std::fprintf(stderr, "        stages s: gather %.4f repartition %.4f grow %.4f bookkeeping %.4f; %s\n",
-                         r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping, r.note.c_str());
+            std::fprintf(
+                stderr, "        stages s: gather %.4f repartition %.4f grow %.4f bookkeeping %.4f; %s\n",
+                r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping, r.note.c_str());
         }
         all.insert(all.end(), mine.begin(), mine.end());
     }
@@ -895,8 +945,8 @@ void stroke(const Options& opt, std::vector<Row>& rows)
         for (const Row& r : all)
             if (r.threads == t) {
                 if (!first) first = &r;
-                std::fprintf(stderr, "  threads %d: D=%d median / D=%d median = %.2fx\n", t, r.size, first->size,
-                             r.medianMs / first->medianMs);
+                std::fprintf(stderr, "  threads %d: D=%d median / D=%d median = %.2fx\n", t, r.size,
+                             first->size, r.medianMs / first->medianMs);
             }
     }
     rows.insert(rows.end(), all.begin(), all.end());
@@ -926,18 +976,30 @@ int main(int argc, char** argv)
                 if (i + 1 >= argc) throw std::runtime_error("missing value after " + a);
                 return argv[++i];
             };
-            if (a == "--press") opt.press = parseList(val());
-            else if (a == "--stroke") opt.stroke = parseList(val());
-            else if (a == "--threads") opt.threads = parseList(val());
-            else if (a == "--repeats") opt.repeats = std::max(1, std::stoi(val()));
-            else if (a == "--baseline-limit") opt.baselineLimit = std::stod(val());
-            else if (a == "--vdb-limit") opt.vdbLimit = std::stod(val());
-            else if (a == "--press-steps") opt.pressSteps = std::stoull(val());
-            else if (a == "--no-baselines") opt.baselines = false;
-            else if (a == "--layers") opt.layers = true;
-            else if (a == "--csv") opt.csv = val();
-            else if (a == "-h" || a == "--help") return usage(argv[0]);
-            else throw std::runtime_error("unknown argument " + a);
+            if (a == "--press")
+                opt.press = parseList(val());
+            else if (a == "--stroke")
+                opt.stroke = parseList(val());
+            else if (a == "--threads")
+                opt.threads = parseList(val());
+            else if (a == "--repeats")
+                opt.repeats = std::max(1, std::stoi(val()));
+            else if (a == "--baseline-limit")
+                opt.baselineLimit = std::stod(val());
+            else if (a == "--vdb-limit")
+                opt.vdbLimit = std::stod(val());
+            else if (a == "--press-steps")
+                opt.pressSteps = std::stoull(val());
+            else if (a == "--no-baselines")
+                opt.baselines = false;
+            else if (a == "--layers")
+                opt.layers = true;
+            else if (a == "--csv")
+                opt.csv = val();
+            else if (a == "-h" || a == "--help")
+                return usage(argv[0]);
+            else
+                throw std::runtime_error("unknown argument " + a);
         }
         if (opt.threads.empty()) throw std::runtime_error("--threads needs at least one count");
     } catch (const std::exception& e) {
@@ -948,7 +1010,8 @@ int main(int argc, char** argv)
     openvdb::initialize();
     std::vector<Row> rows;
     try {
-        for (int n : opt.press) press(opt, n, rows);
+        for (int n : opt.press)
+            press(opt, n, rows);
         if (!opt.stroke.empty()) stroke(opt, rows);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench_scenes: %s\n", e.what());
@@ -960,7 +1023,8 @@ int main(int argc, char** argv)
         return 1;
     }
     std::fprintf(out, "%s\n", kHeader);
-    for (const Row& r : rows) std::fprintf(out, "%s\n", r.csv().c_str());
+    for (const Row& r : rows)
+        std::fprintf(out, "%s\n", r.csv().c_str());
     if (out != stdout) std::fclose(out);
     return 0;
 }

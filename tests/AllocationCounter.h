@@ -34,7 +34,10 @@ void* operator new(std::size_t n)
     alloc_counter::liveBlocks.fetch_add(1, std::memory_order_relaxed);
     return p;
 }
-void* operator new[](std::size_t n) { return ::operator new(n); }
+void* operator new[](std::size_t n)
+{
+    return ::operator new(n);
+}
 void* operator new(std::size_t n, const std::nothrow_t&) noexcept
 {
     try {
@@ -43,15 +46,33 @@ void* operator new(std::size_t n, const std::nothrow_t&) noexcept
         return nullptr;
     }
 }
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return ::operator new(n, t); }
+void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept
+{
+    return ::operator new(n, t);
+}
 void operator delete(void* p) noexcept
 {
     if (!p) return;
     alloc_counter::liveBlocks.fetch_sub(1, std::memory_order_relaxed);
     std::free(p); // every counted block came from malloc in operator new above
 }
-void operator delete[](void* p) noexcept { ::operator delete(p); }
-void operator delete(void* p, std::size_t) noexcept { ::operator delete(p); }
-void operator delete[](void* p, std::size_t) noexcept { ::operator delete(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { ::operator delete(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { ::operator delete(p); }
+void operator delete[](void* p) noexcept
+{
+    ::operator delete(p);
+}
+void operator delete(void* p, std::size_t) noexcept
+{
+    ::operator delete(p);
+}
+void operator delete[](void* p, std::size_t) noexcept
+{
+    ::operator delete(p);
+}
+void operator delete(void* p, const std::nothrow_t&) noexcept
+{
+    ::operator delete(p);
+}
+void operator delete[](void* p, const std::nothrow_t&) noexcept
+{
+    ::operator delete(p);
+}

@@ -200,8 +200,8 @@ TEST_P(OracleTest, SparseEqualsDenseCellForCellEveryStep)
         for (uint64_t s = 0; s < 80; ++s) {
             a.step();
             dense.step(cr, s, opt.seed);
-            ASSERT_TRUE(sameAsDense(*mass, dense)) << ruleName(rule) << " " << dims << "D trial " << trial
-                                                   << " after step " << s;
+            ASSERT_TRUE(sameAsDense(*mass, dense))
+                << ruleName(rule) << " " << dims << "D trial " << trial << " after step " << s;
             ASSERT_EQ(totalMass(*mass), m0);
         }
         ASSERT_EQ(a.residualOverload(), residualOverload(*mass, 100, obs.get()));
@@ -219,15 +219,16 @@ TEST_F(AutomatonTest, BlocksStraddlingLeavesAndNegativeCoordinates)
 {
     // A single overloaded cell at or next to every kind of leaf boundary, each rule, against the
     // oracle, for enough steps that the clay crosses into the neighbouring leaves.
-    const Coord spots[] = {Coord(7, 7, 7),   Coord(8, 8, 8),    Coord(0, 0, 0),  Coord(-1, -1, -1),
+    const Coord spots[] = {Coord(7, 7, 7),    Coord(8, 8, 8),  Coord(0, 0, 0),   Coord(-1, -1, -1),
                            Coord(-8, -8, -8), Coord(-9, 7, 8), Coord(15, -9, 7), Coord(7, 0, -1)};
     for (Rule rule : kAll) {
         for (const Coord& spot : spots) {
             for (int dims : {2, 3}) {
                 const Coord s(spot.x(), spot.y(), dims == 3 ? spot.z() : 0);
                 const CoordBBox box(s.offsetBy(-14), s.offsetBy(14));
-                const CoordBBox b2 = dims == 3 ? box : CoordBBox(Coord(box.min().x(), box.min().y(), 0),
-                                                                 Coord(box.max().x(), box.max().y(), 0));
+                const CoordBBox b2 = dims == 3 ? box
+                                               : CoordBBox(Coord(box.min().x(), box.min().y(), 0),
+                                                           Coord(box.max().x(), box.max().y(), 0));
                 Dense dense(b2, dims);
                 auto mass = newMass();
                 mass->tree().setValue(s, 2500);
@@ -309,8 +310,8 @@ TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
             Rng rng(5);
             auto mass = newMass();
             auto obs = openvdb::MaskGrid::create(false);
-            randomScene(rng, CoordBBox(Coord(-20, -12, -20), Coord(20, 12, 20)), 3, 260, 3, *mass,
-                        obs.get(), nullptr);
+            randomScene(rng, CoordBBox(Coord(-20, -12, -20), Coord(20, 12, 20)), 3, 260, 3, *mass, obs.get(),
+                        nullptr);
             Automaton a(mass, options(rule, 3, 100, threads, 3), obs);
             const int64_t m0 = a.totalMass();
             const StepReport r = a.run(60);
@@ -373,7 +374,8 @@ TEST_F(AutomatonTest, CompactLumpWithOneOverloadedCellSettles)
                 // Over cells drop to exactly Tc and under cells only gain, so the lump stays full
                 // and the whole excess sits outside it.
                 EXPECT_EQ(outside, excess) << ruleName(rule) << " " << dims << "D";
-                for (auto it = c.begin(); it; ++it) EXPECT_EQ(mass->tree().getValue(*it), tc);
+                for (auto it = c.begin(); it; ++it)
+                    EXPECT_EQ(mass->tree().getValue(*it), tc);
             }
             // Settled means settled: further steps examine nothing and change nothing.
             const uint64_t h = contentHash(*mass);
@@ -432,7 +434,8 @@ TEST_F(AutomatonTest, CostFollowsTheMovingClayNotTheVolume)
     EXPECT_LT(total.blocksVisited, total.steps * slabBlocks / 20);
     EXPECT_GT(total.blocksVisited, total.blocksOverTc); // the filter did reject candidates
     // The tree grew only where clay flowed: no leaf is without clay.
-    for (auto it = mass->tree().cbeginLeaf(); it; ++it) EXPECT_FALSE(it->isEmpty()) << it->origin();
+    for (auto it = mass->tree().cbeginLeaf(); it; ++it)
+        EXPECT_FALSE(it->isEmpty()) << it->origin();
 }
 
 TEST_F(AutomatonTest, SettledRegionCostsNothing)
@@ -542,8 +545,7 @@ TEST_F(AutomatonTest, EditWakesTheRegionAndTracksMass)
     ASSERT_TRUE(a.settled());
     const int64_t m0 = a.totalMass();
     // A tool adds 5000 units at one voxel (not mass-neutral: the automaton must follow).
-    a.edit(Box{{{8, 15, 8}}, {{8, 15, 8}}},
-           [](MassGrid& g) { g.tree().setValue(Coord(8, 15, 8), 5100); });
+    a.edit(Box{{{8, 15, 8}}, {{8, 15, 8}}}, [](MassGrid& g) { g.tree().setValue(Coord(8, 15, 8), 5100); });
     EXPECT_EQ(a.totalMass(), m0 + 5000);
     EXPECT_EQ(a.residualOverload(), 5000);
     EXPECT_FALSE(a.settled());
@@ -614,7 +616,8 @@ TEST_F(AutomatonTest, OverflowIsRefusedBeforeAnythingIsWritten)
     const CoordBBox wall(Coord(-1, -1, -1), Coord(2, 2, 2));
     for (auto it = wall.begin(); it; ++it)
         if (!cell.isInside(*it)) obs->tree().setValueOn(*it);
-    for (auto it = cell.begin(); it; ++it) mass->tree().setValue(*it, 1 << 30);
+    for (auto it = cell.begin(); it; ++it)
+        mass->tree().setValue(*it, 1 << 30);
     mass->tree().setValue(Coord(1, 1, 1), 0);
     // A second, harmless overload far away, in a block processed in the same pass.
     mass->tree().setValue(Coord(100, 100, 100), 50);

@@ -47,8 +47,7 @@ openvdb::Int32Grid::Ptr boxGrid(const Coord& lo, const Coord& hi, int32_t m)
 }
 
 /// Expects @a fn to throw an Error whose message contains @a needle.
-template<typename Fn>
-void expectError(Fn&& fn, const std::string& needle)
+template <typename Fn> void expectError(Fn&& fn, const std::string& needle)
 {
     try {
         fn();
@@ -196,7 +195,7 @@ TEST_F(Accuracy, OffsetBoxesHaveIoUOneThird)
 TEST_F(Accuracy, OccupancyIsDensityAtLeastOneHalfOnEachSide)
 {
     auto a = boxGrid(Coord(0, 0, 0), Coord(1, 0, 0), 50); // 2 voxels at Tc / 2
-    a->tree().setValue(Coord(2, 0, 0), 49);                // under half: not occupied
+    a->tree().setValue(Coord(2, 0, 0), 49);               // under half: not occupied
     const auto b = boxGrid(Coord(0, 0, 0), Coord(2, 0, 0), 1000);
     ShapeError e = compareShapes(*a, 100, *b, 1000, 3);
     EXPECT_EQ(e.clayVoxels, 2u);
@@ -260,8 +259,8 @@ TEST_F(Accuracy, SurfaceDistanceMatchesBruteForceOnRandomBlobs)
             auto acc = g.getConstAccessor();
             for (auto it = g.tree().cbeginValueOn(); it; ++it) {
                 const Coord c = it.getCoord();
-                const Coord n[6] = {c.offsetBy(1, 0, 0), c.offsetBy(-1, 0, 0), c.offsetBy(0, 1, 0),
-                                    c.offsetBy(0, -1, 0), c.offsetBy(0, 0, 1), c.offsetBy(0, 0, -1)};
+                const Coord n[6] = {c.offsetBy(1, 0, 0),  c.offsetBy(-1, 0, 0), c.offsetBy(0, 1, 0),
+                                    c.offsetBy(0, -1, 0), c.offsetBy(0, 0, 1),  c.offsetBy(0, 0, -1)};
                 for (const Coord& x : n)
                     if (acc.getValue(x) == 0) {
                         s.push_back(c);
@@ -277,7 +276,8 @@ TEST_F(Accuracy, SurfaceDistanceMatchesBruteForceOnRandomBlobs)
             const std::vector<Coord>& to = dir ? sa : sb;
             for (const Coord& p : from) {
                 int64_t best = INT64_MAX;
-                for (const Coord& q : to) best = std::min<int64_t>(best, (p - q).asVec3d().lengthSqr());
+                for (const Coord& q : to)
+                    best = std::min<int64_t>(best, (p - q).asVec3d().lengthSqr());
                 sum += std::sqrt(double(best));
                 max = std::max(max, std::sqrt(double(best)));
             }
@@ -288,7 +288,6 @@ TEST_F(Accuracy, SurfaceDistanceMatchesBruteForceOnRandomBlobs)
         EXPECT_EQ(e.maxSurfaceDistance, max);
     }
 }
-
 
 // ---- Hard cases ---------------------------------------------------------------------------------
 // Each case states its expected outcome; the figures in comments were measured with these scenes
@@ -313,13 +312,12 @@ RunSummary runScene(const std::string& json, std::vector<FrameReport>* frames = 
 /// A scene with Tc = @a tc and rule @a rule; @a body holds the other fields.
 std::string scene(const char* rule, const std::string& body, int dims = 3, int tc = 100)
 {
-    return "{\"dimensions\": " + std::to_string(dims) + ", \"threshold\": " + std::to_string(tc) + ", \"rule\": \"" +
-           rule + "\", " + body + "}";
+    return "{\"dimensions\": " + std::to_string(dims) + ", \"threshold\": " + std::to_string(tc) +
+           ", \"rule\": \"" + rule + "\", " + body + "}";
 }
 
 /// Every clay voxel satisfies @a pred (called with its coordinate).
-template<typename Pred>
-bool allClay(const MassGrid& g, Pred&& pred)
+template <typename Pred> bool allClay(const MassGrid& g, Pred&& pred)
 {
     for (auto it = g.tree().cbeginValueOn(); it; ++it)
         if (*it != 0 && !pred(it.getCoord())) return false;
@@ -399,15 +397,18 @@ TEST_F(Accuracy, HardIncompressibleLimitEveryRuleSettles)
             std::vector<FrameReport> frames;
             MassGridPtr clay;
             const RunSummary s = runScene(scene(rule, *k.body, k.dims), &frames, &clay);
-            const std::string what = std::string(rule) + " " + std::to_string(k.dims) + "D " + k.body->substr(0, 60);
+            const std::string what =
+                std::string(rule) + " " + std::to_string(k.dims) + "D " + k.body->substr(0, 60);
             EXPECT_EQ(s.massDrift, 0) << what;
             EXPECT_TRUE(s.settled) << what;
             EXPECT_EQ(s.framesUnsettled, 0u) << what;
             EXPECT_EQ(s.residualOverload, 0) << what;
             EXPECT_EQ(s.massTrapped, 0) << what;
             EXPECT_LE(s.metrics.maxCell, 100) << what;
-            for (const FrameReport& f : frames) EXPECT_EQ(f.settle.reason, StopReason::Settled) << what;
-            EXPECT_FALSE(allClay(*clay, [&](const Coord& c) { return !k.beyond(c); })) << what << ": the excess never left";
+            for (const FrameReport& f : frames)
+                EXPECT_EQ(f.settle.reason, StopReason::Settled) << what;
+            EXPECT_FALSE(allClay(*clay, [&](const Coord& c) { return !k.beyond(c); }))
+                << what << ": the excess never left";
         }
     }
 }
@@ -416,9 +417,11 @@ TEST_F(Accuracy, HardIncompressibleLimitEveryRuleSettles)
 TEST_F(Accuracy, HardIncompressibleLimitWithTcOne)
 {
     for (const char* rule : kRuleNames) {
-        const RunSummary s = runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 1}],
+        const RunSummary s =
+            runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 1}],
             "tools": [{"shape": "box", "min": [-4,8,-4], "max": [11,10,11], "path": [{"translate": [0,-1,0], "frames": 2}]}],
-            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}])", 3, 1));
+            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}])",
+                           3, 1));
         EXPECT_EQ(s.massDrift, 0) << rule;
         EXPECT_TRUE(s.settled) << rule;
         EXPECT_EQ(s.metrics.maxCell, 1) << rule;
@@ -459,7 +462,8 @@ TEST_F(Accuracy, HardMassesNearTheInt32LimitAreRefusedOrExact)
     {
         // 2D block of three cells at 2^31 - 1 and one empty cell: the empty one would receive them all.
         auto g = openvdb::Int32Grid::create(0);
-        for (const Coord& c : {Coord(0, 0, 0), Coord(1, 0, 0), Coord(0, 1, 0)}) g->tree().setValue(c, INT32_MAX);
+        for (const Coord& c : {Coord(0, 0, 0), Coord(1, 0, 0), Coord(0, 1, 0)})
+            g->tree().setValue(c, INT32_MAX);
         AutomatonOptions o;
         o.dimensions = 2;
         o.rule.rule = Rule::Bingham;
@@ -515,11 +519,13 @@ TEST_F(Accuracy, HardClayTrappedBetweenToolAndObstacleIsConservedAndReported)
 {
     for (const char* rule : kRuleNames) {
         std::vector<FrameReport> frames;
-        const RunSummary s = runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0], "max": [7,3], "mass": 100}],
+        const RunSummary s =
+            runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0], "max": [7,3], "mass": 100}],
             "tools": [{"shape": "box", "min": [0,4], "max": [7,30], "path": [{"translate": [0,-1], "frames": 4}]}],
             "obstacles": [{"shape": "box", "min": [-3,-3], "max": [10,-1]}, {"shape": "box", "min": [-3,0], "max": [-1,40]},
-                          {"shape": "box", "min": [8,0], "max": [10,40]}])", 2),
-                                      &frames);
+                          {"shape": "box", "min": [8,0], "max": [10,40]}])",
+                           2),
+                     &frames);
         ASSERT_EQ(frames.size(), 4u) << rule;
         EXPECT_EQ(frames[0].settle.reason, StopReason::NoRoom) << rule;
         EXPECT_EQ(frames[0].settle.steps, 8192u) << rule;
@@ -559,8 +565,10 @@ TEST_F(Accuracy, HardClayTrappedBetweenToolAndObstacleIsConservedAndReported)
         EXPECT_EQ(r.steps, 8192u) << ruleName(rule);
         // The least overload possible is 7; rules 1-3 get there, arata keeps moving whole
         // fractions of cells about (well above 7 when the check stops it).
-        if (rule == Rule::Arata) EXPECT_GT(r.residualOverload, 7);
-        else EXPECT_EQ(r.residualOverload, 7) << ruleName(rule);
+        if (rule == Rule::Arata)
+            EXPECT_GT(r.residualOverload, 7);
+        else
+            EXPECT_EQ(r.residualOverload, 7) << ruleName(rule);
         EXPECT_EQ(totalMass(*copy), 64 * 100 + 7) << ruleName(rule);
     }
 }
@@ -572,10 +580,11 @@ TEST_F(Accuracy, HardTwoPlatesClosingToOneVoxel)
 {
     for (const char* rule : kRuleNames) {
         MassGridPtr clay;
-        const RunSummary s = runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [9,9,9], "mass": 100}],
+        const RunSummary s =
+            runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [9,9,9], "mass": 100}],
             "tools": [{"shape": "box", "min": [-10,10,-10], "max": [19,12,19], "path": [{"translate": [0,-1,0], "frames": 5}]},
                       {"shape": "box", "min": [-10,-3,-10], "max": [19,-1,19], "path": [{"translate": [0,1,0], "frames": 4}]}])"),
-                                      nullptr, &clay);
+                     nullptr, &clay);
         EXPECT_EQ(s.massDrift, 0) << rule;
         EXPECT_TRUE(s.settled) << rule;
         EXPECT_EQ(s.residualOverload, 0) << rule;
@@ -596,27 +605,34 @@ TEST_F(Accuracy, HardTwoPlatesClosingToOneVoxel)
 // clay voxel it now covers (384 voxels) all the way out, traps nothing and the cube settles.
 TEST_F(Accuracy, HardToolsThroughThinSheetsAndManyVoxelsPerFrame)
 {
-    const std::string sheet = R"("clay": [{"shape": "box", "min": [0,0,0], "max": [15,0,15], "mass": 100}], )";
+    const std::string sheet =
+        R"("clay": [{"shape": "box", "min": [0,0,0], "max": [15,0,15], "mass": 100}], )";
     for (const char* rule : kRuleNames) {
         MassGridPtr clay;
-        RunSummary s = runScene(scene(rule, sheet + R"("tools": [{"shape": "sphere", "center": [7.5,6,7.5], "radius": 3,
-            "path": [{"translate": [0,-1,0], "frames": 12}]}])"), nullptr, &clay);
+        RunSummary s =
+            runScene(scene(rule, sheet + R"("tools": [{"shape": "sphere", "center": [7.5,6,7.5], "radius": 3,
+            "path": [{"translate": [0,-1,0], "frames": 12}]}])"),
+                     nullptr, &clay);
         EXPECT_EQ(s.massDrift, 0) << rule;
         EXPECT_TRUE(s.settled) << rule;
         auto acc = clay->getConstAccessor();
         for (int x = 6; x <= 9; ++x)
-            for (int z = 6; z <= 9; ++z) EXPECT_EQ(acc.getValue(Coord(x, 0, z)), 0) << rule << " " << x << "," << z;
+            for (int z = 6; z <= 9; ++z)
+                EXPECT_EQ(acc.getValue(Coord(x, 0, z)), 0) << rule << " " << x << "," << z;
 
         const MassGridPtr before = makeClay(*makeBox({{0, 0, 0}}, {{15, 0, 15}}), 100, 3);
         s = runScene(scene(rule, sheet + R"("tools": [{"shape": "box", "min": [4,5,4], "max": [11,8,11],
-            "path": [{"translate": [0,-20,0], "frames": 1}]}])"), nullptr, &clay);
+            "path": [{"translate": [0,-20,0], "frames": 1}]}])"),
+                     nullptr, &clay);
         EXPECT_EQ(contentHash(*clay), contentHash(*before)) << rule << ": the jump went through the sheet";
         EXPECT_EQ(s.steps, 0u) << rule;
 
         std::vector<FrameReport> frames;
-        s = runScene(scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [15,15,15], "mass": 100}],
+        s = runScene(
+            scene(rule, R"("clay": [{"shape": "box", "min": [0,0,0], "max": [15,15,15], "mass": 100}],
             "tools": [{"shape": "box", "min": [4,16,4], "max": [11,30,11], "path": [{"translate": [0,-6,0], "frames": 2}]}],
-            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}])"), &frames, &clay);
+            "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}])"),
+            &frames, &clay);
         ASSERT_EQ(frames.size(), 2u);
         for (const FrameReport& f : frames) {
             EXPECT_EQ(f.push.voxelsPushed, 384u) << rule;
@@ -653,7 +669,8 @@ TEST_F(Accuracy, HardArataAlphaNearZeroAndNearOne)
     EXPECT_EQ(l.metrics.mass, 1 << 24);
     EXPECT_GT(l.report.residualOverload, (1 << 24) - 1000 - 20000);
     for (const char* alpha : {"1e-9", "0.999999999"}) {
-        const RunSummary s = runScene(std::string(R"({"threshold": 100, "rule": "arata", "alpha": )") + alpha + R"(,
+        const RunSummary s =
+            runScene(std::string(R"({"threshold": 100, "rule": "arata", "alpha": )") + alpha + R"(,
             "clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 100}],
             "tools": [{"shape": "box", "min": [-4,8,-4], "max": [11,10,11], "path": [{"translate": [0,-1,0], "frames": 2}]}],
             "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}]})");
@@ -679,14 +696,16 @@ TEST_F(Accuracy, HardTcOneSingleVoxelAndEmptyScene)
         EXPECT_EQ(one.metrics.clayVoxels, 1u);
     }
     // A single voxel pressed by a plate: pushed out, exact, settled.
-    RunSummary s = runScene(R"({"threshold": 100, "clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 100}],
+    RunSummary s = runScene(
+        R"({"threshold": 100, "clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 100}],
         "tools": [{"shape": "box", "min": [-2,2,-2], "max": [2,4,2], "path": [{"translate": [0,-1,0], "frames": 3}]}]})");
     EXPECT_EQ(s.massDrift, 0);
     EXPECT_EQ(s.massFinal, 100);
     EXPECT_TRUE(s.settled);
     EXPECT_EQ(s.metrics.clayVoxels, 1u);
     // No clay at all: frames run, nothing moves, every metric is 0.
-    s = runScene(R"({"tools": [{"shape": "box", "min": [0,0,0], "max": [3,3,3], "path": [{"translate": [0,-1,0], "frames": 3}]}]})");
+    s = runScene(
+        R"({"tools": [{"shape": "box", "min": [0,0,0], "max": [3,3,3], "path": [{"translate": [0,-1,0], "frames": 3}]}]})");
     EXPECT_EQ(s.frames, 3u);
     EXPECT_EQ(s.steps, 0u);
     EXPECT_EQ(s.massFinal, 0);
@@ -740,11 +759,16 @@ TEST_F(Accuracy, HardLongRunKeepsMassExactAndMemoryFlat)
     EXPECT_EQ(allocationsInSteps, 0) << "heap allocations in 9 x 10^5 steps";
 
     std::string path;
-    for (int i = 0; i < 100; ++i) path += std::string(i ? "," : "") + R"({"translate": [0,-1], "frames": 3}, {"translate": [0,1], "frames": 3})";
+    for (int i = 0; i < 100; ++i)
+        path += std::string(i ? "," : "") +
+                R"({"translate": [0,-1], "frames": 3}, {"translate": [0,1], "frames": 3})";
     Sculptor sc(parseScene(R"({"dimensions": 2, "threshold": 100,
         "clay":  [{"shape": "box", "min": [0,0], "max": [15,7], "mass": 100}],
-        "tools": [{"shape": "sphere", "center": [7.5,9], "radius": 2.5, "path": [)" + path + R"(]}],
-        "obstacles": [{"shape": "box", "min": [-40,-3], "max": [60,-1]}]})", "o.json", ""), 1);
+        "tools": [{"shape": "sphere", "center": [7.5,9], "radius": 2.5, "path": [)" +
+                               path + R"(]}],
+        "obstacles": [{"shape": "box", "min": [-40,-3], "max": [60,-1]}]})",
+                           "o.json", ""),
+                1);
     const int64_t lump = 16 * 8 * 100;
     int64_t liveAt300 = 0, liveMaxAfter = 0;
     while (!sc.done()) {
@@ -752,7 +776,8 @@ TEST_F(Accuracy, HardLongRunKeepsMassExactAndMemoryFlat)
         ASSERT_EQ(totalMass(*sc.mass()), lump) << "frame " << f.frame;
         ASSERT_EQ(f.settle.reason, StopReason::Settled) << "frame " << f.frame;
         if (f.frame == 300) liveAt300 = alloc_counter::liveBlocks.load();
-        if (f.frame > 300 && f.frame % 6 == 0) liveMaxAfter = std::max(liveMaxAfter, alloc_counter::liveBlocks.load());
+        if (f.frame > 300 && f.frame % 6 == 0)
+            liveMaxAfter = std::max(liveMaxAfter, alloc_counter::liveBlocks.load());
     }
     EXPECT_EQ(sc.frame(), 600u);
     EXPECT_LE(liveMaxAfter, liveAt300) << "live heap blocks grew over frames 301..600";

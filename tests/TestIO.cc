@@ -79,7 +79,8 @@ protected:
     std::set<std::string> listing() const
     {
         std::set<std::string> names;
-        for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+        for (const auto& e : fs::directory_iterator(dir))
+            names.insert(e.path().filename().string());
         return names;
     }
     std::string dir;
@@ -98,8 +99,7 @@ void spit(const std::string& path, const std::string& bytes)
 }
 
 /// The message of the Error @a fn throws ("" if it throws nothing, "other" for another exception).
-template<typename Fn>
-std::string errorOf(Fn&& fn)
+template <typename Fn> std::string errorOf(Fn&& fn)
 {
     try {
         fn();
@@ -111,7 +111,10 @@ std::string errorOf(Fn&& fn)
     return "";
 }
 
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+bool contains(const std::string& s, const std::string& part)
+{
+    return s.find(part) != std::string::npos;
+}
 
 /// A lump with varied masses: a ball of full cells, some overloaded, some partial, some tiny.
 MassGridPtr sampleClay(int32_t tc = 1000)
@@ -125,7 +128,7 @@ MassGridPtr sampleClay(int32_t tc = 1000)
                 if (r2 > 36) continue;
                 int32_t m = tc;
                 if (r2 > 25) m = 1 + (x * 7 + y * 13 + z * 29 + 300) % tc; // partial rim
-                if (r2 < 4) m = 3 * tc + x;                                 // overloaded core
+                if (r2 < 4) m = 3 * tc + x;                                // overloaded core
                 acc.setValueOn(Coord(x, y, z), m);
             }
     return g;
@@ -167,8 +170,8 @@ PngInfo inspectPng(const std::string& path)
     PngInfo info;
     const std::string bytes = slurp(path);
     static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
-    info.signature = bytes.size() > 33 && std::memcmp(bytes.data(), sig, 8) == 0 &&
-                     bytes.compare(12, 4, "IHDR") == 0;
+    info.signature =
+        bytes.size() > 33 && std::memcmp(bytes.data(), sig, 8) == 0 && bytes.compare(12, 4, "IHDR") == 0;
     if (!info.signature) return info;
     auto be32 = [&](size_t at) {
         return uint32_t(uint8_t(bytes[at])) << 24 | uint32_t(uint8_t(bytes[at + 1])) << 16 |
@@ -287,7 +290,8 @@ TEST_F(IOTest, SurfaceIsNegativeInsidePositiveOutside)
     EXPECT_GT(sacc.getValue(Coord(10, 0, 0)), 0.f);
     EXPECT_GT(sacc.getValue(Coord(0, 0, -10)), 0.f);
     EXPECT_GT(sacc.getValue(Coord(30, 30, 30)), 0.f);
-    for (int x = -6; x <= 6; ++x) EXPECT_LT(sacc.getValue(Coord(x, 1, -1)), 0.f) << x;
+    for (int x = -6; x <= 6; ++x)
+        EXPECT_LT(sacc.getValue(Coord(x, 1, -1)), 0.f) << x;
 }
 
 TEST_F(IOTest, SurfaceLiesWhereCellsAreHalfFull)
@@ -383,8 +387,8 @@ TEST_F(IOTest, FailedWriteLeavesExistingFileUntouched)
     EXPECT_EQ(listing(), std::set<std::string>{"clay.vdb"});
     // A directory in the way is refused, not replaced.
     fs::create_directory(file("adir"));
-    EXPECT_TRUE(contains(errorOf([&] { writeClayFile(file("adir"), *sampleClay(), sampleMeta()); }),
-                         "directory"));
+    EXPECT_TRUE(
+        contains(errorOf([&] { writeClayFile(file("adir"), *sampleClay(), sampleMeta()); }), "directory"));
     EXPECT_TRUE(fs::is_directory(file("adir")));
 }
 
@@ -426,7 +430,8 @@ TEST_F(IOTest, ReadTruncatedFile)
             << keep << " of " << bytes.size() << ": " << msg;
         // OpenVDB quotes the garbage it read; the message stays short and printable.
         EXPECT_LT(msg.size(), 400u) << msg;
-        for (char c : msg) EXPECT_TRUE(c >= 32 && c < 127) << int(c);
+        for (char c : msg)
+            EXPECT_TRUE(c >= 32 && c < 127) << int(c);
         EXPECT_TRUE(contains(errorOf([&] { describeVdb(cut); }), "truncated"));
     }
 }
@@ -461,8 +466,7 @@ TEST_F(IOTest, NegativeMassIsRefused)
     const std::string path = file("neg.vdb");
     openvdb::io::File(path).write({g});
     const std::string msg = errorOf([&] { readClayFile(path); });
-    EXPECT_TRUE(contains(msg, path) && contains(msg, "negative") && contains(msg, "(-4, 5, 6)"))
-        << msg;
+    EXPECT_TRUE(contains(msg, path) && contains(msg, "negative") && contains(msg, "(-4, 5, 6)")) << msg;
 }
 
 // Found by tests/fuzz/fuzz_vdb: OpenVDB trusts a block's recorded size and copies that many bytes
@@ -476,7 +480,8 @@ std::string oneLeafZipFile(const std::string& path)
     auto g = openvdb::Int32Grid::create(0);
     g->setName("mass");
     for (int x = 0; x < 3; ++x) {
-        for (int y = 0; y < 2; ++y) g->tree().setValueOn(Coord(x, y, 0), 40 + 10 * x + y);
+        for (int y = 0; y < 2; ++y)
+            g->tree().setValueOn(Coord(x, y, 0), 40 + 10 * x + y);
     }
     openvdb::io::File f(path);
     f.setCompression(openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK);
@@ -485,7 +490,10 @@ std::string oneLeafZipFile(const std::string& path)
     std::ifstream in(path, std::ios::binary);
     return std::string(std::istreambuf_iterator<char>(in), {});
 }
-void patchInt64(std::string& bytes, size_t at, int64_t v) { std::memcpy(&bytes[at], &v, 8); }
+void patchInt64(std::string& bytes, size_t at, int64_t v)
+{
+    std::memcpy(&bytes[at], &v, 8);
+}
 int64_t int64At(const std::string& bytes, size_t at)
 {
     int64_t v = 0;
@@ -525,7 +533,7 @@ TEST_F(IOTest, DamagedLengthsAreRefusedBeforeOpenVDBAllocates)
     std::memcpy(&count, &bytes[57], 4);
     std::memcpy(&nameLength, &bytes[65], 4);
     ASSERT_EQ(count, 0u);
-    ASSERT_EQ(nameLength, 4u); // "mass"
+    ASSERT_EQ(nameLength, 4u);         // "mass"
     const uint32_t huge = 0xfffffff0u; // OpenVDB would allocate and fill 4 GB for the name
     std::memcpy(&bytes[65], &huge, 4);
     const std::string bad = file("bad.vdb");
@@ -554,9 +562,8 @@ TEST_F(IOTest, DescribeNamesGridsAndTotalMass)
     const std::string path = file("clay.vdb");
     writeClayFile(path, *clay, sampleMeta());
     const std::string text = describeVdb(path);
-    for (const char* part : {"\"mass\"", "\"density\"", "\"surface\"", "int32", "float",
-                             "fog volume", "level set", "vdbclay_threshold", "vdbclay_rule",
-                             "sorted", "voxel size: 0.5"}) {
+    for (const char* part : {"\"mass\"", "\"density\"", "\"surface\"", "int32", "float", "fog volume",
+                             "level set", "vdbclay_threshold", "vdbclay_rule", "sorted", "voxel size: 0.5"}) {
         EXPECT_TRUE(contains(text, part)) << part << "\n" << text;
     }
     EXPECT_TRUE(contains(text, "total mass: " + std::to_string(totalMass(*clay)))) << text;
@@ -578,7 +585,8 @@ double tetVolume(const std::array<double, 3>& a, const std::array<double, 3>& b,
                  const std::array<double, 3>& c)
 {
     return (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-            a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+            a[2] * (b[0] * c[1] - b[1] * c[0])) /
+           6.0;
 }
 
 MeshCounts parseObj(const std::string& path)
@@ -598,12 +606,14 @@ MeshCounts parseObj(const std::string& path)
         } else if (tag == "f") {
             std::vector<long> idx;
             long i;
-            while (s >> i) idx.push_back(i);
-            for (long j : idx) m.indicesValid &= j >= 1 && size_t(j) <= v.size();
+            while (s >> i)
+                idx.push_back(i);
+            for (long j : idx)
+                m.indicesValid &= j >= 1 && size_t(j) <= v.size();
             if (!m.indicesValid || idx.size() < 3) return m;
             for (size_t k = 1; k + 1 < idx.size(); ++k) {
-                m.signedVolume += tetVolume(v[size_t(idx[0] - 1)], v[size_t(idx[k] - 1)],
-                                            v[size_t(idx[k + 1] - 1)]);
+                m.signedVolume +=
+                    tetVolume(v[size_t(idx[0] - 1)], v[size_t(idx[k] - 1)], v[size_t(idx[k + 1] - 1)]);
             }
             ++m.faces;
         }
@@ -629,14 +639,17 @@ MeshCounts parsePly(const std::string& path)
         if (a == "element" && b == "face") s >> nf;
     }
     std::vector<std::array<double, 3>> v(nv);
-    for (auto& p : v) in >> p[0] >> p[1] >> p[2];
+    for (auto& p : v)
+        in >> p[0] >> p[1] >> p[2];
     for (size_t f = 0; f < nf; ++f) {
         size_t n;
         in >> n;
         std::vector<long> idx(n);
-        for (auto& i : idx) in >> i;
+        for (auto& i : idx)
+            in >> i;
         if (!in) return m;
-        for (long j : idx) m.indicesValid &= j >= 0 && size_t(j) < nv;
+        for (long j : idx)
+            m.indicesValid &= j >= 0 && size_t(j) < nv;
         if (!m.indicesValid) return m;
         for (size_t k = 1; k + 1 < n; ++k) {
             m.signedVolume += tetVolume(v[size_t(idx[0])], v[size_t(idx[k])], v[size_t(idx[k + 1])]);
@@ -706,7 +719,8 @@ TEST_F(IOTest, MakeClayFillsExactlyTheCentresInside)
     auto clay = makeClay(sphere, 700);
     EXPECT_EQ(clayVoxelCount(*clay), expected3);
     EXPECT_EQ(totalMass(*clay), int64_t(expected3) * 700);
-    for (auto it = clay->cbeginValueOn(); it; ++it) ASSERT_EQ(*it, 700);
+    for (auto it = clay->cbeginValueOn(); it; ++it)
+        ASSERT_EQ(*it, 700);
 
     auto flat = makeClay(sphere, 9, 2);
     EXPECT_EQ(clayVoxelCount(*flat), expected2);
@@ -719,8 +733,7 @@ TEST_F(IOTest, MakeClayFillsExactlyTheCentresInside)
     EXPECT_TRUE(contains(errorOf([&] { makeClay(sphere, -5); }), "mass per voxel"));
     EXPECT_FALSE(errorOf([&] { makeClay(sphere, 1, 4); }).empty());
     // A sphere too small to hold a voxel centre, and one away from the z = 0 layer.
-    EXPECT_TRUE(contains(errorOf([&] { makeClay(TestSphere({{0.5, 0.5, 0.5}}, 0.3), 1); }),
-                         "test sphere"));
+    EXPECT_TRUE(contains(errorOf([&] { makeClay(TestSphere({{0.5, 0.5, 0.5}}, 0.3), 1); }), "test sphere"));
     EXPECT_TRUE(contains(errorOf([&] { makeClay(TestSphere({{0, 0, 20}}, 3), 1, 2); }), "z = 0"));
 }
 
@@ -733,7 +746,8 @@ TEST_F(IOTest, Render2dDensityMap)
     auto mass = openvdb::Int32Grid::create(0);
     auto acc = mass->getAccessor();
     for (int x = 0; x < 40; ++x)
-        for (int y = 0; y < 40; ++y) acc.setValueOn(Coord(x, y, 0), (x >= 15 && x < 25) ? 3000 : 600);
+        for (int y = 0; y < 40; ++y)
+            acc.setValueOn(Coord(x, y, 0), (x >= 15 && x < 25) ? 3000 : 600);
     AutomatonOptions opt;
     opt.dimensions = 2;
     opt.rule.rule = Rule::Prorata;
@@ -769,7 +783,8 @@ TEST_F(IOTest, Render3dSurface)
     auto acc = mass->getAccessor();
     for (int x = -10; x <= 10; ++x)
         for (int y = 0; y <= 6; ++y)
-            for (int z = -10; z <= 10; ++z) acc.setValueOn(Coord(x, y, z), 1000);
+            for (int z = -10; z <= 10; ++z)
+                acc.setValueOn(Coord(x, y, z), 1000);
     for (int x = -3; x <= 3; ++x)
         for (int y = 7; y <= 16; ++y)
             for (int z = -3; z <= 3; ++z)

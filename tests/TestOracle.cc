@@ -49,7 +49,8 @@ struct RuleDef {
 std::vector<int> rotation(int n, uint64_t hash)
 {
     std::vector<int> order;
-    for (int k = 0; k < n; ++k) order.push_back(int((hash % uint64_t(n) + uint64_t(k)) % uint64_t(n)));
+    for (int k = 0; k < n; ++k)
+        order.push_back(int((hash % uint64_t(n) + uint64_t(k)) % uint64_t(n)));
     return order;
 }
 
@@ -57,7 +58,8 @@ std::vector<int> rotation(int n, uint64_t hash)
 /// below Tc, then a pass over the others (Rules.h: "cells that still have room first"). Room is
 /// judged as each unit is given, so a cell that a unit of the first pass fills to Tc is one of "the
 /// others" in the second.
-void giveUnits(int64_t units, const std::vector<bool>& isUnder, uint64_t hash, int64_t tc, std::vector<int64_t>& out)
+void giveUnits(int64_t units, const std::vector<bool>& isUnder, uint64_t hash, int64_t tc,
+               std::vector<int64_t>& out)
 {
     const std::vector<int> order = rotation(int(out.size()), hash);
     for (bool roomPass : {true, false}) {
@@ -72,7 +74,8 @@ void giveUnits(int64_t units, const std::vector<bool>& isUnder, uint64_t hash, i
 }
 
 /// Shares @a amount equally over the under cells; the remainder by giveUnits.
-void shareEqually(int64_t amount, const std::vector<bool>& isUnder, uint64_t hash, int64_t tc, std::vector<int64_t>& out)
+void shareEqually(int64_t amount, const std::vector<bool>& isUnder, uint64_t hash, int64_t tc,
+                  std::vector<int64_t>& out)
 {
     const int64_t count = std::count(isUnder.begin(), isUnder.end(), true);
     const int64_t each = amount / count;
@@ -82,8 +85,8 @@ void shareEqually(int64_t amount, const std::vector<bool>& isUnder, uint64_t has
 }
 
 /// One block, the paper's way (see the file comment).
-std::vector<int64_t> repartition(const RuleDef& r, const std::vector<int32_t>& mass, const std::vector<bool>& valid,
-                                 uint64_t hash)
+std::vector<int64_t> repartition(const RuleDef& r, const std::vector<int32_t>& mass,
+                                 const std::vector<bool>& valid, uint64_t hash)
 {
     const size_t n = mass.size();
     std::vector<int64_t> out(mass.begin(), mass.end());
@@ -92,7 +95,8 @@ std::vector<int64_t> repartition(const RuleDef& r, const std::vector<int32_t>& m
         isOver[i] = valid[i] && mass[i] > r.tc;
         isUnder[i] = valid[i] && mass[i] <= r.tc;
     }
-    if (std::count(isOver.begin(), isOver.end(), true) == 0 || std::count(isUnder.begin(), isUnder.end(), true) == 0)
+    if (std::count(isOver.begin(), isOver.end(), true) == 0 ||
+        std::count(isUnder.begin(), isUnder.end(), true) == 0)
         return out;
 
     if (r.rule == Rule::Arata) { // dm = max(1, floor(alpha m)) leaves each over cell; shared equally
@@ -113,7 +117,7 @@ std::vector<int64_t> repartition(const RuleDef& r, const std::vector<int32_t>& m
     }
     for (size_t i = 0; i < n; ++i)
         if (isOver[i]) out[i] = r.tc; // every rule but Arata's brings the over cells down to Tc
-    if (r.rule == Rule::Bingham) { // rule 1: dm = m - Tc, shared equally
+    if (r.rule == Rule::Bingham) {    // rule 1: dm = m - Tc, shared equally
         shareEqually(excess, isUnder, hash, r.tc, out);
         return out;
     }
@@ -185,7 +189,8 @@ struct DenseAutomaton {
                         m[i] = mass[index(x, y, z)];
                         valid[i] = !obstacle[index(x, y, z)];
                     }
-                    const std::vector<int64_t> out = repartition(rule, m, valid, blockHashOf(bx, by, bz, step, seed));
+                    const std::vector<int64_t> out =
+                        repartition(rule, m, valid, blockHashOf(bx, by, bz, step, seed));
                     for (int i = 0; i < n; ++i) {
                         const int x = bx + (i & 1), y = by + ((i >> 1) & 1), z = bz + (i >> 2);
                         if (inside(x, y, z)) mass[index(x, y, z)] = int32_t(out[i]);
@@ -201,7 +206,10 @@ namespace {
 
 const Rule kAll[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
 
-reference::RuleDef defOf(const CompiledRule& c) { return {c.rule, c.threshold, c.alphaQ32}; }
+reference::RuleDef defOf(const CompiledRule& c)
+{
+    return {c.rule, c.threshold, c.alphaQ32};
+}
 
 CompiledRule compiled(Rule rule, int32_t tc, double alpha)
 {
@@ -252,10 +260,10 @@ TEST_F(Oracle, RandomBlocksMatchThePaperFormulas)
                     const int64_t top = std::min<int64_t>(INT32_MAX / 2, int64_t(tc) * 3);
                     for (int i = 0; i < n; ++i) {
                         switch (rng() % 4) {
-                        case 0: m[i] = int32_t(rng() % (uint64_t(tc) + 1)); break;             // under
-                        case 1: m[i] = int32_t(tc + int64_t(rng() % uint64_t(top - tc + 1))); break; // over
+                        case 0: m[i] = int32_t(rng() % (uint64_t(tc) + 1)); break;                    // under
+                        case 1: m[i] = int32_t(tc + int64_t(rng() % uint64_t(top - tc + 1))); break;  // over
                         case 2: m[i] = int32_t(std::max<int64_t>(0, tc - int64_t(rng() % 3))); break; // at Tc
-                        default: m[i] = int32_t(rng() % 3); break;                              // nearly empty
+                        default: m[i] = int32_t(rng() % 3); break; // nearly empty
                         }
                         valid[i] = rng() % 8 != 0;
                         if (valid[i]) validBits |= 1u << i;
@@ -270,7 +278,8 @@ TEST_F(Oracle, RandomBlocksMatchThePaperFormulas)
                     const uint32_t changed = repartitionBlock(c, n, m.data(), validBits, key, got.data());
                     const std::vector<int64_t> want = reference::repartition(
                         defOf(c), m, valid, reference::blockHashOf(key.x, key.y, key.z, key.step, key.seed));
-                    ASSERT_EQ(got, want) << ruleName(rule) << " Tc " << tc << " alpha " << alpha << " trial " << trial;
+                    ASSERT_EQ(got, want)
+                        << ruleName(rule) << " Tc " << tc << " alpha " << alpha << " trial " << trial;
                     uint32_t differs = 0;
                     for (int i = 0; i < n; ++i)
                         if (want[i] != m[i]) differs |= 1u << i;
@@ -312,7 +321,8 @@ TEST_F(Oracle, WholeRunsMatchADenseAutomatonCellForCell)
                             continue;
                         }
                         const uint64_t draw = rng() % 10;
-                        const int32_t m = draw < 6 ? int32_t(rng() % (tc + 1)) : (draw < 9 ? int32_t(tc + rng() % (3 * tc)) : 0);
+                        const int32_t m = draw < 6 ? int32_t(rng() % (tc + 1))
+                                                   : (draw < 9 ? int32_t(tc + rng() % (3 * tc)) : 0);
                         dense.mass[i] = m;
                         if (m) grid->tree().setValue(ijk, m);
                     }
@@ -339,7 +349,8 @@ TEST_F(Oracle, WholeRunsMatchADenseAutomatonCellForCell)
                         if (want) ++clayCells;
                     }
             // Nothing outside the box: every active voxel was among the cells checked.
-            EXPECT_EQ(int64_t(grid->tree().activeVoxelCount()), clayCells) << ruleName(rule) << " " << dims << "D";
+            EXPECT_EQ(int64_t(grid->tree().activeVoxelCount()), clayCells)
+                << ruleName(rule) << " " << dims << "D";
             EXPECT_EQ(a.stepCount(), dense.step);
             EXPECT_GT(cellsChecked, 1000);
         }

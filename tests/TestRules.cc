@@ -51,8 +51,14 @@ Result apply(const CompiledRule& r, std::vector<int32_t> m, uint32_t valid = 0xF
     return res;
 }
 
-int64_t sum(const std::vector<int64_t>& v) { return std::accumulate(v.begin(), v.end(), int64_t(0)); }
-int64_t sum(const std::vector<int32_t>& v) { return std::accumulate(v.begin(), v.end(), int64_t(0)); }
+int64_t sum(const std::vector<int64_t>& v)
+{
+    return std::accumulate(v.begin(), v.end(), int64_t(0));
+}
+int64_t sum(const std::vector<int32_t>& v)
+{
+    return std::accumulate(v.begin(), v.end(), int64_t(0));
+}
 
 const Rule kAll[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
 
@@ -60,7 +66,8 @@ const Rule kAll[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
 
 TEST(Rules, NamesRoundTripAndBadNamesAreRefused)
 {
-    for (Rule r : kAll) EXPECT_EQ(parseRule(ruleName(r)), r);
+    for (Rule r : kAll)
+        EXPECT_EQ(parseRule(ruleName(r)), r);
     EXPECT_EQ(parseRule("rule3"), Rule::Prorata);
     try {
         parseRule("rule4");
@@ -281,7 +288,8 @@ TEST(Rules, RemainderChangesFromStepToStepAndPrefersRoom)
     }
     // All three cells receive the unit, none systematically.
     ASSERT_EQ(receiver.size(), 3u);
-    for (auto& kv : receiver) EXPECT_GT(kv.second, 50) << "cell " << kv.first;
+    for (auto& kv : receiver)
+        EXPECT_GT(kv.second, 50) << "cell " << kv.first;
 
     // Prefer room: cells 1, 2 at Tc (no room), cell 3 empty: 13 -> D = 3, share 1 each, remainder 0.
     // With 14: D = 4, share 1, remainder 1 must go to cell 3 (the only one with room after shares).
@@ -306,7 +314,8 @@ TEST(Rules, EveryRuleConservesMassOnRandomBlocks)
             for (int trial = 0; trial < 20000; ++trial) {
                 const int n = (trial & 1) ? 8 : 4;
                 std::vector<int32_t> m(n);
-                for (int i = 0; i < n; ++i) m[i] = int32_t(rnd() % uint64_t(3 * tc + 2));
+                for (int i = 0; i < n; ++i)
+                    m[i] = int32_t(rnd() % uint64_t(3 * tc + 2));
                 const uint32_t valid = uint32_t(rnd()) | uint32_t(rnd()); // mostly valid
                 std::vector<int64_t> out(n);
                 const uint32_t ch =
@@ -394,7 +403,8 @@ TEST(Rules, DivisionBySmallCountsIsExact)
     // a * ceil(2^35 / d) >> 35 for a < 2^28, a division above: compare with '/' on every a below
     // 2^16, around every multiple of d near the switch, and at the extremes.
     for (int d = 1; d <= 8; ++d) {
-        for (int64_t a = 0; a < (1 << 16); ++a) ASSERT_EQ(rules_internal::divideBySmall(a, d), a / d) << a << "/" << d;
+        for (int64_t a = 0; a < (1 << 16); ++a)
+            ASSERT_EQ(rules_internal::divideBySmall(a, d), a / d) << a << "/" << d;
         for (int64_t base : {int64_t(1) << 20, (int64_t(1) << 28) - 64, int64_t(1) << 28, int64_t(1) << 31,
                              (int64_t(1) << 32) - 64, int64_t(1) << 40}) {
             for (int64_t a = base - 64; a < base + 64; ++a) {
@@ -415,7 +425,8 @@ TEST(Rules, DivisionBySmallCountsIsExact)
 TEST(Rules, HashFromTheStepPrefixEqualsTheBlockHash)
 {
     BlockKey k{-5, 7, 1 << 30, (uint64_t(1) << 50) + 9, 0xFEEDull};
-    EXPECT_EQ(rules_internal::finishHash(rules_internal::stepPrefix(k.step, k.seed), k.x, k.y, k.z), blockHash(k));
+    EXPECT_EQ(rules_internal::finishHash(rules_internal::stepPrefix(k.step, k.seed), k.x, k.y, k.z),
+              blockHash(k));
 }
 
 TEST(Rules, ProrataReciprocalSharesAreExactFloors)
@@ -434,7 +445,8 @@ TEST(Rules, ProrataReciprocalSharesAreExactFloors)
             repartitionBlock(cr, 8, m, 0xFFu, k, out);
             const int64_t e = over - 1000;
             int64_t a = 0;
-            for (int i = 1; i < 8; ++i) a += 1000 - m[i];
+            for (int i = 1; i < 8; ++i)
+                a += 1000 - m[i];
             int64_t before = m[0], after = out[0];
             for (int i = 1; i < 8; ++i) {
                 const int64_t share = e * (1000 - m[i]) / a;

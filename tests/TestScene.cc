@@ -49,7 +49,8 @@ void expectRefused(const std::string& json, std::initializer_list<const char*> n
     } catch (const Error& e) {
         const std::string msg = e.what();
         EXPECT_EQ(msg.rfind("s.json: ", 0), 0u) << "message must start with the file: " << msg;
-        for (const char* n : needles) EXPECT_NE(msg.find(n), std::string::npos) << "\"" << n << "\" not in: " << msg;
+        for (const char* n : needles)
+            EXPECT_NE(msg.find(n), std::string::npos) << "\"" << n << "\" not in: " << msg;
         EXPECT_EQ(msg.find('\n'), std::string::npos) << "one line: " << msg;
     }
 }
@@ -131,18 +132,24 @@ TEST_F(SceneTest, EveryMalformedInputIsRefusedWithFieldAndReason)
     // tools
     expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 0, "path": [{}]}])"),
                   {"tools[0].radius", "must be > 0"});
-    expectRefused(scene("", R"([{"shape": "cylinder", "center": [0,0,0], "radius": 2, "height": 0, "path": [{}]}])"),
-                  {"tools[0].height", "must be > 0"});
-    expectRefused(scene("", R"([{"shape": "cylinder", "center": [0,0,0], "radius": 2, "height": 3, "axis": "w", "path": [{}]}])"),
-                  {"tools[0].axis"});
+    expectRefused(
+        scene("", R"([{"shape": "cylinder", "center": [0,0,0], "radius": 2, "height": 0, "path": [{}]}])"),
+        {"tools[0].height", "must be > 0"});
+    expectRefused(
+        scene(
+            "",
+            R"([{"shape": "cylinder", "center": [0,0,0], "radius": 2, "height": 3, "axis": "w", "path": [{}]}])"),
+        {"tools[0].axis"});
     expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2, "path": []}])"),
                   {"tools[0].path", "empty path"});
     expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2}])"),
                   {"tools[0]", "missing field \"path\""});
-    expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2, "path": [{"frames": 0}]}])"),
-                  {"tools[0].path[0].frames", "[1, 1000000]"});
-    expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2, "path": [{"move": [1,0,0]}]}])"),
-                  {"tools[0].path[0].move", "unknown field"});
+    expectRefused(
+        scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2, "path": [{"frames": 0}]}])"),
+        {"tools[0].path[0].frames", "[1, 1000000]"});
+    expectRefused(
+        scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 2, "path": [{"move": [1,0,0]}]}])"),
+        {"tools[0].path[0].move", "unknown field"});
     expectRefused(scene("", R"([{"shape": "sphere", "center": [0,0,"a"], "radius": 2, "path": [{}]}])"),
                   {"tools[0].center[2]", "expected a number"});
     // obstacles never move
@@ -154,11 +161,13 @@ TEST_F(SceneTest, NonFiniteNumbersAreRefused)
 {
     // JSON has no NaN; a number too large for a double is the way a non-finite value sneaks in.
     try {
-        parseScene(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 1e999, "path": [{}]}])"), "s.json", "");
+        parseScene(scene("", R"([{"shape": "sphere", "center": [0,0,0], "radius": 1e999, "path": [{}]}])"),
+                   "s.json", "");
         ADD_FAILURE() << "accepted an infinite radius";
     } catch (const Error& e) {
         const std::string m = e.what();
-        EXPECT_TRUE(m.find("radius") != std::string::npos || m.find("invalid JSON") != std::string::npos) << m;
+        EXPECT_TRUE(m.find("radius") != std::string::npos || m.find("invalid JSON") != std::string::npos)
+            << m;
     }
 }
 
@@ -172,12 +181,14 @@ TEST_F(SceneTest, BadFilesNamedInAScene)
             parseScene(json, "s.json", dir);
             ADD_FAILURE() << "accepted: " << json;
         } catch (const Error& e) {
-            for (const char* n : needles) EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << e.what();
+            for (const char* n : needles)
+                EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << e.what();
         }
     };
     refused(R"({"clay": [{"shape": "mesh", "file": "missing.obj", "mass": 5}]})", {"clay[0]", "missing.obj"});
     refused(R"({"clay": [{"shape": "mesh", "file": "open.obj", "mass": 5}]})", {"clay[0]", "open.obj"});
-    refused(R"({"clay": [{"shape": "levelset", "file": "notvdb.vdb", "mass": 5}]})", {"clay[0]", "notvdb.vdb"});
+    refused(R"({"clay": [{"shape": "levelset", "file": "notvdb.vdb", "mass": 5}]})",
+            {"clay[0]", "notvdb.vdb"});
     // a start file or clay .vdb that is missing, not a .vdb, or lacks the grid: refused when the
     // scene is set up
     const Scene s1 = parseScene(R"({"start": "nothere.vdb"})", "s.json", dir);
@@ -207,9 +218,10 @@ TEST_F(SceneTest, ClayInsideAnObstacleOrOverflowingIsRefused)
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("obstacles[0]"), std::string::npos) << e.what();
     }
-    const Scene over = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [3,3,3], "mass": 2000000000},
+    const Scene over =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [3,3,3], "mass": 2000000000},
                                               {"shape": "box", "min": [3,3,3], "max": [4,4,4], "mass": 2000000000}]})",
-                                  "s.json", "");
+                   "s.json", "");
     try {
         Sculptor sc(over);
         ADD_FAILURE();
@@ -235,10 +247,12 @@ TEST_F(SceneTest, DefaultSceneRunsWithExactMassAndNoClayInsideThePlate)
     auto acc = sc.mass()->getConstAccessor();
     for (int x = -8; x <= 39; ++x)
         for (int z = -8; z <= 39; ++z)
-            for (int y = 24; y <= 32; ++y) ASSERT_EQ(acc.getValue(openvdb::Coord(x, y, z)), 0) << x << "," << y << "," << z;
+            for (int y = 24; y <= 32; ++y)
+                ASSERT_EQ(acc.getValue(openvdb::Coord(x, y, z)), 0) << x << "," << y << "," << z;
     // The pressed clay spread sideways beyond the original cube.
     bool wider = false;
-    for (auto it = sc.mass()->tree().cbeginValueOn(); it && !wider; ++it) wider = it.getCoord().x() < 0;
+    for (auto it = sc.mass()->tree().cbeginValueOn(); it && !wider; ++it)
+        wider = it.getCoord().x() < 0;
     EXPECT_TRUE(wider);
 }
 
@@ -332,22 +346,28 @@ TEST_F(SceneTest, AStoppedRunResumedFromItsCheckpointIsIdenticalToAnUnbrokenRun)
     };
     const std::vector<Case> cases = {
         // tools, obstacles, and a step budget that cuts frames short
-        {"press", R"({"threshold": 100, "seed": 5,
+        {"press",
+         R"({"threshold": 100, "seed": 5,
             "clay":  [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 95}],
             "tools": [{"shape": "sphere", "center": [6,16,6], "radius": 4, "path": [{"translate": [0,-1,0], "frames": 6}]}],
             "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}],
-            "settle": {"max_steps": 30}})", {9, 30, 31}},
+            "settle": {"max_steps": 30}})",
+         {9, 30, 31}},
         // no tools: frames only continue settling, so quiet steps carry across frame boundaries
-        {"no tools", R"({"threshold": 100, "rule": "bingham", "frames": 6,
+        {"no tools",
+         R"({"threshold": 100, "rule": "bingham", "frames": 6,
             "clay":  [{"shape": "box", "min": [0,0,0], "max": [5,5,5], "mass": 400}],
             "obstacles": [{"shape": "box", "min": [-20,-3,-20], "max": [30,-1,30]}],
-            "settle": {"max_steps": 25}})", {1, 24, 26}},
+            "settle": {"max_steps": 25}})",
+         {1, 24, 26}},
         // 2D, arata, a tolerance
-        {"2d", R"({"dimensions": 2, "threshold": 100, "rule": "arata", "alpha": 0.3,
+        {"2d",
+         R"({"dimensions": 2, "threshold": 100, "rule": "arata", "alpha": 0.3,
             "clay":  [{"shape": "box", "min": [0,0], "max": [15,15], "mass": 90}],
             "tools": [{"shape": "box", "min": [-4,16], "max": [19,18], "path": [{"translate": [0,-1], "frames": 5}]}],
             "obstacles": [{"shape": "box", "min": [-30,-3], "max": [40,-1]}],
-            "settle": {"max_steps": 1000, "tolerance": 40}})", {13, 50}},
+            "settle": {"max_steps": 1000, "tolerance": 40}})",
+         {13, 50}},
     };
     // About 100 checkpoints, each ~0.1 s (building the surface level set); on tmpfs where there is
     // one, as fsync on a loaded disk costs up to 0.5 s a file.
@@ -373,7 +393,8 @@ TEST_F(SceneTest, StoppingWaitsForAStepThatResumesExactlyAndSavesTheOpenFrame)
     const Scene s = parseScene(R"({"threshold": 100, "seed": 1,
         "clay":  [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 95}],
         "tools": [{"shape": "box", "min": [-2,12,-2], "max": [13,14,13], "path": [{"translate": [0,-1,0], "frames": 3}]}],
-        "settle": {"max_steps": 100000}})", "s.json", "");
+        "settle": {"max_steps": 100000}})",
+                               "s.json", "");
     Sculptor sc(s);
     bool stop = false;
     sc.setStopRequest([&] { return stop; });
@@ -477,8 +498,10 @@ TEST_F(SceneTest, ByteSizesParseExactlyAndNonsenseIsRefused)
 TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
 {
     // A 32^3 cube is 4^3 = 64 leaves. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
-    const Scene still = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}],
-        "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}]})", "s.json", "");
+    const Scene still =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}],
+        "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}]})",
+                   "s.json", "");
     const MemoryEstimate a = estimateSceneMemory(still);
     EXPECT_EQ(a.clayLeaves, 64u);
     EXPECT_EQ(a.clayLeavesGrown, 64u); // at 800 < Tc with no tool it never moves (issue 11, item 5)
@@ -512,7 +535,8 @@ TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
     EXPECT_EQ(estimateSceneMemory(apart).clayLeavesGrown, 2u * 27u);
     // No more leaves than units of mass: each leaf holds at least one.
     const Scene light = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [0,0,0], "mass": 5}],
-        "tools": [{"shape": "box", "min": [0,0,0], "max": [800,800,800], "path": [{"translate": [1,0,0]}]}]})", "s.json", "");
+        "tools": [{"shape": "box", "min": [0,0,0], "max": [800,800,800], "path": [{"translate": [1,0,0]}]}]})",
+                                   "s.json", "");
     EXPECT_EQ(estimateSceneMemory(light).clayLeavesGrown, 5u);
     // 2D: one layer of leaves.
     const Scene flat = parseScene(
@@ -526,7 +550,8 @@ TEST_F(SceneTest, ASceneOverItsMemoryBudgetIsRefusedBeforeAnyWork)
 {
     // A sphere of radius 3000 voxels: about 1.4e10 voxels of clay, far over 1 GiB.
     Scene big = parseScene(R"({"memory_budget": "1G",
-        "clay": [{"shape": "sphere", "center": [0,0,0], "radius": 3000, "mass": 800}]})", "big.json", "");
+        "clay": [{"shape": "sphere", "center": [0,0,0], "radius": 3000, "mass": 800}]})",
+                           "big.json", "");
     const MemoryEstimate e = estimateSceneMemory(big);
     EXPECT_GT(e.total(), uint64_t(1) << 40);
     const int64_t newCalls0 = alloc_counter::newCalls.load();

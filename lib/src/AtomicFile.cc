@@ -68,7 +68,10 @@ std::string directoryOf(const std::string& path)
     return path.substr(0, slash);
 }
 
-std::string errnoText(int err) { return err != 0 ? std::strerror(err) : "unknown error"; }
+std::string errnoText(int err)
+{
+    return err != 0 ? std::strerror(err) : "unknown error";
+}
 
 /// Removes the temporary file unless released; closes its descriptor.
 struct TempFile {
@@ -129,7 +132,8 @@ std::string extensionOf(const std::string& path)
     const size_t dot = path.find_last_of('.');
     if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
     std::string ext = path.substr(dot);
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    for (char& c : ext)
+        c = char(std::tolower(static_cast<unsigned char>(c)));
     return ext;
 }
 

@@ -88,8 +88,8 @@ struct Automaton::Impl {
     uint64_t stepCount = 0;
     int64_t totalMass = 0;
     int64_t overload = 0;
-    int64_t maxBound = 0;     // upper bound of the largest cell value
-    int quietSteps = 0;       // consecutive steps that changed nothing
+    int64_t maxBound = 0; // upper bound of the largest cell value
+    int quietSteps = 0;   // consecutive steps that changed nothing
     Candidates candidates;
 
     // scratch, reused between steps
@@ -108,11 +108,12 @@ struct Automaton::Impl {
         if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
     }
 
-    template<typename F>
-    void inArena(F&& f)
+    template <typename F> void inArena(F&& f)
     {
-        if (arena) arena->execute(f);
-        else f();
+        if (arena)
+            arena->execute(f);
+        else
+            f();
     }
 
     bool obstacleAt(const openvdb::tree::ValueAccessor<const ObsTree, false>* acc, const Coord& c) const
@@ -146,8 +147,8 @@ struct Automaton::Impl {
                 }
                 const Coord c = leaf.offsetToGlobalCoord(i);
                 if (v < 0) {
-                    throw Error(std::string(context) + ": voxel " + coordStr(c) +
-                                " holds negative mass " + std::to_string(v));
+                    throw Error(std::string(context) + ": voxel " + coordStr(c) + " holds negative mass " +
+                                std::to_string(v));
                 }
                 if (!is3D() && c.z() != 0) {
                     throw Error(std::string(context) + ": 2D clay must lie in the z = 0 layer, but voxel " +
@@ -164,7 +165,8 @@ struct Automaton::Impl {
             }
         };
         if (!region) {
-            for (auto it = tree().beginLeaf(); it; ++it) visit(*it);
+            for (auto it = tree().beginLeaf(); it; ++it)
+                visit(*it);
         } else {
             const Coord lo(region->min[0] & ~7, region->min[1] & ~7, region->min[2] & ~7);
             for (int x = lo.x(); x <= region->max[0]; x += 8) {
@@ -192,9 +194,9 @@ struct Automaton::Impl {
             if (*it != 0) {
                 openvdb::CoordBBox bb;
                 it.getBoundingBox(bb);
-                throw Error("mass grid \"" + massGrid->getName() + "\": inactive tile " +
-                            coordStr(bb.min()) + "-" + coordStr(bb.max()) + " holds mass " +
-                            std::to_string(*it) + "; voxelize it or make it active");
+                throw Error("mass grid \"" + massGrid->getName() + "\": inactive tile " + coordStr(bb.min()) +
+                            "-" + coordStr(bb.max()) + " holds mass " + std::to_string(*it) +
+                            "; voxelize it or make it active");
             }
         }
         std::vector<Origin> hot;
@@ -236,7 +238,10 @@ struct Automaton::Impl {
             PassTotals tot;
             Body(const PassInput* i, WorkItem* w) : in(i), work(w) {}
             Body(Body& o, tbb::split) : in(o.in), work(o.work) {}
-            void operator()(const tbb::blocked_range<size_t>& r) { processRange(*in, work, r.begin(), r.end(), tot); }
+            void operator()(const tbb::blocked_range<size_t>& r)
+            {
+                processRange(*in, work, r.begin(), r.end(), tot);
+            }
             void join(Body& o) { tot.join(o.tot); }
         };
         Body body(&in, work.data());
@@ -370,8 +375,8 @@ struct Automaton::Impl {
             stack.push_back(it.getCoord());
             sacc.setValueOn(it.getCoord());
         }
-        static const Coord kFace[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
-                                       Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
+        static const Coord kFace[6] = {Coord(1, 0, 0),  Coord(-1, 0, 0), Coord(0, 1, 0),
+                                       Coord(0, -1, 0), Coord(0, 0, 1),  Coord(0, 0, -1)};
         const int faces = is3D() ? 6 : 4;
         uint64_t cellsSeen = 0;
         int64_t massSeen = 0, room = 0;
@@ -440,18 +445,25 @@ Automaton::~Automaton() = default;
 Automaton::Automaton(Automaton&&) noexcept = default;
 Automaton& Automaton::operator=(Automaton&&) noexcept = default;
 
-StepReport Automaton::step() { return mImpl->step(); }
+StepReport Automaton::step()
+{
+    return mImpl->step();
+}
 
 StepReport Automaton::run(uint64_t n)
 {
     StepReport total;
     total.residualOverload = mImpl->overload;
     total.settled = mImpl->settled();
-    for (uint64_t i = 0; i < n; ++i) total += mImpl->step();
+    for (uint64_t i = 0; i < n; ++i)
+        total += mImpl->step();
     return total;
 }
 
-bool Automaton::overloadHasNoRoom() { return mImpl->overloadHasNoRoom(); }
+bool Automaton::overloadHasNoRoom()
+{
+    return mImpl->overloadHasNoRoom();
+}
 
 StepReport Automaton::settle(uint64_t maxSteps, int64_t tolerance)
 {
@@ -471,7 +483,8 @@ StepReport Automaton::settle(const SettleOptions& so)
     // (measured: 0.17 s for a 48^3 lump, ~500 steps' worth), so it waits until settling is long;
     // callers settling in short chunks never pay it.
     uint64_t roomCheck = kNoRoomCheckSteps;
-    while (roomCheck < so.stepsDone) roomCheck *= 2;
+    while (roomCheck < so.stepsDone)
+        roomCheck *= 2;
     const uint64_t tolerance = uint64_t(std::max<int64_t>(so.tolerance, 0));
     for (;;) {
         const uint64_t done = so.stepsDone + total.steps;
@@ -549,7 +562,10 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
     im.quietSteps = 0;
 }
 
-void Automaton::resync() { mImpl->resync(); }
+void Automaton::resync()
+{
+    mImpl->resync();
+}
 
 void Automaton::setRule(const RuleParams& rule)
 {
@@ -558,20 +574,50 @@ void Automaton::setRule(const RuleParams& rule)
     mImpl->resync();
 }
 
-void Automaton::setSeed(uint64_t seed) { mImpl->opts.seed = seed; }
+void Automaton::setSeed(uint64_t seed)
+{
+    mImpl->opts.seed = seed;
+}
 void Automaton::setStepCount(uint64_t steps)
 {
     mImpl->stepCount = steps;
     mImpl->resync();
 }
-void Automaton::setThreads(int threads) { mImpl->setThreads(threads); }
-const AutomatonOptions& Automaton::options() const { return mImpl->opts; }
-uint64_t Automaton::stepCount() const { return mImpl->stepCount; }
-int64_t Automaton::totalMass() const { return mImpl->totalMass; }
-int64_t Automaton::residualOverload() const { return mImpl->overload; }
-bool Automaton::settled() const { return mImpl->settled(); }
-int Automaton::quietSteps() const { return mImpl->quietSteps; }
-const MassGridPtr& Automaton::mass() const { return mImpl->massGrid; }
-const ObstacleGridPtr& Automaton::obstacles() const { return mImpl->obsGrid; }
+void Automaton::setThreads(int threads)
+{
+    mImpl->setThreads(threads);
+}
+const AutomatonOptions& Automaton::options() const
+{
+    return mImpl->opts;
+}
+uint64_t Automaton::stepCount() const
+{
+    return mImpl->stepCount;
+}
+int64_t Automaton::totalMass() const
+{
+    return mImpl->totalMass;
+}
+int64_t Automaton::residualOverload() const
+{
+    return mImpl->overload;
+}
+bool Automaton::settled() const
+{
+    return mImpl->settled();
+}
+int Automaton::quietSteps() const
+{
+    return mImpl->quietSteps;
+}
+const MassGridPtr& Automaton::mass() const
+{
+    return mImpl->massGrid;
+}
+const ObstacleGridPtr& Automaton::obstacles() const
+{
+    return mImpl->obsGrid;
+}
 
 } // namespace vdbclay

@@ -56,7 +56,10 @@ public:
     }
 };
 
-void initOpenVDB() { openvdb::initialize(); }
+void initOpenVDB()
+{
+    openvdb::initialize();
+}
 
 /// An exception's text fit for a message: OpenVDB's errors on damaged files quote whatever bytes
 /// it read (a "grid type" of garbage and kilobytes of blanks), so keep printable characters,
@@ -72,13 +75,17 @@ std::string reason(const std::exception& e)
         if (ch == ' ' && (out.empty() || out.back() == ' ')) continue;
         out += ch;
     }
-    while (!out.empty() && out.back() == ' ') out.pop_back();
+    while (!out.empty() && out.back() == ' ')
+        out.pop_back();
     if (*p) out += "...";
     return out.empty() ? "unreadable data" : out;
 }
 
 /// The start of every message about a file OpenVDB could not read.
-std::string damaged(const std::string& path) { return path + " is not a .vdb file or is truncated or damaged: "; }
+std::string damaged(const std::string& path)
+{
+    return path + " is not a .vdb file or is truncated or damaged: ";
+}
 
 const char* kMetaThreshold = "vdbclay_threshold";
 const char* kMetaRule = "vdbclay_rule";
@@ -174,7 +181,7 @@ openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& 
     }
 }
 
-template<typename T, typename MetaT>
+template <typename T, typename MetaT>
 bool readMeta(const openvdb::GridBase& grid, const char* name, T& out, const std::string& path,
               const char* typeName)
 {
@@ -182,8 +189,7 @@ bool readMeta(const openvdb::GridBase& grid, const char* name, T& out, const std
     if (!m) return false;
     const auto typed = std::dynamic_pointer_cast<const MetaT>(m);
     if (!typed) {
-        throw Error(path + ": metadata " + name + " is a " + m->typeName() + ", expected " +
-                    typeName);
+        throw Error(path + ": metadata " + name + " is a " + m->typeName() + ", expected " + typeName);
     }
     out = T(typed->value());
     return true;
@@ -297,9 +303,9 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     openvdb::MetaMap massMeta;
     massMeta.insertMeta(openvdb::GridBase::META_GRID_NAME, openvdb::StringMetadata("mass"));
     massMeta.insertMeta(openvdb::GridBase::META_GRID_CLASS,
-                        openvdb::StringMetadata(openvdb::GridBase::gridClassToString(
-                            openvdb::GRID_UNKNOWN)));
-    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it) massMeta.insertMeta(it->first, *it->second);
+                        openvdb::StringMetadata(openvdb::GridBase::gridClassToString(openvdb::GRID_UNKNOWN)));
+    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it)
+        massMeta.insertMeta(it->first, *it->second);
 
     const auto xform = io_internal::clayTransform(meta.voxelSize, meta.up);
     // Shares the caller's tree (read only) with a fresh name, metadata and transform.
@@ -313,10 +319,10 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     } catch (const Error& e) {
         throw Error("cannot write " + path + ": " + e.what());
     } catch (const std::exception& e) {
-        throw Error("cannot write " + path + ": building the density and surface failed: " +
-                    reason(e));
+        throw Error("cannot write " + path + ": building the density and surface failed: " + reason(e));
     }
-    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it) density->insertMeta(it->first, *it->second);
+    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it)
+        density->insertMeta(it->first, *it->second);
 
     openvdb::GridCPtrVec grids{massOut, density, surface};
     writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
@@ -356,8 +362,8 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     }
     for (auto it = out.mass->tree().cbeginValueAll(); it; ++it) {
         if (*it < 0) {
-            throw Error(path + ": grid \"" + gridName + "\" holds negative mass " +
-                        std::to_string(*it) + " at voxel " + coordText(it.getCoord()));
+            throw Error(path + ": grid \"" + gridName + "\" holds negative mass " + std::to_string(*it) +
+                        " at voxel " + coordText(it.getCoord()));
         }
     }
     normalizeClay(*out.mass, path, gridName);
@@ -492,9 +498,8 @@ std::string describeVdb(const std::string& path)
         if (box.empty()) {
             s << "  index bbox: empty\n";
         } else {
-            s << "  index bbox: [" << box.min().x() << ", " << box.min().y() << ", "
-              << box.min().z() << "] .. [" << box.max().x() << ", " << box.max().y() << ", "
-              << box.max().z() << "]\n";
+            s << "  index bbox: [" << box.min().x() << ", " << box.min().y() << ", " << box.min().z()
+              << "] .. [" << box.max().x() << ", " << box.max().y() << ", " << box.max().z() << "]\n";
         }
         const openvdb::Vec3d vs = g->voxelSize();
         s << "  voxel size: " << vs[0];
@@ -528,18 +533,17 @@ std::string describeVdb(const std::string& path)
             printMeta(*g, "    ");
         }
     }
-    for (const std::string& u : unread) s << u;
+    for (const std::string& u : unread)
+        s << u;
     return s.str();
 }
 
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
-                      double isovalue)
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue)
 {
     initOpenVDB();
     const std::string ext = io_internal::extensionOf(path);
     if (ext != ".obj" && ext != ".ply") {
-        throw Error("cannot write " + path + ": unknown mesh format \"" + ext +
-                    "\" (use .obj or .ply)");
+        throw Error("cannot write " + path + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
     }
     if (!(isovalue > 0) || !std::isfinite(isovalue)) {
         throw Error("cannot write " + path + ": the isovalue must be positive and finite");
@@ -561,7 +565,8 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
     // lies where the .vdb's grids lie in Blender or Houdini, and loadMesh with the same voxel size
     // and up axis puts it back on the same voxels.
     const openvdb::math::Transform& xform = mass.transform();
-    for (auto& p : mesh.points) p = openvdb::Vec3s(xform.indexToWorld(openvdb::Vec3d(p)));
+    for (auto& p : mesh.points)
+        p = openvdb::Vec3s(xform.indexToWorld(openvdb::Vec3d(p)));
 
     // Quads are split into two triangles, so both formats hold triangles only.
     const size_t faces = mesh.triangles.size() + 2 * mesh.quads.size();
@@ -571,7 +576,8 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
             os << "# vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue
                << " (world units, voxel size " << xform.voxelSize()[0] << ")\n";
             os << "# " << mesh.points.size() << " vertices, " << faces << " triangles\n";
-            for (const auto& p : mesh.points) os << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+            for (const auto& p : mesh.points)
+                os << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
             for (const auto& t : mesh.triangles) {
                 os << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
             }
@@ -587,7 +593,8 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
             os << "property float x\nproperty float y\nproperty float z\n";
             os << "element face " << faces << "\n";
             os << "property list uchar int vertex_indices\nend_header\n";
-            for (const auto& p : mesh.points) os << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+            for (const auto& p : mesh.points)
+                os << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
             for (const auto& t : mesh.triangles) {
                 os << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << '\n';
             }
@@ -616,8 +623,9 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
     auto grid = openvdb::Int32Grid::create(0);
     grid->setName("mass");
     auto acc = grid->getAccessor();
-    forEachVoxelInside(shape, dimensions,
-                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel); });
+    forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
+        acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
+    });
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));

@@ -102,20 +102,26 @@ void checkArgs(const char* what, int32_t threshold, int dims)
 }
 
 /// The face neighbour offsets: the first 4 in 2D, all 6 in 3D.
-const Coord kFaces[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
-                         Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
-int faceCount(int dims) { return dims == 3 ? 6 : 4; }
+const Coord kFaces[6] = {Coord(1, 0, 0),  Coord(-1, 0, 0), Coord(0, 1, 0),
+                         Coord(0, -1, 0), Coord(0, 0, 1),  Coord(0, 0, -1)};
+int faceCount(int dims)
+{
+    return dims == 3 ? 6 : 4;
+}
 
 /// 2 m >= Tc, in 64 bits.
-inline bool occupied(int32_t m, int32_t threshold) { return 2 * int64_t(m) >= int64_t(threshold); }
+inline bool occupied(int32_t m, int32_t threshold)
+{
+    return 2 * int64_t(m) >= int64_t(threshold);
+}
 
 /// Calls @a fn(coord, mass) for every voxel holding clay; refuses nonzero tiles.
-template<typename Fn>
-void forEachClayVoxel(const MassGrid& mass, const char* what, Fn&& fn)
+template <typename Fn> void forEachClayVoxel(const MassGrid& mass, const char* what, Fn&& fn)
 {
     for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
         if (*it == 0) continue;
-        if (!it.isVoxelValue()) throw Error(std::string(what) + ": the grid holds a nonzero tile; voxelize it first");
+        if (!it.isVoxelValue())
+            throw Error(std::string(what) + ": the grid holds a nonzero tile; voxelize it first");
         fn(it.getCoord(), *it);
     }
 }
@@ -189,7 +195,10 @@ int64_t squaredDistance(const Point& a, const Point& b)
 /// A static 3D tree for exact nearest-neighbour queries on voxel centres (integer distances).
 class PointTree {
 public:
-    explicit PointTree(std::vector<Point> points) : mPoints(std::move(points)) { build(0, mPoints.size(), 0); }
+    explicit PointTree(std::vector<Point> points) : mPoints(std::move(points))
+    {
+        build(0, mPoints.size(), 0);
+    }
 
     /// The squared distance from @a q to the nearest point; the tree must not be empty.
     int64_t nearest(const Point& q) const
@@ -323,7 +332,8 @@ ShapeError compareShapes(const MassGrid& clay, int32_t threshold, const Shape& r
     checkArgs("compareShapes", threshold, dims);
     auto ref = openvdb::MaskGrid::create(false);
     auto acc = ref->getAccessor();
-    forEachVoxelInside(reference, dims, [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(Coord(x, y, z)); });
+    forEachVoxelInside(reference, dims,
+                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(Coord(x, y, z)); });
     return compareSets(*occupiedSet(clay, threshold, dims, "compareShapes"), *ref, dims);
 }
 

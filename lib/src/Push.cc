@@ -21,14 +21,14 @@
 //
 // The compress push (PushMode::Compress) changes step 3 only. When the march's target is clay
 // (m * 10 >= 3 Tc, in the grid before the push: "full" below), the march goes on along the normal,
-// collecting the contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact depth:
-// round(sqrt(voxels that tool entered this push)) in 3D, their number in 2D, at least 1. The
-// source's clay m is shared over those k voxels: m / k each, the remainder m % k as +1 to the
-// first voxels (nearest the tool). So a plate wider than the clay compresses every column of it
-// uniformly (the study's push T: straight sides), while a small tool poking a large block spreads
-// its clay only as deep as it is wide (a local rim, the far faces untouched). The full test reads
-// the grid as it was before this push, so the plan does not depend on the order of the sources.
-// A source whose target is not full, or was found by the flood, is pushed as by the surface push.
+// collecting the contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact
+// depth: round(sqrt(voxels that tool entered this push)) in 3D, their number in 2D, at least 1. The source's
+// clay m is shared over those k voxels: m / k each, the remainder m % k as +1 to the first voxels (nearest
+// the tool). So a plate wider than the clay compresses every column of it uniformly (the study's push T:
+// straight sides), while a small tool poking a large block spreads its clay only as deep as it is wide (a
+// local rim, the far faces untouched). The full test reads the grid as it was before this push, so the plan
+// does not depend on the order of the sources. A source whose target is not full, or was found by the flood,
+// is pushed as by the surface push.
 
 #include "vdbclay/Push.h"
 #include "vdbclay/Automaton.h"
@@ -181,8 +181,8 @@ public:
             queue.pop_front();
             for (int d = 0; d < dirs; ++d) {
                 const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                if (std::abs(q.x() - s.c.x()) > mMaxSearch ||
-                    std::abs(q.y() - s.c.y()) > mMaxSearch || std::abs(q.z() - s.c.z()) > mMaxSearch) {
+                if (std::abs(q.x() - s.c.x()) > mMaxSearch || std::abs(q.y() - s.c.y()) > mMaxSearch ||
+                    std::abs(q.z() - s.c.z()) > mMaxSearch) {
                     continue;
                 }
                 if (acc.isValueOn(q)) continue;
@@ -330,7 +330,8 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     const std::vector<Source> sources = pusher.sources(u);
     // Voxels each tool entered: the contact size (and the compress push's depth).
     std::vector<uint64_t> entered(tools.size(), 0);
-    for (const Source& s : sources) ++entered[s.tool];
+    for (const Source& s : sources)
+        ++entered[s.tool];
     std::vector<int> depth(tools.size(), 1);
     for (size_t t = 0; t < tools.size(); ++t) {
         const double size = is2D ? double(entered[t]) : std::sqrt(double(entered[t]));

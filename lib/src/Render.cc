@@ -27,14 +27,13 @@ constexpr int kMaxImageSide = 16384;
 using Rgb = std::array<uint8_t, 3>;
 
 const Rgb kWhite{{255, 255, 255}};
-const Rgb kOver{{215, 25, 28}};   // cells over Tc
-const Rgb kInk{{40, 40, 40}};     // legend text and frame
+const Rgb kOver{{215, 25, 28}}; // cells over Tc
+const Rgb kInk{{40, 40, 40}};   // legend text and frame
 
 /// Light to dark blue for densities in (0, 1] (ColorBrewer "Blues"); darker = denser.
 Rgb rampColour(double t)
 {
-    static const double stops[][4] = {
-        {0.0, 222, 235, 247}, {0.5, 107, 174, 214}, {1.0, 8, 48, 107}};
+    static const double stops[][4] = {{0.0, 222, 235, 247}, {0.5, 107, 174, 214}, {1.0, 8, 48, 107}};
     t = std::min(1.0, std::max(0.0, t));
     int i = t <= 0.5 ? 0 : 1;
     const double u = (t - stops[i][0]) / (stops[i + 1][0] - stops[i][0]);
@@ -67,7 +66,8 @@ struct Image {
     void fill(int x0, int y0, int w, int h, const Rgb& c)
     {
         for (int y = y0; y < y0 + h; ++y)
-            for (int x = x0; x < x0 + w; ++x) set(x, y, c);
+            for (int x = x0; x < x0 + w; ++x)
+                set(x, y, c);
     }
 };
 
@@ -94,10 +94,12 @@ void drawText(Image& img, int x, int y, const char* text, int scale)
     }
 }
 
-int textWidth(const char* text, int scale) { return int(std::strlen(text)) * 4 * scale - scale; }
+int textWidth(const char* text, int scale)
+{
+    return int(std::strlen(text)) * 4 * scale - scale;
+}
 
-void render2d(const std::string& path, const MassGrid& mass, int32_t threshold,
-              const RenderOptions& options)
+void render2d(const std::string& path, const MassGrid& mass, int32_t threshold, const RenderOptions& options)
 {
     // The clay's bounding box in the z = 0 layer (nonzero values, active or not).
     openvdb::CoordBBox box;
@@ -122,7 +124,8 @@ void render2d(const std::string& path, const MassGrid& mass, int32_t threshold,
     }
     int scale = int(std::max<int64_t>(1, options.width / w));
     scale = std::min<int>(scale, 64);
-    while (scale > 1 && (w * scale > kMaxImageSide || h * scale > kMaxImageSide)) --scale;
+    while (scale > 1 && (w * scale > kMaxImageSide || h * scale > kMaxImageSide))
+        --scale;
 
     const int mapW = int(w * scale), mapH = int(h * scale);
     const int imgW = std::max(mapW, 160);
@@ -137,8 +140,7 @@ void render2d(const std::string& path, const MassGrid& mass, int32_t threshold,
         for (int64_t vx = 0; vx < w; ++vx) {
             const int32_t m = acc.getValue(openvdb::Coord(int(xmin + vx), int(ymax - vy), 0));
             if (m == 0) continue;
-            img.fill(x0 + int(vx) * scale, int(vy) * scale, scale, scale,
-                     densityColour(m, threshold));
+            img.fill(x0 + int(vx) * scale, int(vy) * scale, scale, scale, densityColour(m, threshold));
         }
     }
 
@@ -183,8 +185,7 @@ public:
     openvdb::tools::BaseShader* copy() const override { return new ClayShader(*this); }
 };
 
-void render3d(const std::string& path, const MassGrid& mass, int32_t threshold,
-              const RenderOptions& options)
+void render3d(const std::string& path, const MassGrid& mass, int32_t threshold, const RenderOptions& options)
 {
     if (options.width > kMaxImageSide || options.height > kMaxImageSide) {
         throw Error("cannot render " + path + ": the picture may be at most " +
@@ -210,14 +211,13 @@ void render3d(const std::string& path, const MassGrid& mass, int32_t threshold,
     const double pi = openvdb::math::pi<double>();
     const double az = options.azimuthDeg * pi / 180.0;
     const double el = std::max(-89.0, std::min(89.0, options.elevationDeg)) * pi / 180.0;
-    const openvdb::Vec3d eye =
-        centre + distance * openvdb::Vec3d(std::cos(el) * std::sin(az), std::sin(el),
-                                           std::cos(el) * std::cos(az));
+    const openvdb::Vec3d eye = centre + distance * openvdb::Vec3d(std::cos(el) * std::sin(az), std::sin(el),
+                                                                  std::cos(el) * std::cos(az));
 
     openvdb::tools::Film film(size_t(options.width), size_t(options.height));
     film.fill(openvdb::tools::Film::RGBA(1.0, 1.0, 1.0, 1.0)); // white background: rays that miss keep it
-    openvdb::tools::PerspectiveCamera camera(film, openvdb::Vec3R(0.0), eye, focal, aperture,
-                                             1e-3, distance + 4 * radius);
+    openvdb::tools::PerspectiveCamera camera(film, openvdb::Vec3R(0.0), eye, focal, aperture, 1e-3,
+                                             distance + 4 * radius);
     camera.lookAt(centre, openvdb::Vec3R(0, 1, 0));
     openvdb::tools::rayTrace(*surface, ClayShader(), camera, /*pixelSamples=*/2, /*seed=*/0,
                              /*threaded=*/true);

@@ -11,7 +11,10 @@
 
 namespace vdbclay {
 
-uint64_t blockHash(const BlockKey& key) { return rules_internal::hashKey(key); }
+uint64_t blockHash(const BlockKey& key)
+{
+    return rules_internal::hashKey(key);
+}
 
 CompiledRule compileRule(const RuleParams& params)
 {
@@ -29,8 +32,8 @@ CompiledRule compileRule(const RuleParams& params)
 uint32_t repartitionBlock(const CompiledRule& rule, int n, const int32_t* mass, uint32_t valid,
                           const BlockKey& key, int64_t* out)
 {
-    if (n != 4 && n != 8) throw Error("repartitionBlock: a block has 4 (2D) or 8 (3D) cells, got " +
-                                      std::to_string(n));
+    if (n != 4 && n != 8)
+        throw Error("repartitionBlock: a block has 4 (2D) or 8 (3D) cells, got " + std::to_string(n));
     return rules_internal::repartition(rule, n, mass, valid, key, out);
 }
 

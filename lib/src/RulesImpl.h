@@ -62,19 +62,21 @@ inline int popcount8(uint32_t m)
 }
 
 /// The cells of @a cells (mask of N bits) whose value in @a out is below @a tc.
-template<int N>
+template <int N>
 __attribute__((always_inline)) inline uint32_t below(const int64_t* out, uint32_t cells, int64_t tc)
 {
     uint32_t m = 0;
     VDBCLAY_UNROLL
-    for (int i = 0; i < N; ++i) m |= uint32_t(out[i] < tc) << i;
+    for (int i = 0; i < N; ++i)
+        m |= uint32_t(out[i] < tc) << i;
     return m & cells;
 }
 
 /// Gives one unit to each of the first @a r cells of @a cells in the rotation that starts at cell
 /// @a start; returns how many units are left (r minus the cells there were).
-template<int N>
-__attribute__((always_inline)) inline int64_t giveInRotation(int64_t r, uint32_t cells, int start, int64_t* out)
+template <int N>
+__attribute__((always_inline)) inline int64_t giveInRotation(int64_t r, uint32_t cells, int start,
+                                                             int64_t* out)
 {
     constexpr uint32_t kAll = (1u << N) - 1;
     // Rotate right by start: bit k is cell (start + k) mod N, so ascending bits follow the rotation.
@@ -92,7 +94,7 @@ __attribute__((always_inline)) inline int64_t giveInRotation(int64_t r, uint32_t
 /// at hash mod N (N is 4 or 8: a mask): first the cells whose new mass is still below Tc, then the
 /// others (those at or above Tc after the first pass, which may include cells the first pass
 /// filled to Tc).
-template<int N>
+template <int N>
 __attribute__((always_inline)) inline void giveRemainder(int64_t r, uint32_t under, int64_t tc, uint64_t hash,
                                                          int64_t* out)
 {
@@ -129,7 +131,7 @@ inline int64_t divideBySmall(int64_t a, int d)
 }
 
 /// Shares @a amount equally among the cells of @a under (nu of them), remainder by hash.
-template<int N, typename Hash>
+template <int N, typename Hash>
 __attribute__((always_inline)) inline void shareEqually(int64_t amount, uint32_t under, int nu, int64_t tc,
                                                         const Hash& hash, int64_t* out)
 {
@@ -144,13 +146,12 @@ __attribute__((always_inline)) inline void shareEqually(int64_t amount, uint32_t
 
 /// The cells of a block holding more than @a tc (bit i = cell i): SSE2 compares where the target
 /// has it (every x86-64), a plain loop elsewhere.
-template<int N>
-__attribute__((always_inline)) inline uint32_t overMask(const int32_t* mass, int32_t tc)
+template <int N> __attribute__((always_inline)) inline uint32_t overMask(const int32_t* mass, int32_t tc)
 {
 #if defined(__SSE2__)
     const __m128i t = _mm_set1_epi32(tc);
-    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(
-        _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(mass)), t))));
+    uint32_t m = uint32_t(_mm_movemask_ps(
+        _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(mass)), t))));
     if constexpr (N == 8) {
         m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(
                  _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(mass + 4)), t))))
@@ -160,7 +161,8 @@ __attribute__((always_inline)) inline uint32_t overMask(const int32_t* mass, int
 #else
     uint32_t m = 0;
     VDBCLAY_UNROLL
-    for (int i = 0; i < N; ++i) m |= uint32_t(mass[i] > tc) << i;
+    for (int i = 0; i < N; ++i)
+        m |= uint32_t(mass[i] > tc) << i;
     return m;
 #endif
 }
@@ -168,7 +170,7 @@ __attribute__((always_inline)) inline uint32_t overMask(const int32_t* mass, int
 /// The rule @a R on one block of N cells (see vdbclay/Rules.h). The kernel instantiates it per rule
 /// and dimension, so no switch runs per block. Unlike repartitionBlock, @a out is left unwritten
 /// when the block has no over or no under cell (the result is then 0 and out is not needed).
-template<Rule R, int N, typename Hash>
+template <Rule R, int N, typename Hash>
 __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& rule, const int32_t* mass,
                                                             uint32_t valid, const Hash& hash, int64_t* out)
 {
@@ -177,7 +179,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
     const uint32_t under = valid & ~over;
     if (!over || !under) return 0;
     VDBCLAY_UNROLL
-    for (int i = 0; i < N; ++i) out[i] = mass[i];
+    for (int i = 0; i < N; ++i)
+        out[i] = mass[i];
     const int nu = popcount8(under);
 
     if constexpr (R == Rule::Arata) {
@@ -215,7 +218,7 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
         if (e > a) {
             // More excess than room (A may be 0): fill every room, share the surplus equally.
             VDBCLAY_UNROLL
-        for (int i = 0; i < N; ++i) {
+            for (int i = 0; i < N; ++i) {
                 if ((under >> i) & 1u) out[i] = tc;
             }
             shareEqually<N>(e - a, under, nu, tc, hash, out);
@@ -252,18 +255,20 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
             if (uint64_t(e) * uint64_t(tc) <= UINT32_MAX) {
                 const double inv = 1.0 / double(a);
                 VDBCLAY_UNROLL
-        for (int i = 0; i < N; ++i) {
+                for (int i = 0; i < N; ++i) {
                     if (!((under >> i) & 1u)) continue;
                     const uint64_t x = uint64_t(e) * uint64_t(tc - out[i]);
                     uint64_t q = uint64_t(double(x) * inv);
-                    if (q * uint64_t(a) > x) --q;
-                    else if ((q + 1) * uint64_t(a) <= x) ++q;
+                    if (q * uint64_t(a) > x)
+                        --q;
+                    else if ((q + 1) * uint64_t(a) <= x)
+                        ++q;
                     out[i] += int64_t(q);
                     given += int64_t(q);
                 }
             } else {
                 VDBCLAY_UNROLL
-        for (int i = 0; i < N; ++i) {
+                for (int i = 0; i < N; ++i) {
                     if (!((under >> i) & 1u)) continue;
                     const int64_t room = tc - out[i];
                     const int64_t share = divide(int64_t(uint64_t(e) * uint64_t(room)), a);
@@ -277,7 +282,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
 
     uint32_t changed = 0;
     VDBCLAY_UNROLL
-    for (int i = 0; i < N; ++i) changed |= uint32_t(out[i] != mass[i]) << i;
+    for (int i = 0; i < N; ++i)
+        changed |= uint32_t(out[i] != mass[i]) << i;
     return changed;
 }
 
@@ -285,7 +291,8 @@ __attribute__((always_inline)) inline uint32_t repartitionT(const CompiledRule& 
 inline uint32_t repartition(const CompiledRule& rule, int n, const int32_t* mass, uint32_t valid,
                             const BlockKey& key, int64_t* out)
 {
-    for (int i = 0; i < n; ++i) out[i] = mass[i]; // the result when nothing moves
+    for (int i = 0; i < n; ++i)
+        out[i] = mass[i]; // the result when nothing moves
     const KeyHash h{key};
     const bool n8 = n == 8;
     switch (rule.rule) {

@@ -51,10 +51,12 @@ struct Ctx {
         if (!obj.is_object()) fail(field, std::string("expected an object, got ") + obj.type_name());
         for (auto it = obj.begin(); it != obj.end(); ++it) {
             bool ok = false;
-            for (const char* a : allowed) ok |= (it.key() == a);
+            for (const char* a : allowed)
+                ok |= (it.key() == a);
             if (!ok) {
                 std::string list;
-                for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
+                for (const char* a : allowed)
+                    list += (list.empty() ? "" : ", ") + std::string(a);
                 fail(join(field, it.key()), "unknown field (expected one of: " + list + ")");
             }
         }
@@ -140,7 +142,8 @@ struct Ctx {
                             " numbers, got " + v.dump());
         }
         Vec3 r{{0, 0, 0}};
-        for (size_t i = 0; i < v.size(); ++i) r[i] = number(v[i], field + "[" + std::to_string(i) + "]");
+        for (size_t i = 0; i < v.size(); ++i)
+            r[i] = number(v[i], field + "[" + std::to_string(i) + "]");
         return r;
     }
     std::string path(const std::string& file) const
@@ -162,8 +165,10 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     text(obj, "name", field);
     text(obj, "comment", field);
     std::vector<const char*> extra;
-    if (forClay) extra = {"mass", "transform"};
-    else extra = {"path", "pivot", "transform"};
+    if (forClay)
+        extra = {"mass", "transform"};
+    else
+        extra = {"path", "pivot", "transform"};
     auto allowed = [&](std::initializer_list<const char*> geo) {
         std::vector<const char*> all{"shape", "name", "comment"};
         all.insert(all.end(), geo.begin(), geo.end());
@@ -172,8 +177,10 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
             if (std::find_if(all.begin(), all.end(), [&](const char* a) { return it.key() == a; }) ==
                 all.end()) {
                 std::string list;
-                for (const char* a : all) list += (list.empty() ? "" : ", ") + std::string(a);
-                fail(join(field, it.key()), "unknown field for a " + s.kind + " (expected one of: " + list + ")");
+                for (const char* a : all)
+                    list += (list.empty() ? "" : ", ") + std::string(a);
+                fail(join(field, it.key()),
+                     "unknown field for a " + s.kind + " (expected one of: " + list + ")");
             }
         }
     };
@@ -220,8 +227,8 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         const Vec3 hi = vec3(need(obj, field, "max"), join(field, "max"));
         for (int i = 0; i < 3; ++i) {
             if (lo[i] > hi[i]) {
-                fail(field, "min must not exceed max (axis " + std::to_string(i) + ": " +
-                                obj["min"].dump() + " > " + obj["max"].dump() + ")");
+                fail(field, "min must not exceed max (axis " + std::to_string(i) + ": " + obj["min"].dump() +
+                                " > " + obj["max"].dump() + ")");
             }
         }
         s.shape = wrap([&] { return makeBox(lo, hi); });
@@ -236,10 +243,14 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         if (const json* a = find(obj, "axis")) {
             if (a->is_string()) {
                 const std::string n = a->get<std::string>();
-                if (n == "x") axis = 0;
-                else if (n == "y") axis = 1;
-                else if (n == "z") axis = 2;
-                else fail(join(field, "axis"), "expected \"x\", \"y\", \"z\" or 0, 1, 2, got " + a->dump());
+                if (n == "x")
+                    axis = 0;
+                else if (n == "y")
+                    axis = 1;
+                else if (n == "z")
+                    axis = 2;
+                else
+                    fail(join(field, "axis"), "expected \"x\", \"y\", \"z\" or 0, 1, 2, got " + a->dump());
             } else {
                 axis = int(integer(*a, join(field, "axis"), 0, 2));
             }
@@ -273,8 +284,10 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         s.grid = "mass";
         if (const json* g = find(obj, "grid")) s.grid = string(*g, join(field, "grid"));
     } else {
-        fail(join(field, "shape"), "unknown shape \"" + s.kind + "\" (expected one of: sphere, box, "
-                                   "cylinder, capsule, levelset, mesh" + (forClay ? ", vdb" : "") + ")");
+        fail(join(field, "shape"), "unknown shape \"" + s.kind +
+                                       "\" (expected one of: sphere, box, "
+                                       "cylinder, capsule, levelset, mesh" +
+                                       (forClay ? ", vdb" : "") + ")");
     }
     if (place && s.kind != "mesh") s.shape = wrap([&] { return makePlaced(s.shape, *place); });
     return s;
@@ -308,7 +321,8 @@ void requireInPlane(const Ctx& cx, const ShapeSpec& s, const std::string& field)
 uint64_t ToolSpec::pathFrames() const
 {
     uint64_t n = 0;
-    for (const PathSegment& s : path) n += s.frames;
+    for (const PathSegment& s : path)
+        n += s.frames;
     return n;
 }
 
@@ -364,9 +378,10 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         const auto p = what.find("] ");
         throw Error(source + ": invalid JSON: " + (p == std::string::npos ? what : what.substr(p + 2)));
     }
-    cx.keys(root, "", {"dimensions", "voxel_size", "threshold", "rule", "alpha", "seed", "clay", "tools",
-                       "obstacles", "settle", "frames", "start", "outputs", "memory_budget", "description",
-                       "comment", "push", "transport", "sweep", "up"});
+    cx.keys(root, "",
+            {"dimensions",  "voxel_size", "threshold", "rule",      "alpha", "seed",    "clay",
+             "tools",       "obstacles",  "settle",    "frames",    "start", "outputs", "memory_budget",
+             "description", "comment",    "push",      "transport", "sweep", "up"});
     cx.text(root, "description", "");
     cx.text(root, "comment", "");
     Scene sc;
@@ -470,8 +485,10 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             ToolSpec t;
             t.shape = cx.shape(obj, f, false);
             const json* path = cx.find(obj, "path");
-            if (!path) cx.fail(f, "missing field \"path\" (a tool moves; shapes that never move are obstacles)");
-            if (!path->is_array()) cx.fail(f + ".path", std::string("expected an array, got ") + path->type_name());
+            if (!path)
+                cx.fail(f, "missing field \"path\" (a tool moves; shapes that never move are obstacles)");
+            if (!path->is_array())
+                cx.fail(f + ".path", std::string("expected an array, got ") + path->type_name());
             if (path->empty()) cx.fail(f + ".path", "empty path: give at least one segment");
             double moved[3] = {0, 0, 0}, turned[3] = {0, 0, 0};
             for (size_t k = 0; k < path->size(); ++k) {
@@ -481,7 +498,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                 PathSegment s;
                 if (const json* v = cx.find(seg, "translate")) s.translate = cx.vec3(*v, pf + ".translate");
                 if (const json* v = cx.find(seg, "rotate")) s.rotateDeg = cx.vec3(*v, pf + ".rotate");
-                if (const json* v = cx.find(seg, "frames")) s.frames = uint64_t(cx.integer(*v, pf + ".frames", 1, 1000000));
+                if (const json* v = cx.find(seg, "frames"))
+                    s.frames = uint64_t(cx.integer(*v, pf + ".frames", 1, 1000000));
                 if (sc.dimensions == 2 && s.translate[2] != 0) {
                     cx.fail(pf + ".translate[2]",
                             "a 2D scene's tools move in the z = 0 plane, got " + Ctx::num(s.translate[2]));
@@ -511,7 +529,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                     cx.coordinate(t.pivot[a], f + ".pivot[" + std::to_string(a) + "]", "a pivot");
             } else {
                 const Box b = t.shape.shape->bounds();
-                for (int a = 0; a < 3; ++a) t.pivot[a] = 0.5 * (double(b.min[a]) + double(b.max[a]));
+                for (int a = 0; a < 3; ++a)
+                    t.pivot[a] = 0.5 * (double(b.min[a]) + double(b.max[a]));
             }
             sc.tools.push_back(std::move(t));
         }
@@ -520,7 +539,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         for (size_t i = 0; i < arr->size(); ++i) {
             const std::string f = "obstacles[" + std::to_string(i) + "]";
             const json& obj = (*arr)[i];
-            if (obj.is_object() && obj.contains("path")) cx.fail(f + ".path", "obstacles never move; moving shapes are tools");
+            if (obj.is_object() && obj.contains("path"))
+                cx.fail(f + ".path", "obstacles never move; moving shapes are tools");
             ShapeSpec s = cx.shape(obj, f, false);
             if (sc.dimensions == 2) requireInPlane(cx, s, f);
             sc.obstacles.push_back(std::move(s));
@@ -528,11 +548,14 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     }
     if (const json* v = cx.find(root, "settle")) {
         cx.keys(*v, "settle", {"max_steps", "tolerance"});
-        if (const json* m = cx.find(*v, "max_steps")) sc.settle.maxSteps = uint64_t(cx.integer(*m, "settle.max_steps", 0, INT64_MAX));
-        if (const json* t = cx.find(*v, "tolerance")) sc.settle.tolerance = cx.integer(*t, "settle.tolerance", 0, INT64_MAX);
+        if (const json* m = cx.find(*v, "max_steps"))
+            sc.settle.maxSteps = uint64_t(cx.integer(*m, "settle.max_steps", 0, INT64_MAX));
+        if (const json* t = cx.find(*v, "tolerance"))
+            sc.settle.tolerance = cx.integer(*t, "settle.tolerance", 0, INT64_MAX);
     }
     uint64_t longest = 0;
-    for (const ToolSpec& t : sc.tools) longest = std::max(longest, t.pathFrames());
+    for (const ToolSpec& t : sc.tools)
+        longest = std::max(longest, t.pathFrames());
     sc.frames = std::max<uint64_t>(longest, 1);
     if (const json* v = cx.find(root, "frames")) sc.frames = uint64_t(cx.integer(*v, "frames", 1, 100000000));
     if (const json* v = cx.find(root, "start")) {
@@ -639,11 +662,16 @@ uint64_t parseByteSize(const std::string& text)
     if (!unit.empty() && unit.back() == 'b') unit.pop_back();
     if (!unit.empty() && unit.back() == 'i') unit.pop_back();
     double scale = 1;
-    if (unit == "k") scale = 1024.0;
-    else if (unit == "m") scale = 1024.0 * 1024;
-    else if (unit == "g") scale = 1024.0 * 1024 * 1024;
-    else if (unit == "t") scale = 1024.0 * 1024 * 1024 * 1024;
-    else if (!unit.empty()) throw bad("unknown unit \"" + t.substr(used) + "\"");
+    if (unit == "k")
+        scale = 1024.0;
+    else if (unit == "m")
+        scale = 1024.0 * 1024;
+    else if (unit == "g")
+        scale = 1024.0 * 1024 * 1024;
+    else if (unit == "t")
+        scale = 1024.0 * 1024 * 1024 * 1024;
+    else if (!unit.empty())
+        throw bad("unknown unit \"" + t.substr(used) + "\"");
     const double bytes = std::floor(value * scale);
     if (!std::isfinite(bytes) || bytes < 1) throw bad("it must be at least one byte");
     if (bytes >= 9.2e18) throw bad("too large");
@@ -660,11 +688,16 @@ std::string formatBytes(uint64_t bytes)
         ++u;
     }
     char buf[32];
-    if (u == 0) std::snprintf(buf, sizeof buf, "%llu B", (unsigned long long)bytes);
-    else std::snprintf(buf, sizeof buf, "%.*f %s", v < 10 ? 2 : (v < 100 ? 1 : 0), v, units[u]);
+    if (u == 0)
+        std::snprintf(buf, sizeof buf, "%llu B", (unsigned long long)bytes);
+    else
+        std::snprintf(buf, sizeof buf, "%.*f %s", v < 10 ? 2 : (v < 100 ? 1 : 0), v, units[u]);
     return buf;
 }
 
-Scene defaultScene() { return parseScene(defaultSceneJson(), "<built-in scene>", ""); }
+Scene defaultScene()
+{
+    return parseScene(defaultSceneJson(), "<built-in scene>", "");
+}
 
 } // namespace vdbclay

@@ -37,7 +37,8 @@ void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::
         const int64_t sum = int64_t(acc.getValue(it.getCoord())) + int64_t(*it);
         if (sum > INT32_MAX) {
             throw Error(field + ": overlapping clay at voxel " + coordStr(it.getCoord()) + " adds up to " +
-                        std::to_string(sum) + ", more than a voxel holds (" + std::to_string(INT32_MAX) + ")");
+                        std::to_string(sum) + ", more than a voxel holds (" + std::to_string(INT32_MAX) +
+                        ")");
         }
         acc.setValue(it.getCoord(), int32_t(sum));
     }
@@ -47,7 +48,8 @@ void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::
 void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
 {
     auto acc = mask.getAccessor();
-    forEachVoxelInside(shape, dims, [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z)); });
+    forEachVoxelInside(shape, dims,
+                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z)); });
 }
 
 /// A start file written in the middle of a frame continues that frame: only the scene that wrote it
@@ -60,10 +62,13 @@ void checkResumable(const Scene& scene, const ClayMeta& m)
         throw Error(where + "with " + what + " " + file + ", but the scene has " + here +
                     "; a frame can only be finished by the scene that began it");
     };
-    if (m.dimensions != scene.dimensions) differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
+    if (m.dimensions != scene.dimensions)
+        differs("dimensions", std::to_string(m.dimensions), std::to_string(scene.dimensions));
     if (m.rule.rule != scene.rule.rule) differs("rule", ruleName(m.rule.rule), ruleName(scene.rule.rule));
-    if (m.rule.threshold != scene.rule.threshold) differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
-    if (m.rule.rule == Rule::Arata && m.rule.alpha != scene.rule.alpha) differs("alpha", std::to_string(m.rule.alpha), std::to_string(scene.rule.alpha));
+    if (m.rule.threshold != scene.rule.threshold)
+        differs("Tc", std::to_string(m.rule.threshold), std::to_string(scene.rule.threshold));
+    if (m.rule.rule == Rule::Arata && m.rule.alpha != scene.rule.alpha)
+        differs("alpha", std::to_string(m.rule.alpha), std::to_string(scene.rule.alpha));
     if (m.seed != scene.seed) differs("seed", std::to_string(m.seed), std::to_string(scene.seed));
     if (m.frames >= scene.frames) {
         throw Error(where + "but the scene has only " + std::to_string(scene.frames) + " frames");
@@ -81,8 +86,7 @@ using MaskTreeT = openvdb::MaskTree;
 using FloatTreeT = openvdb::FloatTree;
 
 /// Bytes of one leaf of tree type T: the node, and for value trees its separately allocated buffer.
-template<typename TreeT>
-constexpr uint64_t leafBytes()
+template <typename TreeT> constexpr uint64_t leafBytes()
 {
     using Leaf = typename TreeT::LeafNodeType;
     using V = typename TreeT::ValueType;
@@ -91,13 +95,11 @@ constexpr uint64_t leafBytes()
 }
 /// The two internal levels (16^3 children of 8^3 leaves: 128^3 voxels; 32^3 of those: 4096^3) and
 /// the root's map entry for each upper node.
-template<typename TreeT>
-constexpr uint64_t lowerNodeBytes()
+template <typename TreeT> constexpr uint64_t lowerNodeBytes()
 {
     return sizeof(typename TreeT::RootNodeType::ChildNodeType::ChildNodeType) + kMallocOverhead;
 }
-template<typename TreeT>
-constexpr uint64_t upperNodeBytes()
+template <typename TreeT> constexpr uint64_t upperNodeBytes()
 {
     return sizeof(typename TreeT::RootNodeType::ChildNodeType) + kMallocOverhead + 64;
 }
@@ -118,21 +120,26 @@ constexpr double kReachPerContact = 1.0;
 
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88;
 
-int64_t leafIndex(int32_t v, int log2) { return int64_t(v) >> log2; } // floor division
+int64_t leafIndex(int32_t v, int log2)
+{
+    return int64_t(v) >> log2;
+} // floor division
 
 /// Number of nodes of side 2^log2 voxels that @a b touches (2D boxes are clipped to z = 0 first).
 uint64_t nodesIn(const Box& b, int log2)
 {
     if (b.empty()) return 0;
     uint64_t n = 1;
-    for (int a = 0; a < 3; ++a) n *= uint64_t(leafIndex(b.max[a], log2) - leafIndex(b.min[a], log2) + 1);
+    for (int a = 0; a < 3; ++a)
+        n *= uint64_t(leafIndex(b.max[a], log2) - leafIndex(b.min[a], log2) + 1);
     return n;
 }
 uint64_t voxelsIn(const Box& b)
 {
     if (b.empty()) return 0;
     uint64_t n = 1;
-    for (int a = 0; a < 3; ++a) n *= uint64_t(int64_t(b.max[a]) - int64_t(b.min[a]) + 1);
+    for (int a = 0; a < 3; ++a)
+        n *= uint64_t(int64_t(b.max[a]) - int64_t(b.min[a]) + 1);
     return n;
 }
 Box clip2D(Box b, int dims)
@@ -171,11 +178,15 @@ Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
         for (int side = 0; side < 2; ++side) {
             for (int k = 0; k < 4 && b.min[a] < b.max[a]; ++k) {
                 Box face = b;
-                if (side == 0) face.max[a] = b.min[a];
-                else face.min[a] = b.max[a];
+                if (side == 0)
+                    face.max[a] = b.min[a];
+                else
+                    face.min[a] = b.max[a];
                 if (voxelsIn(face) > budget || anyInside(face)) break;
-                if (side == 0) ++b.min[a];
-                else --b.max[a];
+                if (side == 0)
+                    ++b.min[a];
+                else
+                    --b.max[a];
             }
         }
     }
@@ -185,7 +196,10 @@ Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
 /// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
 constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
 
-bool touches(const Box& a, const Box& b) { return !intersect(a, b).empty(); }
+bool touches(const Box& a, const Box& b)
+{
+    return !intersect(a, b).empty();
+}
 
 /// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
 /// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
@@ -277,7 +291,9 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
         // all, measure the grid it read.
         const ClayFile f = readClayFile(path, gridName);
         const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
-        if (!bb.empty()) out.bounds = Box{{{bb.min().x(), bb.min().y(), bb.min().z()}}, {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        if (!bb.empty())
+            out.bounds = Box{{{bb.min().x(), bb.min().y(), bb.min().z()}},
+                             {{bb.max().x(), bb.max().y(), bb.max().z()}}};
         out.voxels = f.mass->activeVoxelCount();
         out.memBytes = f.mass->memUsage();
         return out;
@@ -287,7 +303,8 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
     const auto n = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_VOXEL_COUNT);
     const auto mem = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES);
     if (lo && hi) {
-        out.bounds = Box{{{lo->value()[0], lo->value()[1], lo->value()[2]}}, {{hi->value()[0], hi->value()[1], hi->value()[2]}}};
+        out.bounds = Box{{{lo->value()[0], lo->value()[1], lo->value()[2]}},
+                         {{hi->value()[0], hi->value()[1], hi->value()[2]}}};
     }
     if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
     if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
@@ -295,7 +312,9 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
         // A file without statistics: read it (the estimate must not be a guess).
         const ClayFile f = readClayFile(path, gridName);
         const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
-        out.bounds = bb.empty() ? Box() : Box{{{bb.min().x(), bb.min().y(), bb.min().z()}}, {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        out.bounds = bb.empty() ? Box()
+                                : Box{{{bb.min().x(), bb.min().y(), bb.min().z()}},
+                                      {{bb.max().x(), bb.max().y(), bb.max().z()}}};
         out.voxels = f.mass->activeVoxelCount();
         out.memBytes = f.mass->memUsage();
     }
@@ -306,9 +325,11 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
 std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
 {
     std::vector<size_t> parent(boxes.size());
-    for (size_t i = 0; i < parent.size(); ++i) parent[i] = i;
+    for (size_t i = 0; i < parent.size(); ++i)
+        parent[i] = i;
     auto root = [&](size_t i) {
-        while (parent[i] != i) i = parent[i] = parent[parent[i]];
+        while (parent[i] != i)
+            i = parent[i] = parent[parent[i]];
         return i;
     };
     // Pairwise: beyond 4000 boxes (16 million pairs) they are taken as one group.
@@ -316,9 +337,11 @@ std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
         for (size_t j = i + 1; j < boxes.size(); ++j)
             if (boxes.size() > 4000 || touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
     std::vector<std::vector<size_t>> groups(boxes.size());
-    for (size_t i = 0; i < boxes.size(); ++i) groups[root(i)].push_back(i);
-    groups.erase(std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
-                 groups.end());
+    for (size_t i = 0; i < boxes.size(); ++i)
+        groups[root(i)].push_back(i);
+    groups.erase(
+        std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
+        groups.end());
     return groups;
 }
 
@@ -384,7 +407,8 @@ std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, 
         most = std::max(most, voxelsIn(b));
     };
     const uint64_t stride = std::max<uint64_t>(1, end / 100000);
-    for (uint64_t f = 0; f <= end; f += stride) at(f);
+    for (uint64_t f = 0; f <= end; f += stride)
+        at(f);
     if (stride > 1) {
         uint64_t f = 0;
         for (const PathSegment& seg : tool.path) {
@@ -459,7 +483,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             clayBoxes.push_back(b);
             areas.push_back({b, true, c.mass > scene.rule.threshold});
             const double m = double(c.mass) * double(voxelsIn(b));
-            if (massBound != UINT64_MAX) massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
+            if (massBound != UINT64_MAX)
+                massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
             const double settled =
                 c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
@@ -516,7 +541,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             continue;
         }
         std::vector<Box> members;
-        for (size_t i : g) members.push_back(boxes[i]);
+        for (size_t i : g)
+            members.push_back(boxes[i]);
         grown += unionLeaves(members);
         grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
     }
@@ -572,7 +598,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
     // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
     // (~88 bytes). The full cells are at most the clay's leaves' voxels.
-    if (scene.transport == Transport::Global) e.transportBytes = e.clayLeavesGrown * 512 * kTransportBytesPerCell;
+    if (scene.transport == Transport::Global)
+        e.transportBytes = e.clayLeavesGrown * 512 * kTransportBytesPerCell;
     // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
     // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
     // over a band around the surface): counted as three float grids on the clay's leaves, plus
@@ -679,11 +706,11 @@ void checkMemoryBudget(const Scene& scene)
     const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget();
     const MemoryEstimate e = estimateSceneMemory(scene);
     if (e.total() <= budget) return;
-    throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " + formatBytes(budget) +
+    throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " +
+                formatBytes(budget) +
                 (scene.memoryBudget ? "" : " (the default: 3/4 of this machine's memory)") +
                 "; shrink the scene or raise the budget (\"memory_budget\" in the scene, --memory-budget)");
 }
-
 
 struct Sculptor::Impl {
     Scene scene;
@@ -702,7 +729,8 @@ struct Sculptor::Impl {
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
         std::vector<ShapePtr> tools;
-        for (const ToolSpec& t : scene.tools) tools.push_back(makeTransformed(t.shape.shape, t.poseAt(f)));
+        for (const ToolSpec& t : scene.tools)
+            tools.push_back(makeTransformed(t.shape.shape, t.poseAt(f)));
         return tools;
     }
 
@@ -712,7 +740,8 @@ struct Sculptor::Impl {
     Box regionOf(const std::vector<ShapePtr>& tools) const
     {
         Box region;
-        for (const ShapePtr& t : tools) region = unite(region, t->bounds());
+        for (const ShapePtr& t : tools)
+            region = unite(region, t->bounds());
         if (scene.dimensions == 2) {
             region.min[2] = std::max(region.min[2], 0);
             region.max[2] = std::min(region.max[2], 0);
@@ -793,8 +822,9 @@ struct Sculptor::Impl {
                                   double(corner & 2 ? bb.max[1] : bb.min[1]),
                                   double(corner & 4 ? bb.max[2] : bb.min[2])}};
                     const Vec3 pa = a.apply(p), pb = b.apply(p);
-                    const double d = std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
-                                               (pa[2] - pb[2]) * (pa[2] - pb[2]));
+                    const double d =
+                        std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
+                                  (pa[2] - pb[2]) * (pa[2] - pb[2]));
                     most = std::max(most, d);
                 }
             }
@@ -876,15 +906,17 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     if (!scene.start.empty()) {
         ClayFile f = readClayFile(scene.start);
         if (f.hasMeta && f.meta.dimensions != scene.dimensions) {
-            throw Error(scene.source + ": start: " + scene.start + " holds " + std::to_string(f.meta.dimensions) +
-                        "D clay but the scene is " + std::to_string(scene.dimensions) + "D");
+            throw Error(scene.source + ": start: " + scene.start + " holds " +
+                        std::to_string(f.meta.dimensions) + "D clay but the scene is " +
+                        std::to_string(scene.dimensions) + "D");
         }
         if (f.hasMeta && f.meta.rule.threshold != scene.rule.threshold) {
             // Clay at rest holds up to Tc per voxel: continuing under another Tc would silently
             // reshape it (a Tc = 250 file under Tc = 1000 reads as a quarter-full fog).
             throw Error(scene.source + ": start: " + scene.start + " was made with Tc " +
                         std::to_string(f.meta.rule.threshold) + " but the scene has Tc " +
-                        std::to_string(scene.rule.threshold) + " (1000 when it sets none); set \"threshold\": " +
+                        std::to_string(scene.rule.threshold) +
+                        " (1000 when it sets none); set \"threshold\": " +
                         std::to_string(f.meta.rule.threshold) + " in the scene to continue it");
         }
         if (f.meta.frameSteps > 0) checkResumable(scene, f.meta);
@@ -922,7 +954,8 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
 
     im.obstacles = openvdb::MaskGrid::create(false);
     im.obstacles->setName("obstacles");
-    for (const ShapeSpec& o : scene.obstacles) rasterize(*im.obstacles, *o.shape, scene.dimensions);
+    for (const ShapeSpec& o : scene.obstacles)
+        rasterize(*im.obstacles, *o.shape, scene.dimensions);
     if (!scene.obstacles.empty()) {
         auto oacc = im.obstacles->getConstAccessor();
         for (auto it = im.mass->tree().cbeginValueOn(); it; ++it) {
@@ -949,23 +982,54 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
 
 Sculptor::~Sculptor() = default;
 
-bool Sculptor::done() const { return mImpl->frame >= mImpl->scene.frames; }
-uint64_t Sculptor::frame() const { return mImpl->frame; }
-bool Sculptor::frameOpen() const { return mImpl->open; }
-uint64_t Sculptor::totalFrames() const { return mImpl->scene.frames; }
-const Scene& Sculptor::scene() const { return mImpl->scene; }
-Automaton& Sculptor::automaton() { return *mImpl->automaton; }
-const MassGridPtr& Sculptor::mass() const { return mImpl->mass; }
-void Sculptor::setStopRequest(std::function<bool()> poll) { mImpl->stopPoll = std::move(poll); }
-bool Sculptor::stopped() const { return mImpl->stopped; }
-const ClayMeta& Sculptor::startMeta() const { return mImpl->startMeta; }
+bool Sculptor::done() const
+{
+    return mImpl->frame >= mImpl->scene.frames;
+}
+uint64_t Sculptor::frame() const
+{
+    return mImpl->frame;
+}
+bool Sculptor::frameOpen() const
+{
+    return mImpl->open;
+}
+uint64_t Sculptor::totalFrames() const
+{
+    return mImpl->scene.frames;
+}
+const Scene& Sculptor::scene() const
+{
+    return mImpl->scene;
+}
+Automaton& Sculptor::automaton()
+{
+    return *mImpl->automaton;
+}
+const MassGridPtr& Sculptor::mass() const
+{
+    return mImpl->mass;
+}
+void Sculptor::setStopRequest(std::function<bool()> poll)
+{
+    mImpl->stopPoll = std::move(poll);
+}
+bool Sculptor::stopped() const
+{
+    return mImpl->stopped;
+}
+const ClayMeta& Sculptor::startMeta() const
+{
+    return mImpl->startMeta;
+}
 
 ClayMeta Sculptor::checkpointMeta() const
 {
     const Impl& im = *mImpl;
     if (im.open && im.openSteps == 0) {
         // Only an exception between a frame's push and its first step leaves this state.
-        throw Error("frame " + std::to_string(im.frame + 1) + " was pushed but not settled; it cannot be saved");
+        throw Error("frame " + std::to_string(im.frame + 1) +
+                    " was pushed but not settled; it cannot be saved");
     }
     ClayMeta m;
     m.dimensions = im.scene.dimensions;
@@ -982,7 +1046,8 @@ ClayMeta Sculptor::checkpointMeta() const
 FrameReport Sculptor::runFrame()
 {
     Impl& im = *mImpl;
-    if (done()) throw Error("the scene has no frame left to run (" + std::to_string(im.scene.frames) + " run)");
+    if (done())
+        throw Error("the scene has no frame left to run (" + std::to_string(im.scene.frames) + " run)");
     im.stopped = false;
     FrameReport rep;
     rep.frame = im.frame + 1;
@@ -995,7 +1060,9 @@ FrameReport Sculptor::runFrame()
             go.threads = im.automaton->options().threads;
             // The plastic zone: a few contact sizes around the over cells; the whole body when no
             // tool touched clay this frame.
-            go.reach = rep.push.contactSize > 0 ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2 : 0;
+            go.reach = rep.push.contactSize > 0
+                           ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2
+                           : 0;
             rep.transport = transportGlobally(*im.automaton, go);
         }
         im.open = true;
@@ -1036,7 +1103,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.blocksOverTc += r.settle.blocksOverTc;
         s.blocksUpdated += r.settle.blocksUpdated;
         if (!resumedOpen) s.massTrapped = r.push.massTrapped; // clay inside tools now (retried every frame)
-        if (r.finished && (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom))
+        if (r.finished &&
+            (r.settle.reason == StopReason::StepBudget || r.settle.reason == StopReason::NoRoom))
             ++s.framesUnsettled;
         if (r.finished && r.settle.reason == StopReason::NoRoom) ++s.framesNoRoom;
         s.stages += r.settle.seconds;
@@ -1051,7 +1119,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     s.massFinal = totalMass(*im.mass);
     s.massDrift = s.massFinal - s.massInitial;
-    s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions);
+    s.metrics =
+        measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions);
     s.residualOverload = im.automaton->residualOverload();
     s.settled = im.automaton->settled();
     return s;

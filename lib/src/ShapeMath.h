@@ -12,7 +12,6 @@
 namespace vdbclay {
 namespace shapes_internal {
 
-
 /// Coordinates of shape bounds must stay well inside int32 (callers add search margins).
 inline constexpr double kMaxCoord = 1 << 30;
 

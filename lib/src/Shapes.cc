@@ -203,14 +203,16 @@ public:
     double distance(const Vec3& p) const override
     {
         Vec3 q;
-        for (int i = 0; i < 3; ++i) q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
+        for (int i = 0; i < 3; ++i)
+            q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
         return mInner->distance(q) * mMin;
     }
     Vec3 normal(const Vec3& p) const override
     {
         // The inner normal through the inverse transpose of the scale, renormalised.
         Vec3 q;
-        for (int i = 0; i < 3; ++i) q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
+        for (int i = 0; i < 3; ++i)
+            q[i] = (p[i] - mPivot[i]) / mScale[i] + mPivot[i];
         const Vec3 n = mInner->normal(q);
         Vec3 m{{n[0] / mScale[0], n[1] / mScale[1], n[2] / mScale[2]}};
         const double l = length(m);
@@ -282,7 +284,10 @@ UpAxis parseUpAxis(const std::string& text)
     throw Error("unknown up axis \"" + text + "\" (expected \"y\" or \"z\")");
 }
 
-const char* upAxisName(UpAxis up) { return up == UpAxis::Z ? "z" : "y"; }
+const char* upAxisName(UpAxis up)
+{
+    return up == UpAxis::Z ? "z" : "y";
+}
 
 Vec3 worldToIndex(const Vec3& w, double voxelSize, UpAxis up)
 {
@@ -340,7 +345,8 @@ ShapePtr makeCapsule(const Vec3& a, const Vec3& b, double radius)
 Vec3 Placement::apply(const Vec3& p) const
 {
     Vec3 q;
-    for (int i = 0; i < 3; ++i) q[i] = (p[i] - pivot[i]) * scale[i] + pivot[i];
+    for (int i = 0; i < 3; ++i)
+        q[i] = (p[i] - pivot[i]) * scale[i] + pivot[i];
     Pose pose;
     pose.translation = translate;
     pose.rotationDeg = rotateDeg;

@@ -29,10 +29,9 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::stri
     }
     // Only trees the check walked are read (a float level set always is).
     for (const auto& g : layout) {
-        if (!gridName.empty() && g.baseName() == gridName &&
-            g.type != "Tree_float_5_4_3") {
-            throw Error(path + ": grid \"" + gridName + "\" is not a FloatGrid level set (type " +
-                        g.type + ")");
+        if (!gridName.empty() && g.baseName() == gridName && g.type != "Tree_float_5_4_3") {
+            throw Error(path + ": grid \"" + gridName + "\" is not a FloatGrid level set (type " + g.type +
+                        ")");
         }
     }
     openvdb::FloatGrid::Ptr grid;

@@ -276,20 +276,24 @@ double windingNumber(const Mesh& m, const openvdb::Vec3d& p)
 /// with non-manifold edges): distances from @a band (the unsigned narrow band, clamped to its
 /// width), signs from the generalized winding number (|w| > 0.5 is inside), at every grid point of
 /// the mesh's bounds. O(points x triangles), computed once, in parallel.
-openvdb::FloatGrid::Ptr windingLevelSet(const Mesh& m, const openvdb::FloatGrid& band, const std::string& path,
-                                        bool& anyInside)
+openvdb::FloatGrid::Ptr windingLevelSet(const Mesh& m, const openvdb::FloatGrid& band,
+                                        const std::string& path, bool& anyInside)
 {
     openvdb::CoordBBox bb;
     for (const auto& p : m.points) {
-        bb.expand(openvdb::Coord(int32_t(std::floor(p[0])), int32_t(std::floor(p[1])), int32_t(std::floor(p[2]))));
-        bb.expand(openvdb::Coord(int32_t(std::ceil(p[0])), int32_t(std::ceil(p[1])), int32_t(std::ceil(p[2]))));
+        bb.expand(
+            openvdb::Coord(int32_t(std::floor(p[0])), int32_t(std::floor(p[1])), int32_t(std::floor(p[2]))));
+        bb.expand(
+            openvdb::Coord(int32_t(std::ceil(p[0])), int32_t(std::ceil(p[1])), int32_t(std::ceil(p[2]))));
     }
     bb.expand(2);
     const openvdb::Coord dim = bb.dim();
     const uint64_t n = uint64_t(dim.x()) * uint64_t(dim.y()) * uint64_t(dim.z());
     if (n * m.triangles.size() > (uint64_t(1) << 36)) {
-        throw Error(path + ": the mesh is open or non-manifold, and deciding its inside by winding numbers "
-                           "would take " + std::to_string(n) + " points x " + std::to_string(m.triangles.size()) +
+        throw Error(path +
+                    ": the mesh is open or non-manifold, and deciding its inside by winding numbers "
+                    "would take " +
+                    std::to_string(n) + " points x " + std::to_string(m.triangles.size()) +
                     " triangles; close it first, or use a larger voxel size");
     }
     const float width = band.background();
@@ -399,11 +403,13 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         } catch (const std::exception& e) {
             throw Error(path + ": cannot fill the mesh: " + e.what());
         }
-        how = open ? " (open: " + std::to_string(open) + " open edges, closed by the generalized winding number)"
+        how = open ? " (open: " + std::to_string(open) +
+                         " open edges, closed by the generalized winding number)"
                    : " (closed, " + std::to_string(nonManifold) +
                          " non-manifold edges: inside by the generalized winding number)";
         if (!anyInside) {
-            throw Error(path + ": the mesh" + how + " encloses no volume (winding number at most 0.5 everywhere)");
+            throw Error(path + ": the mesh" + how +
+                        " encloses no volume (winding number at most 0.5 everywhere)");
         }
     }
     grid->setName(std::filesystem::path(path).filename().string());

@@ -40,7 +40,7 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
     // leaf is written by one task only, and no topology changes in the pass.
     auto tree = std::make_shared<openvdb::FloatTree>(mass.tree(), 0.f, openvdb::TopologyCopy());
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(*tree);
-    leaves.foreach([&mass, tc](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+    leaves.foreach ([&mass, tc](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
         const MassGrid::TreeType::LeafNodeType* in = mass.tree().probeConstLeaf(leaf.origin());
         for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
             const int32_t m = in->getValue(i);
@@ -75,7 +75,8 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
     constexpr int kHalfWidth = 3; // voxels on each side of the surface
     const float background = float(kHalfWidth * density.voxelSize()[0]);
     bool anyInside = false;
-    for (auto it = density.tree().cbeginValueOn(); it && !anyInside; ++it) anyInside = *it > isovalue;
+    for (auto it = density.tree().cbeginValueOn(); it && !anyInside; ++it)
+        anyInside = *it > isovalue;
     openvdb::FloatGrid::Ptr surface;
     if (!anyInside) {
         surface = openvdb::FloatGrid::create(background);
@@ -91,7 +92,7 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         surface = openvdb::tools::fogToSdf(*fog, float(isovalue));
         // A narrow band: values beyond the half width become inactive, signed background values.
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(surface->tree());
-        leaves.foreach([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+        leaves.foreach ([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
             for (auto v = leaf.beginValueOn(); v; ++v) {
                 if (*v >= background) {
                     v.setValueOff();
@@ -114,13 +115,15 @@ SurfaceMesh surfaceMesh(const openvdb::FloatGrid& density, double isovalue)
 {
     SurfaceMesh mesh;
     // Mesh in index space: a unit transform copy sharing the tree.
-    openvdb::FloatGrid::ConstPtr indexGrid =
-        density.copyReplacingMetadataAndTransform(density, openvdb::math::Transform::createLinearTransform(1.0));
+    openvdb::FloatGrid::ConstPtr indexGrid = density.copyReplacingMetadataAndTransform(
+        density, openvdb::math::Transform::createLinearTransform(1.0));
     openvdb::tools::volumeToMesh(*indexGrid, mesh.points, mesh.triangles, mesh.quads, isovalue);
     // volumeToMesh winds fog-volume faces inwards (measured: the signed volume of the mesh of a
     // ball of full cells is negative); reverse them so normals point out of the clay.
-    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
-    for (auto& q : mesh.quads) std::swap(q[1], q[3]);
+    for (auto& t : mesh.triangles)
+        std::swap(t[1], t[2]);
+    for (auto& q : mesh.quads)
+        std::swap(q[1], q[3]);
     return mesh;
 }
 

@@ -284,7 +284,8 @@ private:
             if (mKind[i] == kUnknown) mRowCell.push_back(int32_t(i));
         std::sort(mRowCell.begin(), mRowCell.end(),
                   [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; });
-        for (size_t k = 0; k < mRowCell.size(); ++k) mRow[size_t(mRowCell[k])] = int32_t(k);
+        for (size_t k = 0; k < mRowCell.size(); ++k)
+            mRow[size_t(mRowCell[k])] = int32_t(k);
         const size_t n = mRowCell.size();
         rep.unknowns = n;
         ++rep.solves;

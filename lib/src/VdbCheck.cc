@@ -19,9 +19,9 @@ namespace io_internal {
 
 namespace {
 
-constexpr int64_t kMagic = 0x56444220;      // OPENVDB_MAGIC
-constexpr uint32_t kOldestFormat = 222;     // node-mask compression, per-grid compression flags
-constexpr uint32_t kNewestFormat = 224;     // OpenVDB 10
+constexpr int64_t kMagic = 0x56444220;  // OPENVDB_MAGIC
+constexpr uint32_t kOldestFormat = 222; // node-mask compression, per-grid compression flags
+constexpr uint32_t kNewestFormat = 224; // OpenVDB 10
 constexpr uint32_t kZip = 0x1, kActiveMask = 0x2, kBlosc = 0x4;
 constexpr const char* kHalfSuffix = "_HalfFloat";
 
@@ -50,8 +50,8 @@ public:
     void need(uint64_t n, const std::string& what) const
     {
         if (n > left()) {
-            fail(what + " needs " + std::to_string(n) + " bytes but the file ends " +
-                 std::to_string(left()) + " bytes later");
+            fail(what + " needs " + std::to_string(n) + " bytes but the file ends " + std::to_string(left()) +
+                 " bytes later");
         }
     }
 
@@ -63,8 +63,7 @@ public:
         mPos += n;
     }
 
-    template<typename T>
-    T get(const std::string& what)
+    template <typename T> T get(const std::string& what)
     {
         T v{};
         read(&v, sizeof v, what);
@@ -105,7 +104,8 @@ private:
 std::string printable(const std::string& s)
 {
     std::string out;
-    for (char c : s.substr(0, 40)) out += (c >= 32 && c < 127) ? c : '?';
+    for (char c : s.substr(0, 40))
+        out += (c >= 32 && c < 127) ? c : '?';
     if (s.size() > 40) out += "...";
     return "\"" + out + "\"";
 }
@@ -114,10 +114,9 @@ std::string printable(const std::string& s)
 uint32_t fixedMetaSize(const std::string& type)
 {
     static const std::map<std::string, uint32_t> sizes{
-        {"bool", 1},   {"int32", 4},  {"int64", 8},  {"float", 4},  {"double", 8},
-        {"vec2i", 8},  {"vec2s", 8},  {"vec2d", 16}, {"vec3i", 12}, {"vec3s", 12},
-        {"vec3d", 24}, {"vec4i", 16}, {"vec4s", 16}, {"vec4d", 32}, {"mat4s", 64},
-        {"mat4d", 128}};
+        {"bool", 1},   {"int32", 4},  {"int64", 8},  {"float", 4},  {"double", 8}, {"vec2i", 8},
+        {"vec2s", 8},  {"vec2d", 16}, {"vec3i", 12}, {"vec3s", 12}, {"vec3d", 24}, {"vec4i", 16},
+        {"vec4s", 16}, {"vec4d", 32}, {"mat4s", 64}, {"mat4d", 128}};
     const auto it = sizes.find(type);
     return it == sizes.end() ? 0 : it->second;
 }
@@ -153,9 +152,8 @@ struct ValueLayout {
 bool valueLayout(const std::string& type, ValueLayout& out)
 {
     static const std::map<std::string, ValueLayout> known{
-        {"Tree_int32_5_4_3", {4, 0}},  {"Tree_int64_5_4_3", {8, 0}},
-        {"Tree_float_5_4_3", {4, 2}},  {"Tree_double_5_4_3", {8, 2}},
-        {"Tree_vec3i_5_4_3", {12, 0}}, {"Tree_vec3s_5_4_3", {12, 6}},
+        {"Tree_int32_5_4_3", {4, 0}},  {"Tree_int64_5_4_3", {8, 0}},  {"Tree_float_5_4_3", {4, 2}},
+        {"Tree_double_5_4_3", {8, 2}}, {"Tree_vec3i_5_4_3", {12, 0}}, {"Tree_vec3s_5_4_3", {12, 6}},
         {"Tree_vec3d_5_4_3", {24, 6}}};
     const auto it = known.find(type);
     if (it == known.end()) return false;
@@ -177,7 +175,8 @@ public:
             mIn.fail("a grid count of " + std::to_string(count) + " does not fit the file");
         }
         std::vector<VdbGridLayout> grids;
-        for (int32_t i = 0; i < count; ++i) grids.push_back(grid(i + 1));
+        for (int32_t i = 0; i < count; ++i)
+            grids.push_back(grid(i + 1));
         return grids;
     }
 
@@ -325,11 +324,13 @@ private:
 
     void transform(const std::string& what, bool nested)
     {
-        static const std::map<std::string, uint32_t> mapSizes{
-            {"AffineMap", 128},         {"UnitaryMap", 128},
-            {"ScaleMap", 120},          {"UniformScaleMap", 120},
-            {"TranslationMap", 24},     {"ScaleTranslateMap", 144},
-            {"UniformScaleTranslateMap", 144}};
+        static const std::map<std::string, uint32_t> mapSizes{{"AffineMap", 128},
+                                                              {"UnitaryMap", 128},
+                                                              {"ScaleMap", 120},
+                                                              {"UniformScaleMap", 120},
+                                                              {"TranslationMap", 24},
+                                                              {"ScaleTranslateMap", 144},
+                                                              {"UniformScaleTranslateMap", 144}};
         const std::string type = mIn.string(what + "'s type");
         const auto it = mapSizes.find(type);
         if (it != mapSizes.end()) {
@@ -370,7 +371,8 @@ private:
             const std::string what = grid + "'s root tile " + std::to_string(i + 1);
             key(what);
             mIn.skip(mValue.size, what);
-            if (mIn.get<unsigned char>(what + "'s active flag") > 1) mIn.fail(what + "'s active flag is not 0 or 1");
+            if (mIn.get<unsigned char>(what + "'s active flag") > 1)
+                mIn.fail(what + "'s active flag is not 0 or 1");
         }
         std::tuple<int32_t, int32_t, int32_t> previous;
         for (uint32_t i = 0; i < children; ++i) {
@@ -422,7 +424,8 @@ private:
     static uint32_t popcount(const std::vector<uint64_t>& words)
     {
         uint32_t n = 0;
-        for (uint64_t w : words) n += uint32_t(std::bitset<64>(w).count());
+        for (uint64_t w : words)
+            n += uint32_t(std::bitset<64>(w).count());
         return n;
     }
 
@@ -472,7 +475,7 @@ private:
     uint32_t mCompression = 0;
     ValueLayout mValue;
     bool mHalf = false;
-    std::vector<uint32_t> mLeafActive; ///< active voxels of each leaf, in file order
+    std::vector<uint32_t> mLeafActive;         ///< active voxels of each leaf, in file order
     uint64_t mLowerNodes = 0, mUpperNodes = 0; ///< internal nodes of the tree being walked
 };
 

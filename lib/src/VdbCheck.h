@@ -19,7 +19,7 @@ namespace io_internal {
 /// One grid of a checked file.
 struct VdbGridLayout {
     std::string name;
-    std::string type;     ///< OpenVDB's tree type name, e.g. "Tree_int32_5_4_3"
+    std::string type;         ///< OpenVDB's tree type name, e.g. "Tree_int32_5_4_3"
     bool treeChecked = false; ///< its tree was walked (a value type checkVdbLayout knows)
     /// When treeChecked: the nodes its topology really holds (not what its metadata claims).
     uint64_t leaves = 0, lowerNodes = 0, upperNodes = 0;

@@ -12,8 +12,7 @@ namespace vdbclay::fuzz {
 /// Runs @a body; returns normally if it succeeds or refuses the input with a vdbclay::Error that
 /// says something. Aborts (libFuzzer then keeps the input as a crash) on an Error with an empty
 /// message or on any other exception escaping the library.
-template<typename Body>
-void expectOnlyErrors(Body&& body)
+template <typename Body> void expectOnlyErrors(Body&& body)
 {
     try {
         body();

@@ -16,7 +16,10 @@ namespace {
 
 std::string gPath;
 
-void removeTempFile() { ::unlink(gPath.c_str()); }
+void removeTempFile()
+{
+    ::unlink(gPath.c_str());
+}
 
 void writeInput(const uint8_t* data, size_t size)
 {

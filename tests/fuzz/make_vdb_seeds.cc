@@ -50,7 +50,8 @@ int main(int argc, char** argv)
     mass->setName("mass");
     addClayMeta(*mass, 2);
     for (int x = 0; x < 3; ++x) {
-        for (int y = 0; y < 2; ++y) mass->tree().setValueOn(openvdb::Coord(x, y, 0), 40 + 10 * x + y);
+        for (int y = 0; y < 2; ++y)
+            mass->tree().setValueOn(openvdb::Coord(x, y, 0), 40 + 10 * x + y);
     }
     write(dir + "/mass-leaf-blosc.vdb", {mass}, blosc);
     write(dir + "/mass-leaf-zip.vdb", {mass}, zip);

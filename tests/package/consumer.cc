@@ -44,7 +44,8 @@ int main()
     // A scene: the built-in default (a cube pressed by a plate), all frames.
     vdbclay::Sculptor sculptor(vdbclay::defaultScene(), 2);
     const vdbclay::RunSummary run = sculptor.run();
-    if (run.massDrift != 0 || run.massFinal != run.massInitial || run.massInitial <= 0) return failed("scene mass");
+    if (run.massDrift != 0 || run.massFinal != run.massInitial || run.massInitial <= 0)
+        return failed("scene mass");
     if (!run.settled || run.frames != sculptor.totalFrames()) return failed("scene did not finish settled");
 
     std::printf("consumer: ok (automaton %llu steps, scene %llu frames, %llu steps)\n",

@@ -80,8 +80,8 @@ class Automaton;
 
 /// How settle() runs; settle(maxSteps, tolerance) is settle(SettleOptions{maxSteps, tolerance}).
 struct SettleOptions {
-    uint64_t maxSteps = 0;  ///< step budget of the whole settle, the stepsDone included
-    int64_t tolerance = 0;  ///< stop once the residual overload is <= tolerance (when > 0)
+    uint64_t maxSteps = 0; ///< step budget of the whole settle, the stepsDone included
+    int64_t tolerance = 0; ///< stop once the residual overload is <= tolerance (when > 0)
     /// Steps an interrupted settle already ran (e.g. before a checkpoint): the budget and the
     /// no-room schedule count from here, so a resumed settle stops exactly where an unbroken one
     /// would.
@@ -93,17 +93,17 @@ struct SettleOptions {
 
 /// What a call to step(), run() or settle() did.
 struct StepReport {
-    uint64_t steps = 0;          ///< steps run by this call
+    uint64_t steps = 0; ///< steps run by this call
     /// Candidate blocks examined, counted before any filter: every block of every anchor's
     /// candidate mask, including those found to hold no over cell or to lie in a missing leaf.
     /// The cost of a step follows this number.
     uint64_t blocksVisited = 0;
-    uint64_t blocksOverTc = 0;   ///< examined blocks holding a cell over Tc (the rule ran on them)
-    uint64_t blocksUpdated = 0;  ///< blocks whose cells changed
-    uint64_t blocksGrown = 0;    ///< updated blocks that needed new leaves (run after the pass)
-    uint64_t leavesCreated = 0;  ///< leaves added to the tree
+    uint64_t blocksOverTc = 0;    ///< examined blocks holding a cell over Tc (the rule ran on them)
+    uint64_t blocksUpdated = 0;   ///< blocks whose cells changed
+    uint64_t blocksGrown = 0;     ///< updated blocks that needed new leaves (run after the pass)
+    uint64_t leavesCreated = 0;   ///< leaves added to the tree
     int64_t residualOverload = 0; ///< after the call: sum over non-obstacle cells of max(0, m - Tc)
-    bool settled = false;        ///< after the call: no block can change any more
+    bool settled = false;         ///< after the call: no block can change any more
     StopReason reason = StopReason::StepBudget; ///< settle() only
     StageSeconds seconds;
 
@@ -172,8 +172,8 @@ public:
     void setStepCount(uint64_t steps);
 
     const AutomatonOptions& options() const;
-    uint64_t stepCount() const;      ///< steps run since construction; step parity gives the phase
-    int64_t totalMass() const;       ///< tracked exactly; equals sum of the grid at every step
+    uint64_t stepCount() const; ///< steps run since construction; step parity gives the phase
+    int64_t totalMass() const;  ///< tracked exactly; equals sum of the grid at every step
     int64_t residualOverload() const;
     bool settled() const;
     /// Consecutive steps that changed no cell; construction, resync(), edit(), editObstacles(),

@@ -17,21 +17,21 @@ OPENVDB_USE_VERSION_NAMESPACE
 namespace OPENVDB_VERSION_NAME {
 class ValueMask;
 namespace tree {
-template<typename T, uint32_t Log2Dim> class LeafNode;
-template<typename ChildT, uint32_t Log2Dim> class InternalNode;
-template<typename ChildT> class RootNode;
-template<typename RootNodeType> class Tree;
+template <typename T, uint32_t Log2Dim> class LeafNode;
+template <typename ChildT, uint32_t Log2Dim> class InternalNode;
+template <typename ChildT> class RootNode;
+template <typename RootNodeType> class Tree;
 } // namespace tree
-template<typename TreeT> class Grid;
+template <typename TreeT> class Grid;
 } // namespace OPENVDB_VERSION_NAME
 } // namespace openvdb
 
 namespace vdbclay {
 
 /// The tree configuration of openvdb::Int32Grid / openvdb::MaskGrid (5-4-3).
-template<typename T>
-using Tree543 = openvdb::tree::Tree<openvdb::tree::RootNode<openvdb::tree::InternalNode<
-    openvdb::tree::InternalNode<openvdb::tree::LeafNode<T, 3>, 4>, 5>>>;
+template <typename T>
+using Tree543 = openvdb::tree::Tree<openvdb::tree::RootNode<
+    openvdb::tree::InternalNode<openvdb::tree::InternalNode<openvdb::tree::LeafNode<T, 3>, 4>, 5>>>;
 
 /// Clay: an integer mass per voxel. Same type as openvdb::Int32Grid.
 using MassGrid = openvdb::Grid<Tree543<int32_t>>;

@@ -16,8 +16,8 @@ struct ClayMeta {
     int dimensions = 3;
     RuleParams rule;
     uint64_t seed = 0;
-    uint64_t steps = 0;   ///< automaton steps run so far
-    uint64_t frames = 0;  ///< scene frames run so far
+    uint64_t steps = 0;  ///< automaton steps run so far
+    uint64_t frames = 0; ///< scene frames run so far
     /// 0: written at a frame boundary. n > 0: a checkpoint written during frame frames + 1, after
     /// its push and n steps of its settling (Sculptor resumes the frame there). Stored only when > 0.
     uint64_t frameSteps = 0;
@@ -25,7 +25,7 @@ struct ClayMeta {
     /// The world's up axis: the grids' transform is voxelSize, rotated for UpAxis::Z (Shapes.h).
     /// Stored as vdbclay_up only when it is z.
     UpAxis up = UpAxis::Y;
-    std::string version;  ///< vdbclay version that wrote it (filled by writeClayFile)
+    std::string version; ///< vdbclay version that wrote it (filled by writeClayFile)
 };
 
 /// Writes @a path holding an Int32Grid "mass" (exact clay), a FloatGrid "density" (mass / Tc, a

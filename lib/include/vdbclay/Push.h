@@ -15,11 +15,11 @@ class Automaton;
 
 /// What one push did.
 struct PushReport {
-    uint64_t voxelsPushed = 0; ///< clay voxels found inside a tool and emptied
-    int64_t massMoved = 0;     ///< clay moved out of tools
+    uint64_t voxelsPushed = 0;  ///< clay voxels found inside a tool and emptied
+    int64_t massMoved = 0;      ///< clay moved out of tools
     uint64_t voxelsTrapped = 0; ///< clay voxels inside a tool with no free voxel to go to
-    int64_t massTrapped = 0;   ///< their clay, left where it was (conserved, reported)
-    Box region;                ///< voxels the push read or wrote (empty when nothing moved)
+    int64_t massTrapped = 0;    ///< their clay, left where it was (conserved, reported)
+    Box region;                 ///< voxels the push read or wrote (empty when nothing moved)
     /// The largest tool contact this push saw: sqrt of the voxels one tool entered (3D), or their
     /// number (2D), i.e. about the width of the contact. 0 when no tool entered clay. The compress
     /// push limits its depth to it; the global transport limits its reach to a multiple of it.
@@ -32,7 +32,8 @@ enum class PushMode {
     /// The paper's push: into the nearest free voxel just past the tool's surface, along its normal.
     Surface,
     /// A compressing push: spread evenly over the contiguous clay (m >= 0.3 Tc: kCompressFullNum /
-    /// kCompressFullDen) ahead of the tool along its normal, at most the tool's contact size deep (so a small tool
+    /// kCompressFullDen) ahead of the tool along its normal, at most the tool's contact size deep (so a small
+    /// tool
     /// makes a local rim and a plate wider than the clay compresses it uniformly); the remainder of
     /// the integer division goes +1 to the voxels nearest the tool. With no such voxel just past
     /// the surface, the surface push.

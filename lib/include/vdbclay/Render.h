@@ -10,7 +10,7 @@
 namespace vdbclay {
 
 struct RenderOptions {
-    int width = 800;   ///< image width in pixels (3D); 2D images scale each voxel to whole pixels
+    int width = 800; ///< image width in pixels (3D); 2D images scale each voxel to whole pixels
     int height = 600;
     /// 3D camera: azimuth and elevation in degrees around the clay's bounding box centre.
     double azimuthDeg = 35.0;

@@ -19,11 +19,11 @@ namespace vdbclay {
 
 /// A shape as written in a scene, resolved to a ready-to-evaluate Shape.
 struct ShapeSpec {
-    std::string kind; ///< sphere, box, cylinder, capsule, levelset, mesh, vdb
+    std::string kind;  ///< sphere, box, cylinder, capsule, levelset, mesh, vdb
     std::string field; ///< where it came from, e.g. "clay[0]", for messages
-    ShapePtr shape;   ///< null only for kind "vdb" (clay imported voxel for voxel)
-    std::string file; ///< levelset, mesh, vdb: the resolved path
-    std::string grid; ///< vdb: the Int32 grid to import (default "mass")
+    ShapePtr shape;    ///< null only for kind "vdb" (clay imported voxel for voxel)
+    std::string file;  ///< levelset, mesh, vdb: the resolved path
+    std::string grid;  ///< vdb: the Int32 grid to import (default "mass")
 };
 
 struct ClaySpec {
@@ -42,7 +42,7 @@ struct PathSegment {
 struct ToolSpec {
     ShapeSpec shape;
     std::vector<PathSegment> path; ///< never empty
-    Vec3 pivot{{0, 0, 0}};          ///< rotation centre at frame 0 (default: centre of the bounds)
+    Vec3 pivot{{0, 0, 0}};         ///< rotation centre at frame 0 (default: centre of the bounds)
     /// The tool's pose after @a frame frames (frame 0 = as written).
     Pose poseAt(uint64_t frame) const;
     uint64_t pathFrames() const;
@@ -65,7 +65,7 @@ constexpr double kMinVoxelSize = 1e-4;
 constexpr double kMaxVoxelSize = 1e6;
 
 struct Scene {
-    std::string source;  ///< the file (or "<built-in>") for messages
+    std::string source; ///< the file (or "<built-in>") for messages
     int dimensions = 3;
     double voxelSize = 1.0;
     /// The world's up axis for files: meshes and level sets are read with it, and the output .vdb's

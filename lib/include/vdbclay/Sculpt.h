@@ -36,15 +36,15 @@ struct RunSummary {
     double seconds = 0;
     int64_t massInitial = 0;
     int64_t massFinal = 0;
-    int64_t massDrift = 0;      ///< massFinal - massInitial: exactly 0 unless mass was lost or made
+    int64_t massDrift = 0; ///< massFinal - massInitial: exactly 0 unless mass was lost or made
     int64_t residualOverload = 0;
-    bool settled = false;       ///< the last frame settled
+    bool settled = false;         ///< the last frame settled
     uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget or had no room
-    uint64_t framesNoRoom = 0;  ///< of those, frames stopped because the overload had no room (NoRoom)
-    int64_t massTrapped = 0;    ///< clay inside a tool after the last push: it had nowhere to go
+    uint64_t framesNoRoom = 0;    ///< of those, frames stopped because the overload had no room (NoRoom)
+    int64_t massTrapped = 0;      ///< clay inside a tool after the last push: it had nowhere to go
     /// Candidate blocks examined (before any filter), of those with a cell over Tc, and updated.
     uint64_t blocksVisited = 0, blocksOverTc = 0, blocksUpdated = 0;
-    double pushSeconds = 0;     ///< everything but the automaton's steps: push and global transport
+    double pushSeconds = 0;      ///< everything but the automaton's steps: push and global transport
     double transportSeconds = 0; ///< of that, the global layer (Scene::transport global)
     uint64_t transportSolves = 0, transportIterations = 0;
     int64_t transportMassMoved = 0;
@@ -139,8 +139,8 @@ public:
     const ClayMeta& startMeta() const;
 
     bool done() const;
-    uint64_t frame() const;       ///< frames finished so far (including those of the start file)
-    bool frameOpen() const;       ///< a frame was cut short by a stop request and is not finished
+    uint64_t frame() const; ///< frames finished so far (including those of the start file)
+    bool frameOpen() const; ///< a frame was cut short by a stop request and is not finished
     uint64_t totalFrames() const;
     const Scene& scene() const;
     Automaton& automaton();

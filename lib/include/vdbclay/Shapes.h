@@ -54,7 +54,7 @@ using ShapePtr = std::shared_ptr<const Shape>;
 /// z = 0 layer when @a dimensions == 2). Voxels for which @a skip(x, y, z) is true are passed over
 /// without evaluating the shape (e.g. voxels already marked). Clay, obstacles, tools and the
 /// accuracy metrics all go through it.
-template<typename Inside, typename Skip>
+template <typename Inside, typename Skip>
 void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside, Skip&& skip)
 {
     Box b = shape.bounds();
@@ -70,8 +70,7 @@ void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside, Ski
                 if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) inside(x, y, z);
             }
 }
-template<typename Inside>
-void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside)
+template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside)
 {
     forEachVoxelInside(shape, dimensions, inside, [](int32_t, int32_t, int32_t) { return false; });
 }
