@@ -43,7 +43,7 @@ if [ ! -f "$TBB_PREFIX/lib/libtbb.so.12" ]; then
   cmake --install "$TBB_ROOT/build" >/dev/null
 fi
 
-# --- vdbclay, instrumented: the library and the threaded test executables only ---------------
+# --- vdbclay, instrumented: the library's core (VDBCLAY_CORE_ONLY) and the threaded tests -------
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
 launcher=() # ccache, as scripts/build.sh uses it
@@ -52,7 +52,7 @@ if command -v ccache >/dev/null 2>&1; then
 fi
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-        -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_APPS=OFF >/dev/null
+        -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_APPS=OFF -DVDBCLAY_BUILD_PYTHON=OFF -DVDBCLAY_CORE_ONLY=ON >/dev/null
 fi
 cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton
 
