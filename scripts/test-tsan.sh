@@ -10,6 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD} # ccache hits shared between clones
+export CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-1}  # -g builds too
 BUILD_DIR=${TSAN_BUILD_DIR:-build-tsan}
 JOBS=${JOBS:-2}
 mkdir -p "$BUILD_DIR"
