@@ -521,7 +521,16 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
 
 int runScene(const RunArgs& a)
 {
-    vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene);
+    uint64_t cliBudget =
+        0; // --memory-budget replaces the scene's; meshes are checked against it as they are read
+    if (!a.memoryBudget.empty()) {
+        try {
+            cliBudget = vdbclay::parseByteSize(a.memoryBudget);
+        } catch (const vdbclay::Error& e) {
+            throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
+        }
+    }
+    vdbclay::Scene scene = a.scene.empty() ? vdbclay::defaultScene() : vdbclay::loadScene(a.scene, cliBudget);
     if (!a.rule.empty()) {
         try {
             scene.rule.rule = vdbclay::parseRule(a.rule);
@@ -552,13 +561,7 @@ int runScene(const RunArgs& a)
     }
     if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
     applyUp(scene, a.up);
-    if (!a.memoryBudget.empty()) {
-        try {
-            scene.memoryBudget = vdbclay::parseByteSize(a.memoryBudget);
-        } catch (const vdbclay::Error& e) {
-            throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
-        }
-    }
+    if (cliBudget != 0) scene.memoryBudget = cliBudget;
     const std::string outVdb = a.out.empty() ? scene.outputs.vdb : a.out;
     const std::string outStats = a.stats.empty() ? scene.outputs.stats : a.stats;
     const std::string outPng = a.png.empty() ? scene.outputs.png : a.png;

@@ -538,7 +538,9 @@ PYBIND11_MODULE(_vdbclay, m)
 
     // ---- scenes ----------------------------------------------------------------------------------
     py::class_<Scene>(m, "Scene", "A scene (docs/SCENES.md): clay, tools with paths, obstacles, settling.")
-        .def_static("load", &loadScene, py::arg("path"), "Reads a scene .json file.")
+        .def_static(
+            "load", [](const std::string& path) { return loadScene(path); }, py::arg("path"),
+            "Reads a scene .json file.")
         .def_static(
             "from_json",
             [](const std::string& text, const std::string& source, const std::string& baseDir) {

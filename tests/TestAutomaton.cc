@@ -10,6 +10,7 @@
 #include <climits>
 #include <string>
 #include <vector>
+#include "TestRng.h"
 
 using namespace vdbclay;
 using openvdb::Coord;
@@ -24,18 +25,7 @@ protected:
     static void SetUpTestSuite() { openvdb::initialize(); }
 };
 
-struct Rng {
-    uint64_t s;
-    explicit Rng(uint64_t seed) : s(seed * 0x9E3779B97F4A7C15ull + 1) {}
-    uint64_t next()
-    {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        return s;
-    }
-    int range(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }
-};
+using vdbclay_test::Rng;
 
 openvdb::Int32Grid::Ptr newMass()
 {

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include "TestRng.h"
 
 using namespace vdbclay;
 using openvdb::Coord;
@@ -20,19 +21,8 @@ using openvdb::CoordBBox;
 
 namespace {
 
-/// xorshift64: the generator of every golden scene. Never change it.
-struct Gen {
-    uint64_t s;
-    explicit Gen(uint64_t seed) : s(seed * 0x9E3779B97F4A7C15ull + 1) {}
-    uint64_t next()
-    {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        return s;
-    }
-    int range(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }
-};
+/// The generator of every golden scene (TestRng.h). Never change it.
+using Gen = vdbclay_test::Rng;
 
 const Rule kRules[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
 

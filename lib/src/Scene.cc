@@ -345,7 +345,8 @@ Pose ToolSpec::poseAt(uint64_t frame) const
 
 // ---- parsing -----------------------------------------------------------------------------------
 
-Scene parseScene(const std::string& text, const std::string& source, const std::string& baseDir)
+Scene parseScene(const std::string& text, const std::string& source, const std::string& baseDir,
+                 uint64_t memoryBudget)
 {
     Ctx cx;
     cx.source = source;
@@ -417,6 +418,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         } catch (const Error&) {
         }
     }
+    if (memoryBudget != 0) cx.meshBudget = memoryBudget; // the caller's budget replaces the scene's
     if (const json* v = cx.find(root, "threshold")) {
         if (v->is_number() && v->get<double>() <= 0) cx.fail("threshold", "Tc must be > 0, got " + v->dump());
         sc.rule.threshold = int32_t(cx.integer(*v, "threshold", 1, INT32_MAX));
@@ -577,6 +579,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             sc.memoryBudget = uint64_t(cx.integer(*v, "memory_budget", 1, INT64_MAX));
         }
     }
+    if (memoryBudget != 0) sc.memoryBudget = memoryBudget;
     if (const json* v = cx.find(root, "outputs")) {
         cx.keys(*v, "outputs", {"vdb", "png", "mesh", "stats"});
         auto out = [&](const char* k, std::string& dst) {
@@ -590,7 +593,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     return sc;
 }
 
-Scene loadScene(const std::string& path)
+Scene loadScene(const std::string& path, uint64_t memoryBudget)
 {
     // Any path: a FIFO or process substitution (<(...)) is a fine scene; a directory, a device that
     // never ends (/dev/zero) or a huge file is not, and is refused before it fills memory.
@@ -624,7 +627,7 @@ Scene loadScene(const std::string& path)
     }
     const auto slash = path.find_last_of('/');
     const std::string base = slash == std::string::npos ? std::string() : path.substr(0, slash);
-    return parseScene(text, path, base);
+    return parseScene(text, path, base, memoryBudget);
 }
 
 const char* defaultSceneJson()

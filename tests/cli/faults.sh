@@ -5,21 +5,8 @@
 # as they were, no temporary file left.
 # usage: faults.sh VDBCLAY WORKDIR
 set -uo pipefail
-bin=$1; work=$2
-rm -rf "$work"; mkdir -p "$work"; cd "$work"
-fails=0
-fail() { echo "FAIL $*"; fails=$((fails+1)); }
-# refused NAME NEEDLE COMMAND...: the command fails with one stderr line holding NEEDLE.
-refused() {
-  local name=$1 needle=$2; shift 2
-  "$@" > out.txt 2> err.txt; local rc=$?
-  if [ $rc -eq 0 ] || [ "$(wc -l < err.txt)" -ne 1 ] || ! grep -q -- "$needle" err.txt; then
-    fail "$name: rc=$rc, needle '$needle', stderr: $(cat err.txt)"
-  else
-    echo "PASS $name: $(cat err.txt)"
-  fi
-}
-no_temp_files() { ls ./*.tmp* ./*/*.tmp* > /dev/null 2>&1 && fail "$1: temporary files left: $(ls ./*.tmp* ./*/*.tmp* 2>/dev/null)"; }
+source "$(dirname "$0")/lib.sh"
+cli_setup "$1" "$2"
 # full LIMIT_KB ARGS...: vdbclay with writes limited to LIMIT_KB kilobytes, as on a full disk.
 full() { local kb=$1; shift; (ulimit -f "$kb"; trap '' XFSZ; exec "$bin" "$@"); }
 
@@ -102,6 +89,19 @@ refused mesh-far "far-cube.obj: the mesh spans 0 .. 8e+09 voxels along axis 0 (a
   "$bin" run mesh-far.json -o big.vdb
 refused import-too-big "big-cube.obj: turning the mesh into a level set" "$bin" import big-cube.obj -o big.vdb --mass 100 --memory-budget 1G
 [ -e big.vdb ] && fail "mesh checks: an output was written"
+# --memory-budget replaces the scene's budget for the mesh check too: it lifts a scene's small budget
+# and lowers the default one (a 40^3 mesh cube needs about 1.5 MiB to become a level set).
+cube 40 c40.obj
+printf '{"memory_budget": "1M", "clay": [{"shape": "mesh", "file": "c40.obj", "mass": 800}]}' > mesh-1m.json
+printf '{"clay": [{"shape": "mesh", "file": "c40.obj", "mass": 800}]}' > mesh-default.json
+refused mesh-scene-budget "memory budget of 1.00 MiB" "$bin" run mesh-1m.json --frames 1 -o m.vdb
+"$bin" run mesh-1m.json --frames 1 --quiet -o m.vdb --memory-budget 64M > /dev/null 2> err.txt ||
+  fail "--memory-budget 64M over a scene's 1M: $(cat err.txt)"
+[ -s m.vdb ] || fail "--memory-budget 64M over a scene's 1M: no output"
+rm -f m.vdb
+refused mesh-cli-budget "mesh-default.json: clay\[0\]: c40.obj: .* memory budget of 1.00 MiB" \
+  "$bin" run mesh-default.json --frames 1 -o m.vdb --memory-budget 1M
+[ -e m.vdb ] && fail "mesh-cli-budget: an output was written"
 
 # 6. The budget is kept while the run goes on (item 5): clay read from a file at 2^31 - 1 per voxel
 #    spreads far beyond what the estimate can see in the file, and the run stops with a checkpoint

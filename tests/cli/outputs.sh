@@ -6,21 +6,8 @@
 # event (a FIFO's reader, a pipe that fills).
 # usage: outputs.sh VDBCLAY WORKDIR
 set -uo pipefail
-bin=$1; work=$2
-rm -rf "$work"; mkdir -p "$work"; cd "$work"
-fails=0
-fail() { echo "FAIL $*"; fails=$((fails+1)); }
-# refused NAME NEEDLE COMMAND...: non-zero exit, one stderr line holding NEEDLE.
-refused() {
-  local name=$1 needle=$2; shift 2
-  "$@" > out.txt 2> err.txt; local rc=$?
-  if [ $rc -eq 0 ] || [ "$(wc -l < err.txt)" -ne 1 ] || ! grep -q -- "$needle" err.txt; then
-    fail "$name: rc=$rc, needle '$needle', stderr: $(cat err.txt)"
-  else
-    echo "PASS $name: $(cat err.txt)"
-  fi
-}
-no_temp_files() { ls ./*.tmp* > /dev/null 2>&1 && fail "$1: temporary files left: $(ls ./*.tmp*)"; }
+source "$(dirname "$0")/lib.sh"
+cli_setup "$1" "$2"
 run1() { "$bin" run --frames 1 --quiet "$@"; }
 
 # 1. A FIFO as an output is written through (a reader gets a complete .vdb) and stays a FIFO.

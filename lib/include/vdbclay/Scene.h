@@ -100,10 +100,14 @@ uint64_t parseByteSize(const std::string& text);
 std::string formatBytes(uint64_t bytes);
 
 /// Parses scene JSON. Relative file names inside the scene are resolved against @a baseDir.
+/// @a memoryBudget, when not 0, replaces the scene's "memory_budget" (as `vdbclay run
+/// --memory-budget` does; kNoMemoryBudget: none): meshes are voxelized as they are read, and are
+/// checked against the budget that will hold for the run.
 /// @throw Error "SOURCE: FIELD: what was wrong" on any malformed or inconsistent input.
-Scene parseScene(const std::string& json, const std::string& source, const std::string& baseDir);
+Scene parseScene(const std::string& json, const std::string& source, const std::string& baseDir,
+                 uint64_t memoryBudget = 0);
 /// Reads and parses a scene file. @throw Error as parseScene, or if the file cannot be read.
-Scene loadScene(const std::string& path);
+Scene loadScene(const std::string& path, uint64_t memoryBudget = 0);
 /// The built-in default scene (the smallest complete example: a cube pressed by a plate).
 Scene defaultScene();
 /// The built-in default scene as JSON text.
