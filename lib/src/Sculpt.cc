@@ -760,45 +760,23 @@ struct Sculptor::Impl {
         return !unite(regionOf(toolsAt(frame + 1)), toolRegion).empty();
     }
 
-    /// Settles the open frame step by step, with the rest of its step budget, exactly as
-    /// Automaton::settle(maxSteps, tolerance) would, but returns after a step when the stop poll
-    /// asks (and the state resumes exactly). @a finished tells which.
+    /// Settles the open frame through Automaton::settle with the rest of its step budget: the
+    /// frame's steps so far are settle's stepsDone, so the budget and the no-room check's schedule
+    /// count in frame steps and a resumed frame stops exactly where an unbroken one does. The stop
+    /// hook ends the settle after a step when the stop poll asks and the state resumes exactly (no
+    /// quiet step is pending: a resumed automaton restarts its quiet count at 0). @a finished is
+    /// false when the poll cut the frame short (StopReason::Stopped).
     StepReport settleOpenFrame(bool& finished)
     {
-        StepReport total;
-        total.residualOverload = automaton->residualOverload();
-        total.settled = automaton->settled();
-        const uint64_t budget = scene.settle.maxSteps;
-        const int64_t tolerance = scene.settle.tolerance;
-        for (;;) {
-            const uint64_t left = openSteps >= budget ? 0 : budget - openSteps;
-            // The no-room check on Automaton::settle's own schedule (after kNoRoomCheckSteps steps
-            // of the frame, then at each doubling: powers of two), counted in frame steps so that a
-            // resumed frame checks exactly where an unbroken one does.
-            if (openSteps >= Automaton::kNoRoomCheckSteps && (openSteps & (openSteps - 1)) == 0 &&
-                !automaton->settled() && !(tolerance > 0 && automaton->residualOverload() <= tolerance) &&
-                automaton->overloadHasNoRoom()) {
-                total.reason = StopReason::NoRoom;
-                finished = true;
-                return total;
-            }
-            // settle(1) runs one step unless the automaton is settled or within tolerance;
-            // settle(0) once the budget is spent only tells why it stops: the checks and their
-            // order stay the automaton's.
-            const StepReport r = automaton->settle(left ? 1 : 0, tolerance);
-            total += r;
-            if (r.steps == 0) {
-                total.reason = r.reason;
-                finished = true;
-                return total;
-            }
-            ++openSteps;
-            if (automaton->quietSteps() == 0 && stopRequested()) {
-                total.reason = StopReason::StepBudget;
-                finished = false;
-                return total;
-            }
-        }
+        SettleOptions so;
+        so.maxSteps = scene.settle.maxSteps;
+        so.tolerance = scene.settle.tolerance;
+        so.stepsDone = openSteps;
+        so.stop = [this](const Automaton& a) { return a.quietSteps() == 0 && stopRequested(); };
+        const StepReport r = automaton->settle(so);
+        openSteps += r.steps;
+        finished = r.reason != StopReason::Stopped;
+        return r;
     }
 
     /// Places the tools at frame @a f and pushes clay out of them. With Scene::sweep, the move from
