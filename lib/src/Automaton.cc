@@ -562,6 +562,18 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
     im.quietSteps = 0;
 }
 
+void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
+{
+    Impl& im = *mImpl;
+    if (!im.obsGrid) {
+        im.obsGrid = openvdb::MaskGrid::create(false);
+        im.obsGrid->setName("obstacles");
+    }
+    // No cell turned on holds clay (no overload changes) or shares a block with clay (no block
+    // that can change sees it before the next wake-up reaches it): nothing to rescan or wake.
+    fn(*im.obsGrid);
+}
+
 void Automaton::resync()
 {
     mImpl->resync();
