@@ -304,7 +304,8 @@ TEST_F(ShapesTest, TransformedDistanceIsBitIdenticalToTheInnerDistanceAtApplyInv
                 EXPECT_EQ(std::memcmp(&want, &got, sizeof(double)), 0) << s->describe() << " at pose " << k;
                 const double want2 = s->distance(pose.applyInverse(outer.applyInverse(p)));
                 const double got2 = tt->distance(p);
-                EXPECT_EQ(std::memcmp(&want2, &got2, sizeof(double)), 0) << s->describe() << " nested, pose " << k;
+                EXPECT_EQ(std::memcmp(&want2, &got2, sizeof(double)), 0)
+                    << s->describe() << " nested, pose " << k;
                 ++compared;
             }
         }

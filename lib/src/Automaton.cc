@@ -187,8 +187,9 @@ struct Automaton::Impl {
                     return;
                 }
                 if (!is3D() && c.z() != 0) {
-                    per[k].error = std::string(context) + ": 2D clay must lie in the z = 0 layer, but voxel " +
-                                   coordStr(c) + " holds mass " + std::to_string(v);
+                    per[k].error = std::string(context) +
+                                   ": 2D clay must lie in the z = 0 layer, but voxel " + coordStr(c) +
+                                   " holds mass " + std::to_string(v);
                     return;
                 }
                 leaf.setValueOn(i);

@@ -3,8 +3,8 @@
 // 1. U = union of the tools' bounds (2D: clipped to z = 0). Only leaves of the mass grid that meet
 //    U are visited (in parallel, one leaf per task, merged in leaf order), and in them only clay
 //    voxels are tested against the tools; the clay voxels whose centre is inside a tool are the
-//    sources, sorted in coordinate order (x, then y, then z). A voxel inside a tool is a source even if it is an
-//    obstacle: a Sculptor makes the tools' voxels obstacles while clay settles around them.
+//    sources, sorted in coordinate order (x, then y, then z). A voxel inside a tool is a source even if it is
+//    an obstacle: a Sculptor makes the tools' voxels obstacles while clay settles around them.
 // 2. Each source is given the tool that holds it most deeply (smallest distance; ties: the first
 //    tool) and that tool's normal at its centre (2D: z dropped).
 // 3. Target: march from the centre along the normal to (-distance + 0.5) past the surface, then on
@@ -371,7 +371,8 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     // clay blocks as the whole region, at a cost that follows the clay, not the tools' bounds.
     Box targets;
     for (const auto& a : pusher.added())
-        targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}}, {{a.first.x(), a.first.y(), a.first.z()}}});
+        targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}},
+                                     {{a.first.x(), a.first.y(), a.first.z()}}});
     const Box editRegion = clay_internal::narrowedEditRegion(automaton.mass()->constTree(), region, targets);
     automaton.edit(editRegion, [&](MassGrid& grid) {
         auto acc = grid.getAccessor();

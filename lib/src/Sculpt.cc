@@ -742,11 +742,11 @@ struct Sculptor::Impl {
     std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
     Box toolRegion;                        ///< bounds of the tools as placed now
     // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
-    std::vector<ShapePtr> placed;             ///< the tools as placed now
-    openvdb::MaskTree coveredSlots{false};    ///< slots of toolRegion whose tool cells are marked
-    openvdb::MaskTree seenLeaves{false};      ///< mass leaves whose neighbouring slots are covered
-    bool coveredAll = false;                  ///< every slot of toolRegion is covered
-    openvdb::Index64 leavesAtCover = 0;       ///< the mass tree's leaf count at the last cover
+    std::vector<ShapePtr> placed;          ///< the tools as placed now
+    openvdb::MaskTree coveredSlots{false}; ///< slots of toolRegion whose tool cells are marked
+    openvdb::MaskTree seenLeaves{false};   ///< mass leaves whose neighbouring slots are covered
+    bool coveredAll = false;               ///< every slot of toolRegion is covered
+    openvdb::Index64 leavesAtCover = 0;    ///< the mass tree's leaf count at the last cover
     std::function<bool()> stopPoll;
     bool stopped = false;
     ClayMeta startMeta;
@@ -816,7 +816,8 @@ struct Sculptor::Impl {
     void keepToolsAhead(uint64_t frameSteps, bool afterPush)
     {
         if (placed.empty() || coveredAll) return;
-        const bool floodNext = frameSteps >= Automaton::kNoRoomCheckSteps && (frameSteps & (frameSteps - 1)) == 0;
+        const bool floodNext =
+            frameSteps >= Automaton::kNoRoomCheckSteps && (frameSteps & (frameSteps - 1)) == 0;
         const openvdb::Index64 leaves = mass->constTree().leafCount();
         if (!afterPush && !floodNext && leaves == leavesAtCover) return;
         int64_t reach = 1;
@@ -849,7 +850,8 @@ struct Sculptor::Impl {
         bool all = scene.transport == Transport::Global || reach > 64;
         std::vector<const clay_internal::MassLeafT*> leaves;
         if (!all) {
-            leaves = clay_internal::leavesNear(mass->constTree(), clay_internal::grownBy(box, int32_t(8 * reach)));
+            leaves =
+                clay_internal::leavesNear(mass->constTree(), clay_internal::grownBy(box, int32_t(8 * reach)));
             const int64_t side = 2 * reach + 1;
             const int64_t around = side * side * (is2D ? 1 : side);
             all = int64_t(leaves.size()) > boxSlots / around;
@@ -906,7 +908,8 @@ struct Sculptor::Impl {
                         for (int32_t z = sb.min[2]; z <= sb.max[2]; ++z) {
                             const Coord c(x, y, z);
                             if (ro.isValueOn(c)) continue;
-                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0) inside[i].push_back(c);
+                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0)
+                                inside[i].push_back(c);
                         }
             });
             for (const std::vector<Coord>& cells : inside)
