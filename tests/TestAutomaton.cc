@@ -705,3 +705,41 @@ TEST_F(AutomatonTest, ActiveTilesAreVoxelizedAndSettle)
     EXPECT_TRUE(r.settled);
     EXPECT_EQ(totalMass(*m), a.totalMass());
 }
+
+// The leaf scan (construction, resync, edits) runs in parallel over leaves: the totals, the
+// overload and the error reported (the first bad voxel in leaf order) must be a serial scan's.
+TEST(AutomatonScan, ParallelScanReportsTheSameTotalsAndTheFirstErrorInLeafOrder)
+{
+    openvdb::initialize();
+    auto make = [] {
+        auto g = openvdb::Int32Grid::create(0);
+        for (int i = 0; i < 200; ++i) // 200 leaves, a few over Tc
+            g->tree().setValue(Coord(8 * (i % 10), 8 * (i / 10 % 5), 8 * (i / 50)), 500 + 7 * i);
+        return g;
+    };
+    std::string firstError;
+    for (int threads : {1, 2, 3, 8}) {
+        AutomatonOptions o;
+        o.threads = threads;
+        auto g = make();
+        Automaton a(g, o);
+        EXPECT_EQ(a.totalMass(), 200 * 500 + 7 * 199 * 200 / 2) << threads;
+        int64_t over = 0;
+        for (int i = 0; i < 200; ++i)
+            over += std::max(0, 500 + 7 * i - 1000);
+        EXPECT_EQ(a.residualOverload(), over) << threads;
+        // Two bad voxels: the one in the lower leaf (x, then y, then z) is reported.
+        auto bad = make();
+        bad->tree().setValue(Coord(72, 33, 17), -5);
+        bad->tree().setValue(Coord(8, 2, 9), -3);
+        try {
+            Automaton b(bad, o);
+            ADD_FAILURE() << "accepted negative mass, " << threads << " threads";
+        } catch (const Error& e) {
+            const std::string msg = e.what();
+            EXPECT_NE(msg.find("(8, 2, 9)"), std::string::npos) << msg;
+            if (firstError.empty()) firstError = msg;
+            EXPECT_EQ(msg, firstError) << threads;
+        }
+    }
+}

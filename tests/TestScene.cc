@@ -442,6 +442,47 @@ TEST_F(SceneTest, StoppingWaitsForAStepThatResumesExactlyAndSavesTheOpenFrame)
     EXPECT_EQ(sc.checkpointMeta().frameSteps, 0u);
 }
 
+// The Sculptor settles through Automaton::settle(SettleOptions): a stopped frame says Stopped, and
+// a frame stopped and resumed in the middle keeps settle's no-room schedule in frame steps. The
+// 2D piston of TestHardCases (clay pressed into a closed tube with no room) stops its first frame
+// with NoRoom after exactly 8192 steps; stopped at step 5000 and resumed from the checkpoint, the
+// resumed part runs the other 3192 steps and stops with NoRoom at the same step, same clay.
+TEST_F(SceneTest, AStoppedFrameSaysStoppedAndKeepsTheNoRoomScheduleWhenResumed)
+{
+    const std::string json = R"({"dimensions": 2, "threshold": 100, "rule": "prorata",
+        "clay": [{"shape": "box", "min": [0,0], "max": [7,3], "mass": 100}],
+        "tools": [{"shape": "box", "min": [0,4], "max": [7,30], "path": [{"translate": [0,-1], "frames": 4}]}],
+        "obstacles": [{"shape": "box", "min": [-3,-3], "max": [10,-1]}, {"shape": "box", "min": [-3,0], "max": [-1,40]},
+                      {"shape": "box", "min": [8,0], "max": [10,40]}]})";
+    const Scene s = parseScene(json, "piston.json", "");
+    Sculptor whole(s, 1);
+    const FrameReport w = whole.runFrame();
+    ASSERT_TRUE(w.finished);
+    ASSERT_EQ(w.settle.reason, StopReason::NoRoom);
+    ASSERT_EQ(w.settle.steps, 8192u);
+
+    Sculptor first(s, 2);
+    first.setStopRequest([&first] { return first.automaton().stepCount() >= 5000; });
+    const FrameReport a = first.runFrame();
+    EXPECT_FALSE(a.finished);
+    EXPECT_EQ(a.settle.reason, StopReason::Stopped);
+    EXPECT_EQ(a.settle.steps, 5000u);
+    EXPECT_EQ(first.checkpointMeta().frameSteps, 5000u);
+    const std::string file = dir + "/piston.vdb";
+    writeClayFile(file, *first.mass(), first.checkpointMeta());
+
+    Scene cont = s;
+    cont.start = file;
+    Sculptor rest(cont, 3);
+    const FrameReport b = rest.runFrame();
+    EXPECT_TRUE(b.finished);
+    EXPECT_EQ(b.settle.reason, StopReason::NoRoom);
+    EXPECT_EQ(b.settle.steps, 8192u - 5000u);
+    EXPECT_EQ(rest.automaton().stepCount(), 8192u);
+    EXPECT_EQ(b.settle.residualOverload, w.settle.residualOverload);
+    EXPECT_EQ(contentHash(*rest.mass()), contentHash(*whole.mass()));
+}
+
 TEST_F(SceneTest, AnOpenFrameIsOnlyFinishedByTheSceneThatBeganIt)
 {
     const std::string json = R"({"threshold": 100, "seed": 1,

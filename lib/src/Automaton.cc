@@ -44,6 +44,7 @@
 #include <openvdb/tree/ValueAccessor.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
@@ -127,15 +128,49 @@ struct Automaton::Impl {
         int64_t mass = 0, overload = 0, maxValue = 0;
     };
     /// When @a hot is given, the origins of the leaves holding an over cell are appended to it.
+    /// The leaves are scanned in parallel (one task per leaf: each writes only its own leaf and
+    /// result) and the results folded in leaf order, so the sums, the hot list and the error
+    /// reported (the first bad voxel in leaf order) are those of a serial scan.
     Scan scanLeaves(const Box* region, const char* context, std::vector<Origin>* hot = nullptr)
     {
-        Scan s;
         const int64_t tc = rule.threshold;
         const ObsTree* ot = obsTree();
-        std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
-        if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
-        auto visit = [&](MassLeaf& leaf) {
-            const int64_t overloadBefore = s.overload;
+        std::vector<MassLeaf*> leaves;
+        if (!region) {
+            leaves.reserve(tree().leafCount());
+            for (auto it = tree().beginLeaf(); it; ++it)
+                leaves.push_back(&*it);
+        } else if (region->empty()) {
+            return Scan();
+        } else {
+            int64_t slots = 1;
+            for (int a = 0; a < 3 && slots <= INT64_MAX / 4096 / 1024; ++a)
+                slots *= (int64_t(region->max[a]) >> 3) - (int64_t(region->min[a]) >> 3) + 1;
+            if (slots <= int64_t(tree().leafCount())) {
+                const Coord lo(region->min[0] & ~7, region->min[1] & ~7, region->min[2] & ~7);
+                for (int64_t x = lo.x(); x <= region->max[0]; x += 8)
+                    for (int64_t y = lo.y(); y <= region->max[1]; y += 8)
+                        for (int64_t z = lo.z(); z <= region->max[2]; z += 8)
+                            if (MassLeaf* leaf = tree().probeLeaf(Coord(int32_t(x), int32_t(y), int32_t(z))))
+                                leaves.push_back(leaf);
+            } else {
+                // Fewer leaves than slots: walk them, in the slot loop's order (x, then y, then z).
+                const openvdb::CoordBBox rb(Coord(region->min[0], region->min[1], region->min[2]),
+                                            Coord(region->max[0], region->max[1], region->max[2]));
+                for (auto it = tree().beginLeaf(); it; ++it)
+                    if (it->getNodeBoundingBox().hasOverlap(rb)) leaves.push_back(&*it);
+                std::sort(leaves.begin(), leaves.end(),
+                          [](const MassLeaf* a, const MassLeaf* b) { return a->origin() < b->origin(); });
+            }
+        }
+        struct One {
+            Scan s;
+            std::string error;
+        };
+        std::vector<One> per(leaves.size());
+        auto visit = [&](size_t k) {
+            MassLeaf& leaf = *leaves[k];
+            Scan& s = per[k].s;
             const ObsLeaf* ol = ot ? ot->probeConstLeaf(leaf.origin()) : nullptr;
             const bool tileObs = ot && !ol && ot->isValueOn(leaf.origin());
             int32_t* d = leaf.buffer().data();
@@ -147,12 +182,15 @@ struct Automaton::Impl {
                 }
                 const Coord c = leaf.offsetToGlobalCoord(i);
                 if (v < 0) {
-                    throw Error(std::string(context) + ": voxel " + coordStr(c) + " holds negative mass " +
-                                std::to_string(v));
+                    per[k].error = std::string(context) + ": voxel " + coordStr(c) + " holds negative mass " +
+                                   std::to_string(v);
+                    return;
                 }
                 if (!is3D() && c.z() != 0) {
-                    throw Error(std::string(context) + ": 2D clay must lie in the z = 0 layer, but voxel " +
-                                coordStr(c) + " holds mass " + std::to_string(v));
+                    per[k].error = std::string(context) +
+                                   ": 2D clay must lie in the z = 0 layer, but voxel " + coordStr(c) +
+                                   " holds mass " + std::to_string(v);
+                    return;
                 }
                 leaf.setValueOn(i);
                 s.mass += v;
@@ -160,21 +198,30 @@ struct Automaton::Impl {
                 const bool isObs = ol ? ol->isValueOn(i) : tileObs;
                 if (!isObs && v > tc) s.overload += v - tc;
             }
-            if (hot && s.overload != overloadBefore) {
-                hot->push_back(Origin(leaf.origin().x(), leaf.origin().y(), leaf.origin().z()));
-            }
         };
-        if (!region) {
-            for (auto it = tree().beginLeaf(); it; ++it)
-                visit(*it);
+        if (opts.threads == 1 || leaves.size() < 64) {
+            for (size_t k = 0; k < leaves.size(); ++k) {
+                visit(k);
+                if (!per[k].error.empty()) break;
+            }
         } else {
-            const Coord lo(region->min[0] & ~7, region->min[1] & ~7, region->min[2] & ~7);
-            for (int x = lo.x(); x <= region->max[0]; x += 8) {
-                for (int y = lo.y(); y <= region->max[1]; y += 8) {
-                    for (int z = lo.z(); z <= region->max[2]; z += 8) {
-                        if (MassLeaf* leaf = tree().probeLeaf(Coord(x, y, z))) visit(*leaf);
-                    }
-                }
+            inArena([&] {
+                tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size(), 16),
+                                  [&](const tbb::blocked_range<size_t>& r) {
+                                      for (size_t k = r.begin(); k != r.end(); ++k)
+                                          visit(k);
+                                  });
+            });
+        }
+        Scan s;
+        for (size_t k = 0; k < leaves.size(); ++k) {
+            if (!per[k].error.empty()) throw Error(per[k].error);
+            s.mass += per[k].s.mass;
+            s.overload += per[k].s.overload;
+            s.maxValue = std::max(s.maxValue, per[k].s.maxValue);
+            if (hot && per[k].s.overload != 0) {
+                const Coord o = leaves[k]->origin();
+                hot->push_back(Origin(o.x(), o.y(), o.z()));
             }
         }
         return s;
@@ -560,6 +607,18 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
     im.overload += after.overload - before.overload;
     im.candidates.addRegion(region);
     im.quietSteps = 0;
+}
+
+void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
+{
+    Impl& im = *mImpl;
+    if (!im.obsGrid) {
+        im.obsGrid = openvdb::MaskGrid::create(false);
+        im.obsGrid->setName("obstacles");
+    }
+    // No cell turned on holds clay (no overload changes) or shares a block with clay (no block
+    // that can change sees it before the next wake-up reaches it): nothing to rescan or wake.
+    fn(*im.obsGrid);
 }
 
 void Automaton::resync()

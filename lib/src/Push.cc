@@ -1,9 +1,10 @@
 // The push operation: clay inside a tool moves to the nearest free voxel outside every tool.
 //
 // 1. U = union of the tools' bounds (2D: clipped to z = 0). Only leaves of the mass grid that meet
-//    U are visited; the clay voxels there whose centre is inside a tool are the sources, sorted in
-//    coordinate order (x, then y, then z). A voxel inside a tool is a source even if it is an
-//    obstacle: a Sculptor makes the tools' voxels obstacles while clay settles around them.
+//    U are visited (in parallel, one leaf per task, merged in leaf order), and in them only clay
+//    voxels are tested against the tools; the clay voxels whose centre is inside a tool are the
+//    sources, sorted in coordinate order (x, then y, then z). A voxel inside a tool is a source even if it is
+//    an obstacle: a Sculptor makes the tools' voxels obstacles while clay settles around them.
 // 2. Each source is given the tool that holds it most deeply (smallest distance; ties: the first
 //    tool) and that tool's normal at its centre (2D: z dropped).
 // 3. Target: march from the centre along the normal to (-distance + 0.5) past the surface, then on
@@ -14,8 +15,9 @@
 //    obstacle) within Chebyshev distance maxSearch takes the first free voxel it reaches, so clay
 //    never crosses an obstacle, however thin. Failing that, the clay is trapped.
 // 4. The plan (sources emptied, targets increased) is computed read-only first, then written in one
-//    Automaton::edit() over the region U grown by maxSearch + 2, so nothing is written if a tool
-//    throws, and the automaton rescans and wakes exactly that region.
+//    Automaton::edit() over the region U grown by maxSearch + 2, cut to the part near clay
+//    (ClayLeaves.h: the same clay blocks are woken, the cost follows the clay), so nothing is
+//    written if a tool throws.
 // Sources are inside a tool and targets outside all tools, so no voxel is both; the plan depends only
 // on the grid, the tools and the source order: deterministic.
 //
@@ -32,6 +34,9 @@
 
 #include "vdbclay/Push.h"
 #include "vdbclay/Automaton.h"
+
+#include "ClayLeaves.h"
+#include "ParallelFor.h"
 
 #include <openvdb/openvdb.h>
 
@@ -95,27 +100,20 @@ public:
 
     void setRegion(const Box& r) { mRegion = r; }
 
-    /// Clay voxels inside a tool, in coordinate order.
-    std::vector<Source> sources(const Box& u) const
+    /// Clay voxels inside a tool, in coordinate order. Only the mass leaves that meet @a u are
+    /// visited, each in parallel (@a threads as the automaton's), its sources collected apart and
+    /// merged in leaf order: the cost follows the clay inside the tools' bounds, and the result does
+    /// not depend on the thread count.
+    std::vector<Source> sources(const Box& u, int threads) const
     {
-        std::vector<const openvdb::Int32Tree::LeafNodeType*> leaves;
-        const int64_t slots = ((int64_t(u.max[0]) >> 3) - (int64_t(u.min[0]) >> 3) + 1) *
-                              ((int64_t(u.max[1]) >> 3) - (int64_t(u.min[1]) >> 3) + 1) *
-                              ((int64_t(u.max[2]) >> 3) - (int64_t(u.min[2]) >> 3) + 1);
+        const std::vector<const clay_internal::MassLeafT*> leaves = clay_internal::leavesNear(mMass, u);
         const CoordBBox ub(Coord(u.min[0], u.min[1], u.min[2]), Coord(u.max[0], u.max[1], u.max[2]));
-        if (slots <= int64_t(mMass.leafCount())) {
-            for (int x = u.min[0] & ~7; x <= u.max[0]; x += 8)
-                for (int y = u.min[1] & ~7; y <= u.max[1]; y += 8)
-                    for (int z = u.min[2] & ~7; z <= u.max[2]; z += 8)
-                        if (const auto* l = mMass.probeConstLeaf(Coord(x, y, z))) leaves.push_back(l);
-        } else {
-            for (auto it = mMass.cbeginLeaf(); it; ++it)
-                if (it->getNodeBoundingBox().hasOverlap(ub)) leaves.push_back(&*it);
-        }
-        std::vector<Source> out;
-        for (const auto* leaf : leaves) {
+        std::vector<std::vector<Source>> perLeaf(leaves.size());
+        parallel_internal::forEachIndex(leaves.size(), threads, [&](size_t i) {
+            const auto* leaf = leaves[i];
             CoordBBox b = leaf->getNodeBoundingBox();
             b.intersect(ub);
+            std::vector<Source>& out = perLeaf[i];
             for (auto it = b.begin(); it; ++it) {
                 const Coord c = *it;
                 const int32_t m = leaf->getValue(c);
@@ -132,7 +130,10 @@ public:
                 }
                 if (best != SIZE_MAX) out.push_back(Source{c, m, best, bestD});
             }
-        }
+        });
+        std::vector<Source> out;
+        for (const std::vector<Source>& l : perLeaf)
+            out.insert(out.end(), l.begin(), l.end());
         std::sort(out.begin(), out.end(), [](const Source& a, const Source& b) { return a.c < b.c; });
         return out;
     }
@@ -327,7 +328,7 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
         int32_t mass;
     };
     std::vector<Move> moves;
-    const std::vector<Source> sources = pusher.sources(u);
+    const std::vector<Source> sources = pusher.sources(u, automaton.options().threads);
     // Voxels each tool entered: the contact size (and the compress push's depth).
     std::vector<uint64_t> entered(tools.size(), 0);
     for (const Source& s : sources)
@@ -366,7 +367,14 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     if (moves.empty()) return report;
 
     report.region = region;
-    automaton.edit(region, [&](MassGrid& grid) {
+    // The edit rescans and wakes only the part of the region near clay (ClayLeaves.h): the same
+    // clay blocks as the whole region, at a cost that follows the clay, not the tools' bounds.
+    Box targets;
+    for (const auto& a : pusher.added())
+        targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}},
+                                     {{a.first.x(), a.first.y(), a.first.z()}}});
+    const Box editRegion = clay_internal::narrowedEditRegion(automaton.mass()->constTree(), region, targets);
+    automaton.edit(editRegion, [&](MassGrid& grid) {
         auto acc = grid.getAccessor();
         for (const Move& m : moves)
             acc.setValueOff(m.from, 0);

@@ -1,10 +1,29 @@
 // Running a scene frame by frame: move the tools, push clay out of them, settle.
+//
+// While clay settles, the voxels a tool occupies are obstacles (otherwise clay would flow back into
+// the tool that just pushed it out). Only the tool voxels the automaton can read need to be
+// obstacles: those in a Margolus block with clay, and those the no-room flood reaches. So the tools
+// are marked where the clay is, ahead of it, not over their whole bounds (placeTools, cover):
+// - at placement, in every leaf slot (8^3) of the tools' bounds within one slot of a mass leaf
+//   (clay lies in leaves; a block reaches one voxel beyond its cell), evaluated in parallel over
+//   slots and merged in slot order, tool by tool (the same cells as the whole bounds gave, where
+//   they are needed; thread-count independent);
+// - before each settle (the push may have put clay in new leaves) and after every step that
+//   created a leaf (a step moves clay at most one voxel, into a slot already covered), the slots
+//   near the new leaves; before the no-room flood (Automaton::kNoRoomCheckSteps, then doublings)
+//   also the slots the flood can reach through empty cells (ceil(overload / Tc) + 1 voxels
+//   beyond the clay). These go through Automaton::extendObstacles: cells no step has read yet,
+//   so nothing is woken and the quiet-step count is kept;
+// - all of the bounds when that is fewer slots, or with the global transport (it moves clay far).
+// The clay, the step counts and the hashes are those of marking the whole bounds every frame.
 #include "vdbclay/Sculpt.h"
 
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 
+#include "ClayLeaves.h"
 #include "Format.h"
+#include "ParallelFor.h"
 #include "VdbCheck.h"
 
 #include <openvdb/openvdb.h>
@@ -722,6 +741,12 @@ struct Sculptor::Impl {
     uint64_t openSteps = 0;                ///< its settling steps so far
     std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
     Box toolRegion;                        ///< bounds of the tools as placed now
+    // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
+    std::vector<ShapePtr> placed;          ///< the tools as placed now
+    openvdb::MaskTree coveredSlots{false}; ///< slots of toolRegion whose tool cells are marked
+    openvdb::MaskTree seenLeaves{false};   ///< mass leaves whose neighbouring slots are covered
+    bool coveredAll = false;               ///< every slot of toolRegion is covered
+    openvdb::Index64 leavesAtCover = 0;    ///< the mass tree's leaf count at the last cover
     std::function<bool()> stopPoll;
     bool stopped = false;
     ClayMeta startMeta;
@@ -760,44 +785,138 @@ struct Sculptor::Impl {
         return !unite(regionOf(toolsAt(frame + 1)), toolRegion).empty();
     }
 
-    /// Settles the open frame step by step, with the rest of its step budget, exactly as
-    /// Automaton::settle(maxSteps, tolerance) would, but returns after a step when the stop poll
-    /// asks (and the state resumes exactly). @a finished tells which.
+    /// Settles the open frame through Automaton::settle with the rest of its step budget: the
+    /// frame's steps so far are settle's stepsDone, so the budget and the no-room check's schedule
+    /// count in frame steps and a resumed frame stops exactly where an unbroken one does. The stop
+    /// hook keeps the tools' cells ahead of the clay (keepToolsAhead) and ends the settle after a
+    /// step when the stop poll asks and the state resumes exactly (no quiet step is pending: a
+    /// resumed automaton restarts its quiet count at 0). @a finished is false when the poll cut the
+    /// frame short (StopReason::Stopped).
     StepReport settleOpenFrame(bool& finished)
     {
-        StepReport total;
-        total.residualOverload = automaton->residualOverload();
-        total.settled = automaton->settled();
-        const uint64_t budget = scene.settle.maxSteps;
-        const int64_t tolerance = scene.settle.tolerance;
-        for (;;) {
-            const uint64_t left = openSteps >= budget ? 0 : budget - openSteps;
-            // The no-room check on Automaton::settle's own schedule (after kNoRoomCheckSteps steps
-            // of the frame, then at each doubling: powers of two), counted in frame steps so that a
-            // resumed frame checks exactly where an unbroken one does.
-            if (openSteps >= Automaton::kNoRoomCheckSteps && (openSteps & (openSteps - 1)) == 0 &&
-                !automaton->settled() && !(tolerance > 0 && automaton->residualOverload() <= tolerance) &&
-                automaton->overloadHasNoRoom()) {
-                total.reason = StopReason::NoRoom;
-                finished = true;
-                return total;
+        SettleOptions so;
+        so.maxSteps = scene.settle.maxSteps;
+        so.tolerance = scene.settle.tolerance;
+        so.stepsDone = openSteps;
+        const uint64_t step0 = automaton->stepCount();
+        keepToolsAhead(openSteps, true);
+        so.stop = [this, step0](const Automaton& a) {
+            keepToolsAhead(openSteps + (a.stepCount() - step0), false);
+            return a.quietSteps() == 0 && stopRequested();
+        };
+        const StepReport r = automaton->settle(so);
+        openSteps += r.steps;
+        finished = r.reason != StopReason::Stopped;
+        return r;
+    }
+
+    /// Before the automaton's next step, with @a frameSteps steps of the frame run: marks the
+    /// tools' cells near leaves created since the last cover (always when @a afterPush), and, when
+    /// settle's next check is the no-room flood, as far as the flood can reach.
+    void keepToolsAhead(uint64_t frameSteps, bool afterPush)
+    {
+        if (placed.empty() || coveredAll) return;
+        const bool floodNext =
+            frameSteps >= Automaton::kNoRoomCheckSteps && (frameSteps & (frameSteps - 1)) == 0;
+        const openvdb::Index64 leaves = mass->constTree().leafCount();
+        if (!afterPush && !floodNext && leaves == leavesAtCover) return;
+        int64_t reach = 1;
+        if (floodNext) {
+            // The flood gives up once the empty cells it reached have room for the overload, so it
+            // reads obstacles at most ceil(overload / Tc) + 1 voxels beyond the clay.
+            const int64_t tc = scene.rule.threshold;
+            const int64_t voxels = (automaton->residualOverload() + tc - 1) / tc + 2;
+            reach = std::max<int64_t>(1, (voxels + 7) / 8 + 1);
+        }
+        automaton->extendObstacles([&](ObstacleGrid& grid) { cover(grid, reach); });
+    }
+
+    /// Marks the tools' cells (placed, within toolRegion) in the slots within @a reach slots of a
+    /// mass leaf that are not covered yet; in every slot of toolRegion when that is fewer, or with
+    /// the global transport. The tools are evaluated one after the other, each in parallel over
+    /// the slots, and merged in slot order: the cells marked and toolCells do not depend on the
+    /// thread count, and a cell already an obstacle is not evaluated (as forEachVoxelInside's
+    /// skip did over the whole bounds).
+    void cover(ObstacleGrid& grid, int64_t reach)
+    {
+        leavesAtCover = mass->constTree().leafCount();
+        const Box box = toolRegion;
+        if (placed.empty() || box.empty() || coveredAll) return;
+        using openvdb::Coord;
+        const bool is2D = scene.dimensions == 2;
+        const Coord lo(box.min[0] >> 3, box.min[1] >> 3, box.min[2] >> 3);
+        const Coord hi(box.max[0] >> 3, box.max[1] >> 3, box.max[2] >> 3);
+        const int64_t boxSlots = clay_internal::slotCount(box);
+        bool all = scene.transport == Transport::Global || reach > 64;
+        std::vector<const clay_internal::MassLeafT*> leaves;
+        if (!all) {
+            leaves =
+                clay_internal::leavesNear(mass->constTree(), clay_internal::grownBy(box, int32_t(8 * reach)));
+            const int64_t side = 2 * reach + 1;
+            const int64_t around = side * side * (is2D ? 1 : side);
+            all = int64_t(leaves.size()) > boxSlots / around;
+        }
+        std::vector<Coord> slots;
+        openvdb::tree::ValueAccessor<openvdb::MaskTree> covered(coveredSlots);
+        if (all) {
+            for (int32_t x = lo.x(); x <= hi.x(); ++x)
+                for (int32_t y = lo.y(); y <= hi.y(); ++y)
+                    for (int32_t z = lo.z(); z <= hi.z(); ++z)
+                        if (!covered.isValueOn(Coord(x, y, z))) slots.emplace_back(x, y, z);
+            coveredAll = true;
+        } else {
+            openvdb::tree::ValueAccessor<openvdb::MaskTree> seen(seenLeaves);
+            openvdb::MaskTree want(false);
+            openvdb::tree::ValueAccessor<openvdb::MaskTree> wacc(want);
+            const int r = int(reach), rz = is2D ? 0 : r;
+            for (const auto* leaf : leaves) {
+                const Coord o(leaf->origin().x() >> 3, leaf->origin().y() >> 3, leaf->origin().z() >> 3);
+                if (reach == 1) {
+                    if (seen.isValueOn(o)) continue;
+                    seen.setValueOn(o);
+                }
+                for (int dx = -r; dx <= r; ++dx)
+                    for (int dy = -r; dy <= r; ++dy)
+                        for (int dz = -rz; dz <= rz; ++dz) {
+                            const Coord c = o.offsetBy(dx, dy, dz);
+                            if (c.x() < lo.x() || c.x() > hi.x() || c.y() < lo.y() || c.y() > hi.y() ||
+                                c.z() < lo.z() || c.z() > hi.z() || covered.isValueOn(c))
+                                continue;
+                            wacc.setValueOn(c);
+                        }
             }
-            // settle(1) runs one step unless the automaton is settled or within tolerance;
-            // settle(0) once the budget is spent only tells why it stops: the checks and their
-            // order stay the automaton's.
-            const StepReport r = automaton->settle(left ? 1 : 0, tolerance);
-            total += r;
-            if (r.steps == 0) {
-                total.reason = r.reason;
-                finished = true;
-                return total;
-            }
-            ++openSteps;
-            if (automaton->quietSteps() == 0 && stopRequested()) {
-                total.reason = StopReason::StepBudget;
-                finished = false;
-                return total;
-            }
+            for (auto it = want.cbeginValueOn(); it; ++it)
+                slots.push_back(it.getCoord());
+            std::sort(slots.begin(), slots.end());
+        }
+        for (const Coord& c : slots)
+            covered.setValueOn(c);
+        if (slots.empty()) return;
+        auto acc = grid.getAccessor();
+        for (const ShapePtr& t : placed) {
+            Box tb = t->bounds();
+            if (is2D) tb = intersect(tb, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
+            std::vector<std::vector<Coord>> inside(slots.size());
+            parallel_internal::forEachIndex(slots.size(), automaton->options().threads, [&](size_t i) {
+                const Coord o = slots[i];
+                const Box sb = intersect(tb, Box{{{o.x() * 8, o.y() * 8, o.z() * 8}},
+                                                 {{o.x() * 8 + 7, o.y() * 8 + 7, o.z() * 8 + 7}}});
+                if (sb.empty()) return;
+                openvdb::tree::ValueAccessor<const openvdb::MaskTree, false> ro(grid.constTree());
+                for (int32_t x = sb.min[0]; x <= sb.max[0]; ++x)
+                    for (int32_t y = sb.min[1]; y <= sb.max[1]; ++y)
+                        for (int32_t z = sb.min[2]; z <= sb.max[2]; ++z) {
+                            const Coord c(x, y, z);
+                            if (ro.isValueOn(c)) continue;
+                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0)
+                                inside[i].push_back(c);
+                        }
+            });
+            for (const std::vector<Coord>& cells : inside)
+                for (const Coord& c : cells) {
+                    acc.setValueOn(c);
+                    toolCells.push_back(c);
+                }
         }
     }
 
@@ -862,28 +981,28 @@ struct Sculptor::Impl {
     }
 
     /// While clay settles, the voxels a tool occupies are obstacles: otherwise clay would flow back
-    /// into the tool that just pushed it out. Moves those obstacle cells to @a tools' placement.
+    /// into the tool that just pushed it out. Moves those obstacle cells to @a tools' placement,
+    /// where the clay can read them (file comment). The edit rescans and wakes the tools' old and
+    /// new bounds, cut to the part near clay (ClayLeaves.h: the same clay blocks).
     void placeTools(const std::vector<ShapePtr>& tools)
     {
         const Box region = regionOf(tools);
         const Box both = unite(region, toolRegion);
         if (both.empty()) return;
-        automaton->editObstacles(both, [&](ObstacleGrid& grid) {
+        const Box edited = clay_internal::narrowedEditRegion(mass->constTree(), both);
+        automaton->editObstacles(edited, [&](ObstacleGrid& grid) {
             auto acc = grid.getAccessor();
             auto fixed = obstacles->getConstAccessor();
             for (const openvdb::Coord& c : toolCells) {
                 if (!fixed.isValueOn(c)) acc.setValueOff(c);
             }
             toolCells.clear();
-            for (const ShapePtr& t : tools) {
-                forEachVoxelInside(
-                    *t, scene.dimensions,
-                    [&](int32_t x, int32_t y, int32_t z) {
-                        acc.setValueOn(openvdb::Coord(x, y, z));
-                        toolCells.emplace_back(x, y, z);
-                    },
-                    [&](int32_t x, int32_t y, int32_t z) { return acc.isValueOn(openvdb::Coord(x, y, z)); });
-            }
+            placed = tools;
+            toolRegion = region;
+            coveredSlots.clear();
+            seenLeaves.clear();
+            coveredAll = false;
+            cover(grid, 1);
             grid.tree().prune();
         });
         toolRegion = region;

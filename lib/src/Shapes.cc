@@ -167,8 +167,8 @@ public:
         }
         mBounds = boxOf(lo, hi, describe());
     }
-    double distance(const Vec3& p) const override { return mInner->distance(mPose.applyInverse(p)); }
-    Vec3 normal(const Vec3& p) const override { return mul(mRot, mInner->normal(mPose.applyInverse(p))); }
+    double distance(const Vec3& p) const override { return mInner->distance(toInner(p)); }
+    Vec3 normal(const Vec3& p) const override { return mul(mRot, mInner->normal(toInner(p))); }
     Box bounds() const override { return mBounds; }
     std::string describe() const override
     {
@@ -177,6 +177,17 @@ public:
     }
 
 private:
+    /// Pose::applyInverse with the rotation computed once, at construction: the same floating-point
+    /// operations in the same order, so the same bits (sin/cos were recomputed for every point).
+    Vec3 toInner(const Vec3& p) const
+    {
+        const Vec3& t = mPose.translation;
+        const Vec3& c = mPose.pivot;
+        const Vec3 q{{p[0] - t[0] - c[0], p[1] - t[1] - c[1], p[2] - t[2] - c[2]}};
+        const Vec3 r = mulT(mRot, q);
+        return {{r[0] + c[0], r[1] + c[1], r[2] + c[2]}};
+    }
+
     ShapePtr mInner;
     Pose mPose;
     Mat3 mRot;

@@ -158,6 +158,13 @@ public:
     /// The region is rescanned as by edit(). Clay left in a cell that becomes an obstacle stays
     /// there, frozen, until the cell is freed.
     void editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn);
+    /// Lets @a fn turn on obstacle cells where no clay can be read yet, without rescanning or
+    /// waking anything and keeping the quiet-step count, so that settling goes on exactly as if
+    /// those cells had been obstacles all along (a Sculptor places its tools' cells ahead of the
+    /// clay this way). The caller guarantees that every cell @a fn turns on holds no clay and
+    /// shares no Margolus block with a cell that holds clay; it is not checked. Creates an empty
+    /// obstacle grid if there was none. Use editObstacles() for any other change.
+    void extendObstacles(const std::function<void(ObstacleGrid&)>& fn);
     /// Rescans the whole grid after arbitrary outside changes, as the constructor does.
     void resync();
 

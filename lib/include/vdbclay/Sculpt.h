@@ -143,6 +143,9 @@ public:
     bool frameOpen() const; ///< a frame was cut short by a stop request and is not finished
     uint64_t totalFrames() const;
     const Scene& scene() const;
+    /// The automaton the frames settle. While tools are placed, their voxels are obstacles where
+    /// the clay can reach them (near the clay, extended as it spreads while runFrame() settles),
+    /// not over the tools' whole bounds; step it through runFrame() rather than directly.
     Automaton& automaton();
     const MassGridPtr& mass() const;
 

@@ -1,0 +1,108 @@
+// The clay near a box: the push and the tools' placement visit only these leaves, so their cost
+// follows the clay a tool's bounds hold, not the volume of those bounds.
+//
+// leavesNear() finds the mass leaves that overlap a box by probing the box's leaf slots or by
+// walking every leaf, whichever is fewer (so the cost is min(slots of the box, leaves of the
+// tree)); the result is in slot order (x, then y, then z, of the leaf origins), the same on every
+// call and thread count.
+//
+// narrowedEditRegion() shrinks a region that an Automaton::edit() or editObstacles() would rescan
+// and wake to the part near the clay, waking exactly the same clay blocks: the automaton wakes every
+// block anchored in a leaf slot within one voxel of the region (Candidates::addPending), and only a
+// block holding clay can change; such a block's anchor slot lies within one slot of a clay leaf. So
+// the region cut to the clay leaves near it, grown by 16 voxels, wakes the same blocks that hold
+// clay (blocks without clay change nothing: the same state, only fewer blocks examined) and rescans
+// the same clay leaves (every clay leaf that meets the region lies inside the cut).
+#pragma once
+
+#include "vdbclay/Types.h"
+
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <climits>
+#include <cstdint>
+#include <vector>
+
+namespace vdbclay {
+namespace clay_internal {
+
+using MassLeafT = openvdb::Int32Tree::LeafNodeType;
+
+/// Number of leaf slots (8^3 aligned) that @a b meets (0 if empty); saturates at INT64_MAX / 4.
+inline int64_t slotCount(const Box& b)
+{
+    if (b.empty()) return 0;
+    int64_t n = 1;
+    for (int i = 0; i < 3; ++i) {
+        n *= (int64_t(b.max[i]) >> 3) - (int64_t(b.min[i]) >> 3) + 1;
+        if (n > INT64_MAX / (int64_t(1) << 30)) return INT64_MAX / 4;
+    }
+    return n;
+}
+
+inline bool originLess(const openvdb::Coord& a, const openvdb::Coord& b)
+{
+    return a < b; // x, then y, then z
+}
+
+/// The leaves of @a tree that overlap @a b, in origin order.
+inline std::vector<const MassLeafT*> leavesNear(const openvdb::Int32Tree& tree, const Box& b)
+{
+    std::vector<const MassLeafT*> out;
+    if (b.empty()) return out;
+    const openvdb::CoordBBox bb(openvdb::Coord(b.min[0], b.min[1], b.min[2]),
+                                openvdb::Coord(b.max[0], b.max[1], b.max[2]));
+    if (slotCount(b) <= int64_t(tree.leafCount())) {
+        for (int64_t x = b.min[0] & ~7; x <= b.max[0]; x += 8)
+            for (int64_t y = b.min[1] & ~7; y <= b.max[1]; y += 8)
+                for (int64_t z = b.min[2] & ~7; z <= b.max[2]; z += 8)
+                    if (const MassLeafT* l =
+                            tree.probeConstLeaf(openvdb::Coord(int32_t(x), int32_t(y), int32_t(z))))
+                        out.push_back(l);
+        return out;
+    }
+    for (auto it = tree.cbeginLeaf(); it; ++it)
+        if (it->getNodeBoundingBox().hasOverlap(bb)) out.push_back(&*it);
+    std::sort(out.begin(), out.end(),
+              [](const MassLeafT* p, const MassLeafT* q) { return originLess(p->origin(), q->origin()); });
+    return out;
+}
+
+/// @a b grown by @a by voxels on every side (clamped far from the int32 limits).
+inline Box grownBy(const Box& b, int32_t by)
+{
+    if (b.empty()) return b;
+    Box r = b;
+    for (int i = 0; i < 3; ++i) {
+        r.min[i] = int32_t(std::max<int64_t>(int64_t(b.min[i]) - by, INT32_MIN / 2));
+        r.max[i] = int32_t(std::min<int64_t>(int64_t(b.max[i]) + by, INT32_MAX / 2));
+    }
+    return r;
+}
+
+/// The voxels of the leaves in @a leaves (empty box if none).
+inline Box leafBounds(const std::vector<const MassLeafT*>& leaves)
+{
+    Box b;
+    for (const MassLeafT* l : leaves) {
+        const openvdb::Coord o = l->origin();
+        b = unite(b, Box{{{o.x(), o.y(), o.z()}}, {{o.x() + 7, o.y() + 7, o.z() + 7}}});
+    }
+    return b;
+}
+
+/// @a region cut to the clay near it (see the file comment); @a alsoNear (e.g. where a push puts
+/// clay in leaves that do not exist yet) is kept as if it were clay. With no clay near, the single
+/// voxel region.min: an edit of a non-empty region still happens (and restarts the automaton's
+/// quiet-step count, as the whole region would), waking only blocks without clay.
+inline Box narrowedEditRegion(const openvdb::Int32Tree& tree, const Box& region, const Box& alsoNear = Box())
+{
+    if (region.empty()) return region;
+    const Box near = unite(leafBounds(leavesNear(tree, grownBy(region, 16))), alsoNear);
+    const Box cut = intersect(region, grownBy(near, 16));
+    return cut.empty() ? Box{region.min, region.min} : cut;
+}
+
+} // namespace clay_internal
+} // namespace vdbclay
