@@ -44,7 +44,9 @@ if [ ! -f "$TBB_PREFIX/lib/libtbb.so.12" ]; then
   cmake --install "$TBB_ROOT/build" >/dev/null
 fi
 
-# --- vdbclay, instrumented: the library's core (VDBCLAY_CORE_ONLY) and the threaded tests -------
+# --- vdbclay, instrumented: the library, the CLI and the threaded tests ------------------------
+# Threads run in the automaton, the push and the tools' placement (Sculpt.cc, Push.cc), the global
+# transport's solver (Transport.cc) and the output (Surface.cc): all of them are instrumented.
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
 launcher=() # ccache, as scripts/build.sh uses it
@@ -53,9 +55,9 @@ if command -v ccache >/dev/null 2>&1; then
 fi
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-        -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_APPS=OFF -DVDBCLAY_BUILD_PYTHON=OFF -DVDBCLAY_CORE_ONLY=ON >/dev/null
+        -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_PYTHON=OFF >/dev/null
 fi
-cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton
+cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_tool_placement test_transport vdbclay_cli
 
 # The instrumented TBB must be the one loaded: check, rather than trust the search path.
 export LD_LIBRARY_PATH=$TBB_PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -81,4 +83,14 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 # the normal and ASan suites run it.
 "$BUILD_DIR/tests/test_automaton" --gtest_brief=1 \
   --gtest_filter='-AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles'
+# The push and the tools' placement on 1, 2, 3 and 8 threads; the global layer's solver likewise.
+"$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1
+"$BUILD_DIR/tests/test_transport" --gtest_brief=1 --gtest_filter='*Thread*'
+# A whole scene through the CLI (scene, push, settle, the parallel output) on 2 and 3 threads.
+tsan_work=$BUILD_DIR/tsan-scene
+rm -rf "$tsan_work"; mkdir -p "$tsan_work"
+for t in 2 3; do
+  "$BUILD_DIR/apps/vdbclay" run data/scenes/cube-small-plate.json --frames 3 --threads $t --quiet \
+    -o "$tsan_work/t$t.vdb" --mesh "$tsan_work/t$t.obj" > /dev/null
+done
 echo "test-tsan: no data race reported"
