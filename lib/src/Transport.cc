@@ -667,20 +667,43 @@ private:
             std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
         const double stop = mOpt.tolerance * std::max(bnorm, 1e-300);
         double rz = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * z[k]; });
+        double rr = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * r[k]; });
+        // Each pass below also forms its dot product, per chunk, added in chunk order.
+        auto pass = [&](const auto& fn) {
+            const size_t chunks = (n + kChunk - 1) / kChunk;
+            partial.assign(chunks, 0.0);
+            forChunks(n, mSerial, [&](size_t lo, size_t hi) { partial[lo / kChunk] = fn(lo, hi); });
+            double sum = 0;
+            for (double v : partial)
+                sum += v;
+            return sum;
+        };
         const uint64_t maxIt = 20000;
         for (uint64_t it = 0; it < maxIt; ++it) {
-            const double rnorm =
-                std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * r[k]; }));
-            if (rnorm <= stop) break;
-            apply(p, q);
-            const double pq = chunkedSum(n, mSerial, partial, [&](size_t k) { return p[k] * q[k]; });
+            if (std::sqrt(rr) <= stop) break;
+            const double pq = pass([&](size_t lo, size_t hi) { // q = A p, and p . q
+                double sum = 0;
+                for (size_t k = lo; k < hi; ++k) {
+                    double v = diag[k] * p[k];
+                    for (int d = 0; d < 6; ++d) {
+                        const int32_t j = nb[k * 6 + size_t(d)];
+                        if (j >= 0) v -= p[size_t(j)];
+                    }
+                    q[k] = v;
+                    sum += p[k] * v;
+                }
+                return sum;
+            });
             if (!(pq > 0)) break;
             const double alpha = rz / pq;
-            forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            rr = pass([&](size_t lo, size_t hi) {
+                double sum = 0;
                 for (size_t k = lo; k < hi; ++k) {
                     x[k] += alpha * p[k];
                     r[k] -= alpha * q[k];
+                    sum += r[k] * r[k];
                 }
+                return sum;
             });
             precondition(r, z);
             const double rzNew = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * z[k]; });
