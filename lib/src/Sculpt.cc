@@ -1065,6 +1065,9 @@ FrameReport Sculptor::runFrame()
             go.reach = rep.push.contactSize > 0
                            ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2
                            : 0;
+            // The overload the push made lies in its region: look for it there only (a frame
+            // costs the tool's region, not the model's size).
+            if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
             rep.transport = transportGlobally(*im.automaton, go);
         }
         im.open = true;

@@ -401,14 +401,38 @@ public:
     GlobalTransportReport run()
     {
         GlobalTransportReport rep;
+        // Nothing over Tc (the automaton keeps the sum): nothing to do, at no cost (a push that
+        // found room where it was, a compressible clay).
+        if (mA.residualOverload() == 0) return rep;
         std::vector<Coord> seeds;
-        for (auto it = mMass.cbeginValueOn(); it; ++it) {
-            if (*it > mTc && !isObstacle(it.getCoord())) {
-                seeds.push_back(it.getCoord());
-                rep.overloadBefore += int64_t(*it) - mTc;
+        auto seed = [&](const Coord& c, int32_t m) {
+            if (m > mTc && !isObstacle(c)) {
+                seeds.push_back(c);
+                rep.overloadBefore += int64_t(m) - mTc;
             }
+        };
+        if (mOpt.seedRegion.empty()) {
+            for (auto it = mMass.cbeginValueOn(); it; ++it)
+                seed(it.getCoord(), *it);
+        } else { // the leaves that meet the region, in x, y, z order of their origins
+            const Box& r = mOpt.seedRegion;
+            openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(mMass);
+            const int32_t lo[3] = {r.min[0] & ~7, r.min[1] & ~7, r.min[2] & ~7};
+            for (int32_t x = lo[0]; x <= r.max[0]; x += 8)
+                for (int32_t y = lo[1]; y <= r.max[1]; y += 8)
+                    for (int32_t z = lo[2]; z <= r.max[2]; z += 8) {
+                        const auto* leaf = acc.probeConstLeaf(Coord(x, y, z));
+                        if (!leaf) continue;
+                        for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                            const Coord c = it.getCoord();
+                            if (c.x() < r.min[0] || c.x() > r.max[0] || c.y() < r.min[1] || c.y() > r.max[1] ||
+                                c.z() < r.min[2] || c.z() > r.max[2])
+                                continue;
+                            seed(c, *it);
+                        }
+                    }
         }
-        rep.overloadAfter = rep.overloadBefore;
+        rep.overloadAfter = mA.residualOverload();
         if (seeds.empty()) return rep;
 
         int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;

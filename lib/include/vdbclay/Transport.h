@@ -26,6 +26,9 @@ struct GlobalTransportOptions {
     /// plastic zone. 0: the whole connected body. When a region within the reach has no room, the
     /// reach is doubled until it has, or the whole body is reached (then NoRoom).
     int64_t reach = 0;
+    /// Only the cells over Tc in this box move (the push's region); empty: every cell of the grid.
+    /// Either way nothing runs when the automaton holds no overload (residualOverload() == 0).
+    Box seedRegion;
     /// Active-set rounds (each one Poisson solve) at most.
     int maxRounds = 12;
     /// Conjugate gradients stop at this residual, relative to the right-hand side. The routing is
@@ -41,8 +44,8 @@ struct GlobalTransportOptions {
 };
 
 struct GlobalTransportReport {
-    int64_t overloadBefore = 0;   ///< sum of max(0, m - Tc) over non-obstacle cells, before
-    int64_t overloadAfter = 0;    ///< and after
+    int64_t overloadBefore = 0;   ///< sum of max(0, m - Tc) over the seed region's cells, before
+    int64_t overloadAfter = 0;    ///< after, over every cell (Automaton::residualOverload())
     int64_t massMoved = 0;        ///< clay routed from cell to cell (sum of the integer face flows)
     uint64_t unknowns = 0;        ///< cells of the last solve
     uint64_t solves = 0;          ///< Poisson solves (active-set rounds, over every reach tried)
