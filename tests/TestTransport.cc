@@ -198,6 +198,32 @@ TEST_F(TransportTest, GlobalLayerMovesTheOverloadToRoomExactly)
     EXPECT_EQ(outside, 5000);
 }
 
+TEST_F(TransportTest, GlobalLayerSkipsOverloadThatFitsWhereItIs)
+{
+    // Compressible clay (m0 = Tc / 2) with 3000 extra in one cell: its 24 cells within two steps
+    // have 12000 room, so no solve; with 13000 extra (more than that room) it solves; in clay at
+    // Tc (no room near) it solves. The automaton settles the skipped overload, mass exact.
+    for (int extra : {3000, 13000}) {
+        MassGridPtr g = block(box(0, 0, 0, 9, 9, 9), 500);
+        g->tree().setValue(openvdb::Coord(5, 5, 5), 500 + extra);
+        Automaton a(g, opts());
+        const int64_t m0 = a.totalMass();
+        const GlobalTransportReport r = transportGlobally(a);
+        EXPECT_EQ(r.skipped, extra == 3000) << extra;
+        EXPECT_EQ(r.solves == 0, extra == 3000) << extra;
+        a.settle(100000);
+        EXPECT_EQ(a.residualOverload(), 0);
+        EXPECT_EQ(a.totalMass(), m0);
+    }
+    MassGridPtr g = block(box(0, 0, 0, 9, 9, 9), 1000);
+    g->tree().setValue(openvdb::Coord(5, 5, 5), 1100);
+    Automaton a(g, opts());
+    const GlobalTransportReport r = transportGlobally(a);
+    EXPECT_FALSE(r.skipped);
+    EXPECT_GE(r.solves, 1u);
+    EXPECT_EQ(r.overloadAfter, 0);
+}
+
 TEST_F(TransportTest, GlobalLayerIsIdenticalOnAnyThreadCount2DAnd3D)
 {
     for (int dims : {2, 3}) {

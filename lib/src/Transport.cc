@@ -425,8 +425,8 @@ public:
                         if (!leaf) continue;
                         for (auto it = leaf->cbeginValueOn(); it; ++it) {
                             const Coord c = it.getCoord();
-                            if (c.x() < r.min[0] || c.x() > r.max[0] || c.y() < r.min[1] || c.y() > r.max[1] ||
-                                c.z() < r.min[2] || c.z() > r.max[2])
+                            if (c.x() < r.min[0] || c.x() > r.max[0] || c.y() < r.min[1] ||
+                                c.y() > r.max[1] || c.z() < r.min[2] || c.z() > r.max[2])
                                 continue;
                             seed(c, *it);
                         }
@@ -434,6 +434,10 @@ public:
         }
         rep.overloadAfter = mA.residualOverload();
         if (seeds.empty()) return rep;
+        if (fitsNearby(seeds, rep.overloadBefore)) {
+            rep.skipped = true;
+            return rep;
+        }
 
         int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;
         for (;;) {
@@ -455,6 +459,40 @@ public:
 
 private:
     bool isObstacle(const Coord& c) const { return mObs && mObs->isValueOn(c); }
+
+    /// The overload fits where it is: every over cell has room within two face steps, and the
+    /// distinct cells with room within two steps of the over cells hold all of it (compressible
+    /// clay, a push beside free space). The automaton then settles it in a few local steps, and a
+    /// solve would cost more than it saves (docs/TRANSPORT.md: the compressible press, the stroke
+    /// at 0.95 Tc). Stops at the first over cell with no room near it (saturated clay).
+    bool fitsNearby(const std::vector<Coord>& seeds, int64_t excess) const
+    {
+        std::vector<Coord> near;
+        for (int dx = -2; dx <= 2; ++dx)
+            for (int dy = -2; dy <= 2; ++dy)
+                for (int dz = mDirs == 6 ? -2 : 0; dz <= (mDirs == 6 ? 2 : 0); ++dz) {
+                    const int l1 = std::abs(dx) + std::abs(dy) + std::abs(dz);
+                    if (l1 >= 1 && l1 <= 2) near.emplace_back(dx, dy, dz);
+                }
+        openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(mMass);
+        std::vector<Coord> room;
+        for (const Coord& c : seeds) {
+            bool any = false;
+            for (const Coord& o : near) {
+                const Coord q = c + o;
+                if (acc.getValue(q) >= mTc || isObstacle(q)) continue;
+                any = true;
+                room.push_back(q);
+            }
+            if (!any) return false;
+        }
+        std::sort(room.begin(), room.end());
+        room.erase(std::unique(room.begin(), room.end()), room.end());
+        int64_t total = 0;
+        for (const Coord& q : room)
+            total += int64_t(mTc) - acc.getValue(q);
+        return total >= excess;
+    }
     bool inPlane(const Coord& c) const { return mDirs == 6 || c.z() == 0; }
 
     int32_t indexOf(const Coord& c) const

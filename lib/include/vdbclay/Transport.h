@@ -55,6 +55,9 @@ struct GlobalTransportReport {
     /// Some over clay is walled in (obstacles, tools) with no room in its connected body: its
     /// Poisson problem is singular. That clay is left where it is (the automaton reports NoRoom).
     bool noRoom = false;
+    /// The overload fitted where it was (room within two steps of every over cell, enough of it):
+    /// no solve, the automaton settles it locally.
+    bool skipped = false;
     int64_t massNoRoom = 0; ///< the overload of those walled-in regions
     double seconds = 0;
     Box region; ///< the voxels written (empty when nothing moved)
