@@ -3,6 +3,8 @@
 //   transport_study squeeze R0        cylinder R0, H0 = 2 R0 between slip plates, pressed to H = R0
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc
 //   transport_study stroke W          sphere r 6 dipped 9 voxels into a clay sphere W wide, slid 2/frame
+//   transport_study scene FILE        a scene file, its transport and push overridden: steps, block
+//                                     updates, whole run and median frame time (frames 2..)
 // Each runs the four combinations (or those named by --only local-surface,global-compress,...)
 // on one thread and prints one line per combination.
 #include <vdbclay/Metrics.h>
@@ -163,14 +165,35 @@ void stroke(int width, const std::string& only)
     }
 }
 
+void sceneFile(const std::string& path, const std::string& only)
+{
+    for (auto& c : kCombos) {
+        if (!wanted(only, c[0], c[1])) continue;
+        Scene s = loadScene(path);
+        s.transport = parseTransport(c[0]);
+        s.push = parsePushMode(c[1]);
+        const Run run = runScene(s);
+        std::vector<double> f(run.frameSeconds.begin() + (run.frameSeconds.size() > 1 ? 1 : 0),
+                              run.frameSeconds.end());
+        std::sort(f.begin(), f.end());
+        std::printf(
+            "%s %-6s %-8s  steps %llu  blocks %llu  %.3f s (global layer %.3f s)  median frame %.2f ms  "
+            "drift %lld\n",
+            path.c_str(), c[0], c[1], (unsigned long long)run.steps, (unsigned long long)run.blocks,
+            run.seconds, run.transportSeconds, 1e3 * f[f.size() / 2], (long long)run.drift);
+        std::fflush(stdout);
+    }
+}
+
 } // namespace
 
 int main(int argc, char** argv)
 {
     openvdb::initialize();
     if (argc < 2) {
-        std::fprintf(stderr,
-                     "usage: transport_study squeeze R0 | poke | stroke W  [--only local-surface,...]\n");
+        std::fprintf(
+            stderr,
+            "usage: transport_study squeeze R0 | poke | stroke W | scene FILE  [--only local-surface,...]\n");
         return 2;
     }
     std::string only;
@@ -181,6 +204,8 @@ int main(int argc, char** argv)
         squeeze(argc > 2 ? std::atoi(argv[2]) : 16, only);
     else if (what == "poke")
         poke(only);
+    else if (what == "scene" && argc > 2)
+        sceneFile(argv[2], only);
     else if (what == "stroke")
         stroke(argc > 2 ? std::atoi(argv[2]) : 128, only);
     else

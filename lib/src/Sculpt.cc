@@ -137,7 +137,7 @@ constexpr int kMaxSweepSubsteps = 256;
 /// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
 constexpr double kReachPerContact = 1.0;
 
-constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88;
+constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
 
 int64_t leafIndex(int32_t v, int log2)
 {
@@ -616,7 +616,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // The global layer (lib/src/Transport.cc) holds, per full clay cell of the body: its coordinate,
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
     // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
-    // (~88 bytes). The full cells are at most the clay's leaves' voxels.
+    // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
+    // work vectors, coordinates, aggregates, members over every level: ~88 bytes). The full cells
+    // are at most the clay's leaves' voxels.
     if (scene.transport == Transport::Global)
         e.transportBytes = e.clayLeavesGrown * 512 * kTransportBytesPerCell;
     // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
@@ -1182,6 +1184,9 @@ FrameReport Sculptor::runFrame()
             go.reach = rep.push.contactSize > 0
                            ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2
                            : 0;
+            // The overload the push made lies in its region: look for it there only (a frame
+            // costs the tool's region, not the model's size).
+            if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
             rep.transport = transportGlobally(*im.automaton, go);
         }
         im.open = true;

@@ -26,26 +26,38 @@ struct GlobalTransportOptions {
     /// plastic zone. 0: the whole connected body. When a region within the reach has no room, the
     /// reach is doubled until it has, or the whole body is reached (then NoRoom).
     int64_t reach = 0;
+    /// Only the cells over Tc in this box move (the push's region); empty: every cell of the grid.
+    /// Either way nothing runs when the automaton holds no overload (residualOverload() == 0).
+    Box seedRegion;
     /// Active-set rounds (each one Poisson solve) at most.
     int maxRounds = 12;
-    /// Conjugate gradients stop at this residual, relative to the right-hand side.
-    double tolerance = 1e-5;
+    /// Conjugate gradients stop at this residual, relative to the right-hand side. The routing is
+    /// exact whatever it is; 1e-5 and 1e-3 gave the same squeezed shape (docs/TRANSPORT.md).
+    double tolerance = 1e-4;
+    /// Solves with at least this many unknowns are preconditioned by an aggregation multigrid
+    /// V-cycle (iterations nearly flat in N); smaller ones by MIC(0) (cheaper per iteration).
+    /// 0: always multigrid.
+    uint64_t multigridMin = 20000;
     /// Worker threads for the solver's vector operations: 0 all cores, 1 serial. The result does
     /// not depend on it (fixed chunks, partial sums added in chunk order).
     int threads = 0;
 };
 
 struct GlobalTransportReport {
-    int64_t overloadBefore = 0; ///< sum of max(0, m - Tc) over non-obstacle cells, before
-    int64_t overloadAfter = 0;  ///< and after
-    int64_t massMoved = 0;      ///< clay routed from cell to cell (sum of the integer face flows)
-    uint64_t unknowns = 0;      ///< cells of the last solve
-    uint64_t solves = 0;        ///< Poisson solves (active-set rounds, over every reach tried)
-    uint64_t iterations = 0;    ///< conjugate-gradient iterations, all solves
-    int64_t reach = 0;          ///< the reach finally used (0: the whole body)
+    int64_t overloadBefore = 0;   ///< sum of max(0, m - Tc) over the seed region's cells, before
+    int64_t overloadAfter = 0;    ///< after, over every cell (Automaton::residualOverload())
+    int64_t massMoved = 0;        ///< clay routed from cell to cell (sum of the integer face flows)
+    uint64_t unknowns = 0;        ///< cells of the last solve
+    uint64_t solves = 0;          ///< Poisson solves (active-set rounds, over every reach tried)
+    uint64_t iterations = 0;      ///< conjugate-gradient iterations, all solves
+    uint64_t multigridSolves = 0; ///< of the solves, those preconditioned by multigrid
+    int64_t reach = 0;            ///< the reach finally used (0: the whole body)
     /// Some over clay is walled in (obstacles, tools) with no room in its connected body: its
     /// Poisson problem is singular. That clay is left where it is (the automaton reports NoRoom).
     bool noRoom = false;
+    /// The overload fitted where it was (room within two steps of every over cell, enough of it):
+    /// no solve, the automaton settles it locally.
+    bool skipped = false;
     int64_t massNoRoom = 0; ///< the overload of those walled-in regions
     double seconds = 0;
     Box region; ///< the voxels written (empty when nothing moved)
