@@ -1220,7 +1220,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         const auto tf = Clock::now();
         const FrameReport r = runFrame();
         const double frameSecs = std::chrono::duration<double>(Clock::now() - tf).count();
-        s.pushSeconds += frameSecs - r.settle.seconds.total();
+        s.pushSeconds += frameSecs - r.settle.seconds.total() - r.transport.seconds;
         ++s.frames;
         s.steps += r.settle.steps;
         s.blocksVisited += r.settle.blocksVisited;

@@ -44,7 +44,7 @@ struct RunSummary {
     int64_t massTrapped = 0;      ///< clay inside a tool after the last push: it had nowhere to go
     /// Candidate blocks examined (before any filter), of those with a cell over Tc, and updated.
     uint64_t blocksVisited = 0, blocksOverTc = 0, blocksUpdated = 0;
-    double pushSeconds = 0;      ///< everything but the automaton's steps: push and global transport
+    double pushSeconds = 0;      ///< everything but the automaton's steps and the global transport
     double transportSeconds = 0; ///< of that, the global layer (Scene::transport global)
     uint64_t transportSolves = 0, transportIterations = 0;
     int64_t transportMassMoved = 0;
