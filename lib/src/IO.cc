@@ -623,9 +623,23 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
     auto grid = openvdb::Int32Grid::create(0);
     grid->setName("mass");
     auto acc = grid->getAccessor();
-    forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
-        acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
-    });
+    if (shape.keepsVolume()) {
+        // Meshes and level sets: each voxel holds round(m0 x the fraction of it the shape covers)
+        // (Coverage.cc), so the clay's mass is the shape's volume x m0. A boundary voxel holding
+        // less than Tc is under-full clay, which the automaton may fill like any other.
+        forEachVoxelCovered(shape, dimensions, [&](int32_t x, int32_t y, int32_t z, double fraction) {
+            const int64_t m = std::llround(double(massPerVoxel) * fraction);
+            if (m > 0) acc.setValueOn(openvdb::Coord(x, y, z), int32_t(std::min<int64_t>(m, massPerVoxel)));
+        });
+        if (grid->activeVoxelCount() == 0) {
+            throw Error(shape.describe() + " covers no voxel" + (dimensions == 2 ? " of the z = 0 layer" : "") +
+                        " enough to hold a unit of mass (" + std::to_string(massPerVoxel) + " per voxel)");
+        }
+    } else {
+        forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
+            acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
+        });
+    }
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));

@@ -2,6 +2,7 @@
 
 #include "vdbclay/Shapes.h"
 
+#include "Coverage.h"
 #include "LevelSetShape.h"
 
 #include <openvdb/openvdb.h>
@@ -324,6 +325,37 @@ openvdb::FloatGrid::Ptr windingLevelSet(const Mesh& m, const openvdb::FloatGrid&
     return grid;
 }
 
+/// A mesh: inside and distance from its level set (or winding-number level set); the clay it makes
+/// keeps its volume exactly (Coverage.h) when it is closed and consistently oriented, else by the
+/// level set's distance (forEachVoxelCovered).
+class MeshShape final : public Shape {
+public:
+    MeshShape(std::shared_ptr<const LevelSet> levelSet, std::vector<Vec3> points,
+              std::vector<std::array<uint32_t, 3>> triangles)
+        : mLevelSet(std::move(levelSet)), mPoints(std::move(points)), mTriangles(std::move(triangles))
+    {
+        mOriented = isOrientedClosed(mTriangles);
+    }
+    double distance(const Vec3& p) const override { return mLevelSet->distance(p); }
+    Vec3 normal(const Vec3& p) const override { return mLevelSet->normal(p); }
+    Box bounds() const override { return mLevelSet->bounds(); }
+    std::string describe() const override { return mLevelSet->describe(); }
+    bool keepsVolume() const override { return true; }
+    bool coverage(int dimensions,
+                  const std::function<void(int32_t, int32_t, int32_t, double)>& covered) const override
+    {
+        if (dimensions != 3 || !mOriented) return false;
+        meshCoverage(mPoints, mTriangles, covered);
+        return true;
+    }
+
+private:
+    std::shared_ptr<const LevelSet> mLevelSet;
+    std::vector<Vec3> mPoints;
+    std::vector<std::array<uint32_t, 3>> mTriangles;
+    bool mOriented = false;
+};
+
 } // namespace
 
 ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement)
@@ -381,8 +413,11 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         placed = " placed (scale " + vecStr(placement.scale) + ", rotate " + vecStr(placement.rotateDeg) +
                  ", translate " + vecStr(placement.translate) + ", pivot " + vecStr(placement.pivot) + ")";
     }
+    std::vector<Vec3> indexPoints;
+    indexPoints.reserve(mesh.points.size());
     for (auto& p : mesh.points) {
         const Vec3 q = placement.apply(worldToIndex(Vec3{{p[0], p[1], p[2]}}, voxelSize, up));
+        indexPoints.push_back(q);
         p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
     }
     openvdb::initialize();
@@ -413,7 +448,12 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         }
     }
     grid->setName(std::filesystem::path(path).filename().string());
-    return std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + how + placed);
+    std::vector<std::array<uint32_t, 3>> triangles;
+    triangles.reserve(mesh.triangles.size());
+    for (const auto& t : mesh.triangles)
+        triangles.push_back({{t[0], t[1], t[2]}});
+    return std::make_shared<MeshShape>(std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + how + placed),
+                                       std::move(indexPoints), std::move(triangles));
 }
 
 } // namespace vdbclay

@@ -73,7 +73,10 @@ void writeTextFile(const std::string& path, const std::string& text);
 /// write in progress, if any. Async-signal-safe (one unlink(2) of a name kept in a fixed buffer).
 void removePendingTempFile() noexcept;
 
-/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0).
+/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0), for
+/// the analytic shapes. Shapes that keepsVolume() (meshes, level sets) give every voxel
+/// round(massPerVoxel x the fraction of it they cover) instead (forEachVoxelCovered), so that the
+/// clay's mass is their volume x massPerVoxel; boundary voxels are under-full clay.
 /// @throw Error if massPerVoxel <= 0 or the shape is empty.
 MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);
 
