@@ -148,9 +148,9 @@ TEST_F(InteropTest, MeshOutputIsInWorldUnitsAndRoundTripsAsMeshClay)
     const MassGridPtr back = makeClay(*loadMesh(file("box.obj"), vs), 1000);
     EXPECT_EQ(clayVoxelCount(*back), uint64_t(20 * 10 * 10));
     EXPECT_EQ(back->evalActiveVoxelBoundingBox(), clay->evalActiveVoxelBoundingBox());
-    EXPECT_EQ(back->tree().getValue(Coord(-3, 6, 9)), 1000);  // a face
-    EXPECT_EQ(back->tree().getValue(Coord(5, 6, 9)), 1000);   // inside
-    EXPECT_EQ(back->tree().getValue(Coord(5, 2, 5)), 750);    // an edge: 3/4 of it
+    EXPECT_EQ(back->tree().getValue(Coord(-3, 6, 9)), 1000); // a face
+    EXPECT_EQ(back->tree().getValue(Coord(5, 6, 9)), 1000);  // inside
+    EXPECT_EQ(back->tree().getValue(Coord(5, 2, 5)), 750);   // an edge: 3/4 of it
     const double meshVolume = std::abs(objVolumeOf(file("box.obj"))) / (vs * vs * vs);
     EXPECT_NEAR(double(totalMass(*back)), meshVolume * 1000, 0.5 * 2000);
 }
@@ -432,7 +432,8 @@ std::string sphereObj(const Vec3& c, double r, int rings, int segments)
     for (int j = 0; j < segments; ++j) {
         o << "f 1 " << at(1, j + 1) << ' ' << at(1, j) << '\n';
         for (int i = 1; i + 1 < rings; ++i)
-            o << "f " << at(i, j) << ' ' << at(i, j + 1) << ' ' << at(i + 1, j + 1) << ' ' << at(i + 1, j) << '\n';
+            o << "f " << at(i, j) << ' ' << at(i, j + 1) << ' ' << at(i + 1, j + 1) << ' ' << at(i + 1, j)
+              << '\n';
         o << "f " << south << ' ' << at(rings - 1, j) << ' ' << at(rings - 1, j + 1) << '\n';
     }
     return o.str();
@@ -464,7 +465,7 @@ TEST_F(InteropTest, MeshClayOfA16UnitCubeWithFacesOnVoxelCentresHoldsExactly16Cu
     EXPECT_EQ(totalMass(*cube), int64_t(4096) * 1000);
     EXPECT_EQ(clayVoxelCount(*cube), uint64_t(17 * 17 * 17));
     EXPECT_EQ(cube->tree().getValue(Coord(0, 0, 0)), 1000);
-    EXPECT_EQ(cube->tree().getValue(Coord(8, 0, 0)), 500);  // a face through the voxel centre: half
+    EXPECT_EQ(cube->tree().getValue(Coord(8, 0, 0)), 500); // a face through the voxel centre: half
     EXPECT_EQ(cube->tree().getValue(Coord(-8, 0, 0)), 500);
     EXPECT_EQ(cube->tree().getValue(Coord(0, 0, -8)), 500);
     EXPECT_EQ(cube->tree().getValue(Coord(8, -8, 0)), 250); // an edge: a quarter
@@ -472,7 +473,8 @@ TEST_F(InteropTest, MeshClayOfA16UnitCubeWithFacesOnVoxelCentresHoldsExactly16Cu
     EXPECT_EQ(cube->tree().getValue(Coord(9, 0, 0)), 0);
     // The same cube from Blender (z up, voxel size 0.5, 8 units): the same clay.
     writeText(file("cube8z.obj"), boxesObj({{{{-4, -4, -4}}, {{4, 4, 4}}}}));
-    EXPECT_EQ(contentHash(*makeClay(*loadMesh(file("cube8z.obj"), 0.5, UpAxis::Z), 1000)), contentHash(*cube));
+    EXPECT_EQ(contentHash(*makeClay(*loadMesh(file("cube8z.obj"), 0.5, UpAxis::Z), 1000)),
+              contentHash(*cube));
     // Inside out (every face reversed), it is the same solid.
     std::string flipped;
     {
@@ -535,7 +537,8 @@ double supersampledVolume(const Shape& s)
         for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
             for (int32_t z = b.min[2]; z <= b.max[2]; ++z)
                 for (int i = 0; i < 64; ++i) {
-                    const Vec3 p{{x + ((i & 3) - 1.5) / 4, y + (((i >> 2) & 3) - 1.5) / 4, z + ((i >> 4) - 1.5) / 4}};
+                    const Vec3 p{
+                        {x + ((i & 3) - 1.5) / 4, y + (((i >> 2) & 3) - 1.5) / 4, z + ((i >> 4) - 1.5) / 4}};
                     if (s.distance(p) < 0) ++inside;
                 }
     return double(inside) / 64;
@@ -565,8 +568,8 @@ TEST_F(InteropTest, ExactMeshCoverageAgainstSamplesOfTheLevelSet)
 TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
 {
     const double r = 10;
-    auto ball = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(r), openvdb::Vec3f(0.3f, 0.1f, 0.f),
-                                                                         1.f);
+    auto ball = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        float(r), openvdb::Vec3f(0.3f, 0.1f, 0.f), 1.f);
     ball->setName("ball");
     openvdb::io::File(file("ball.vdb")).write({ball});
     const double want = 4.0 / 3.0 * M_PI * r * r * r;
@@ -583,9 +586,10 @@ TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
     // At half the voxel size the same ball is 8 times as many voxels.
     const double gotFine = double(totalMass(*makeClay(*loadLevelSet(file("ball.vdb"), 0.5), 1000))) / 1000;
     EXPECT_NEAR(gotFine, 8 * want, 0.005 * 8 * want);
-    std::printf("level-set ball r = %g: %.3f voxels (%+.3f %%), placed x2: %+.3f %%, voxel size 0.5: %+.3f %%\n",
-                r, got, 100 * (got - want) / want, 100 * (gotBig - 8 * want) / (8 * want),
-                100 * (gotFine - 8 * want) / (8 * want));
+    std::printf(
+        "level-set ball r = %g: %.3f voxels (%+.3f %%), placed x2: %+.3f %%, voxel size 0.5: %+.3f %%\n", r,
+        got, 100 * (got - want) / want, 100 * (gotBig - 8 * want) / (8 * want),
+        100 * (gotFine - 8 * want) / (8 * want));
     // Analytic shapes keep the voxel-centre rule.
     EXPECT_FALSE(makeSphere({{0, 0, 0}}, 3)->keepsVolume());
     EXPECT_FALSE(makePlaced(makeBox({{0, 0, 0}}, {{2, 2, 2}}), twice)->keepsVolume());

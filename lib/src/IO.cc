@@ -632,8 +632,9 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
             if (m > 0) acc.setValueOn(openvdb::Coord(x, y, z), int32_t(std::min<int64_t>(m, massPerVoxel)));
         });
         if (grid->activeVoxelCount() == 0) {
-            throw Error(shape.describe() + " covers no voxel" + (dimensions == 2 ? " of the z = 0 layer" : "") +
-                        " enough to hold a unit of mass (" + std::to_string(massPerVoxel) + " per voxel)");
+            throw Error(shape.describe() + " covers no voxel" +
+                        (dimensions == 2 ? " of the z = 0 layer" : "") + " enough to hold a unit of mass (" +
+                        std::to_string(massPerVoxel) + " per voxel)");
         }
     } else {
         forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
