@@ -834,6 +834,9 @@ int main(int argc, char** argv)
         ->check(CLI::Range(1, INT32_MAX));
     std::string meshUp;
     mesh->add_option("--up", meshUp, "y or z: orient the mesh for this up axis (default: the file's)");
+    bool meshKeepVolume = false;
+    mesh->add_flag("--keep-volume", meshKeepVolume,
+                   "move the surface along its normals (at most half a voxel) to enclose the clay's volume");
 
     std::string renIn, renOut;
     vdbclay::RenderOptions ro;
@@ -923,7 +926,7 @@ int main(int argc, char** argv)
             const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
             if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
             gWriting.store(true);
-            vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
+            vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso, meshKeepVolume);
             std::printf("wrote %s\n", meshOut.c_str());
             return 0;
         }

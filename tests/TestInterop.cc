@@ -595,7 +595,8 @@ TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
     EXPECT_FALSE(makePlaced(makeBox({{0, 0, 0}}, {{2, 2, 2}}), twice)->keepsVolume());
 }
 
-// Mesh out, mesh clay in: the clay keeps its place and the mesh's volume.
+// Mesh out, mesh clay in: the clay keeps its place and the mesh's volume, and the clay's own volume
+// when the mesh is written to keep it.
 TEST_F(InteropTest, MeshRoundTripKeepsPlaceAndVolume)
 {
     const double vs = 0.1;
@@ -609,6 +610,17 @@ TEST_F(InteropTest, MeshRoundTripKeepsPlaceAndVolume)
     std::printf("ball clay %.3f voxels, its mesh %.3f, mesh clay %.3f (%+.3f %% of the clay)\n", before,
                 meshVolume, after, 100 * (after - before) / before);
     EXPECT_NEAR(after, meshVolume, 0.0005 * meshVolume);
+    // Written to keep the clay's volume, the mesh gives it back within 0.5 %: smooth clay and a box
+    // of whole cells (whose edges marching cubes cuts).
+    writeSurfaceMesh(file("kept.obj"), *ball, 1000, 0.5, /*keepClayVolume=*/true);
+    const double kept = double(totalMass(*makeClay(*loadMesh(file("kept.obj"), vs), 1000))) / 1000;
+    EXPECT_NEAR(kept, before, 0.005 * before);
+    const MassGridPtr box = boxClay(Coord(-3, 2, 5), Coord(16, 11, 14), 1000, vs);
+    writeSurfaceMesh(file("box.obj"), *box, 1000, 0.5, true);
+    const double boxBack = double(totalMass(*makeClay(*loadMesh(file("box.obj"), vs), 1000))) / 1000;
+    EXPECT_NEAR(boxBack, 2000, 0.005 * 2000);
+    std::printf("kept volume: ball %.3f -> %.3f (%+.3f %%), box 2000 -> %.3f (%+.3f %%)\n", before, kept,
+                100 * (kept - before) / before, boxBack, 100 * (boxBack - 2000) / 2000);
     // Same place: the same centre of mass, to a hundredth of a voxel.
     auto centre = [](const MassGrid& g) {
         Vec3 c{{0, 0, 0}};
@@ -621,6 +633,9 @@ TEST_F(InteropTest, MeshRoundTripKeepsPlaceAndVolume)
         return Vec3{{c[0] / m, c[1] / m, c[2] / m}};
     };
     const Vec3 a = centre(*ball), b = centre(*back);
-    for (int i = 0; i < 3; ++i)
+    const Vec3 c = centre(*box), d = centre(*makeClay(*loadMesh(file("box.obj"), vs), 1000));
+    for (int i = 0; i < 3; ++i) {
         EXPECT_NEAR(a[i], b[i], 0.01) << "axis " << i;
+        EXPECT_NEAR(c[i], d[i], 0.01) << "box, axis " << i;
+    }
 }

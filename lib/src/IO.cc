@@ -22,6 +22,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -538,7 +539,46 @@ std::string describeVdb(const std::string& path)
     return s.str();
 }
 
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue)
+namespace {
+
+/// Moves every vertex of @a mesh (index space, outward faces) along its normal by one distance,
+/// so that the mesh encloses @a target voxels: marching cubes cuts convex edges and rounds convex
+/// surfaces inward. Two Newton steps (volume' = area); the move is at most half a voxel.
+void keepVolume(io_internal::SurfaceMesh& mesh, double target)
+{
+    std::vector<std::array<uint32_t, 3>> tris;
+    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+    for (const auto& t : mesh.triangles)
+        tris.push_back({{t[0], t[1], t[2]}});
+    for (const auto& q : mesh.quads) {
+        tris.push_back({{q[0], q[1], q[2]}});
+        tris.push_back({{q[0], q[2], q[3]}});
+    }
+    for (int iteration = 0; iteration < 2; ++iteration) {
+        std::vector<openvdb::Vec3d> normals(mesh.points.size(), openvdb::Vec3d(0.0));
+        double volume = 0, area = 0;
+        for (const auto& t : tris) {
+            const openvdb::Vec3d a(mesh.points[t[0]]), b(mesh.points[t[1]]), c(mesh.points[t[2]]);
+            const openvdb::Vec3d n = (b - a).cross(c - a); // twice the area, outward
+            volume += a.dot(b.cross(c)) / 6;
+            area += n.length() / 2;
+            for (int i = 0; i < 3; ++i)
+                normals[t[i]] += n;
+        }
+        if (!(area > 0)) return;
+        const double shift = std::max(-0.5, std::min(0.5, (target - volume) / area));
+        for (size_t i = 0; i < mesh.points.size(); ++i) {
+            const double l = normals[i].length();
+            if (l > 0)
+                mesh.points[i] = openvdb::Vec3s(openvdb::Vec3d(mesh.points[i]) + normals[i] * (shift / l));
+        }
+    }
+}
+
+} // namespace
+
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue,
+                      bool keepClayVolume)
 {
     initOpenVDB();
     const std::string ext = io_internal::extensionOf(path);
@@ -554,6 +594,13 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
     try {
         auto density = io_internal::densityGrid(mass, threshold, 1.0);
         mesh = io_internal::surfaceMesh(*density, isovalue);
+        if (keepClayVolume && !mesh.points.empty()) {
+            // The clay's volume: each cell counts for its fill, up to 1.
+            double volume = 0;
+            for (auto it = mass.cbeginValueOn(); it; ++it)
+                volume += std::min(1.0, double(*it) / double(threshold)) * double(it.getVoxelCount());
+            keepVolume(mesh, volume);
+        }
     } catch (const Error& e) {
         throw Error("cannot write " + path + ": " + e.what());
     }

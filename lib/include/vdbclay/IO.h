@@ -56,10 +56,13 @@ std::string describeVdb(const std::string& path);
 /// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension, in world units: the
 /// vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform),
 /// so the mesh lies on the .vdb and loadMesh() with the same voxel size and up axis puts it back on
-/// the same voxels. Atomic like writeClayFile. @throw Error on an unknown extension or a write
-/// failure.
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
-                      double isovalue = 0.5);
+/// the same voxels. With @a keepClayVolume, every vertex then moves along its normal by one distance
+/// (at most half a voxel) so that the mesh encloses the clay's volume (the sum of min(mass / Tc, 1)
+/// over the cells): marching cubes cuts convex edges and rounds convex surfaces inward, and mesh
+/// clay made from the mesh then keeps the clay's volume. Atomic like writeClayFile.
+/// @throw Error on an unknown extension or a write failure.
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue = 0.5,
+                      bool keepClayVolume = false);
 
 /// Gives @a mass the transform a clay file records: @a voxelSize world units per voxel, rotated for
 /// @a up (Shapes.h: UpAxis).
