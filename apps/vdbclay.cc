@@ -860,17 +860,22 @@ int main(int argc, char** argv)
     double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
     CLI::App* imp =
-        app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
-    imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required()->check(fileName);
+        app.add_subcommand("import", "Turn a mesh (OBJ/STL/PLY), a level set or a fog volume .vdb into clay");
+    imp->add_option("file", impIn, "MESH.obj, MESH.stl, MESH.ply, LEVELSET.vdb or FOG.vdb")
+        ->required()
+        ->check(fileName);
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required()->check(fileName);
-    imp->add_option("--mass", impMass, "clay per voxel inside the shape")
+    imp->add_option("--mass", impMass, "clay per voxel inside the shape (a fog volume: per unit of density)")
         ->required()
         ->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
     imp->add_option("--voxel-size", impVoxel,
                     "world units per voxel (default: a level set's own voxel size; 1 for meshes)")
         ->check(finiteIn(vdbclay::kMinVoxelSize, vdbclay::kMaxVoxelSize));
     std::string impGrid;
-    imp->add_option("--grid", impGrid, "LEVELSET.vdb: the level set grid to import (default: the first)");
+    imp->add_option(
+        "--grid", impGrid,
+        ".vdb: the level set or fog volume to import (default: the first level set, else the first fog "
+        "volume)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
     std::string impUp = "y";
     imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
@@ -942,8 +947,29 @@ int main(int argc, char** argv)
         if (*imp) {
             checkOutputs({{"-o", impOut}}, {{{"the input file", impIn}, {}}});
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
-            if (!isVdb && !impGrid.empty())
-                throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
+            if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a .vdb, not " + impIn);
+            const std::string fogGrid = isVdb ? vdbclay::fogGridToImport(impIn, impGrid) : std::string();
+            if (!fogGrid.empty()) {
+                // A fog volume: round(density x M) per voxel, voxel for voxel at its own voxel size.
+                const vdbclay::FogClay fog =
+                    vdbclay::readFogAsClay(impIn, fogGrid, int32_t(impMass), impDims);
+                if (impVoxel != 0 && impVoxel != fog.voxelSize) {
+                    throw vdbclay::Error("--voxel-size: fog volume \"" + fogGrid + "\" in " + impIn +
+                                         " is taken voxel for voxel at its own voxel size " +
+                                         std::to_string(fog.voxelSize) + "; leave --voxel-size out");
+                }
+                vdbclay::ClayMeta meta;
+                meta.dimensions = impDims;
+                meta.voxelSize = fog.voxelSize;
+                meta.up = upOption(impUp);
+                gWriting.store(true);
+                vdbclay::writeClayFile(impOut, *fog.mass, meta);
+                std::printf("note: %s\n", fog.note.c_str());
+                std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
+                            (unsigned long long)vdbclay::clayVoxelCount(*fog.mass),
+                            (long long)vdbclay::totalMass(*fog.mass));
+                return 0;
+            }
             if (impVoxel == 0 && isVdb) {
                 // The level set's own voxel size; loadLevelSet checks the file before OpenVDB reads it.
                 vdbclay::loadLevelSet(impIn, 1.0, impGrid, upOption(impUp));

@@ -289,7 +289,7 @@ PYBIND11_MODULE(_vdbclay, m)
             return PyShape{loadMesh(path, vs, parseUpAxis(up))};
         },
         py::arg("path"), py::arg("voxel_size") = 1.0, py::arg("up") = "y",
-        "A closed triangle mesh (OBJ or STL) in world units with up axis 'y' or 'z', at voxel_size world "
+        "A triangle mesh (OBJ, STL or PLY) in world units with up axis 'y' or 'z', at voxel_size world "
         "units per voxel.");
     m.def(
         "level_set",

@@ -639,3 +639,116 @@ TEST_F(InteropTest, MeshRoundTripKeepsPlaceAndVolume)
         EXPECT_NEAR(c[i], d[i], 0.01) << "box, axis " << i;
     }
 }
+
+// ---- Issue 14 item 8: import gaps: PLY meshes, fog volumes -----------------------------------------
+
+// PLY: what `vdbclay mesh` writes, and ordinary ASCII / binary little-endian files with other
+// properties and elements; others are refused naming the file and what is wrong.
+TEST_F(InteropTest, PlyMeshesAreRead)
+{
+    const double vs = 0.5;
+    const MassGridPtr clay = boxClay(Coord(-3, 2, 5), Coord(6, 11, 9), 1000, vs);
+    writeSurfaceMesh(file("box.ply"), *clay, 1000);
+    writeSurfaceMesh(file("box.obj"), *clay, 1000);
+    EXPECT_EQ(contentHash(*makeClay(*loadMesh(file("box.ply"), vs), 1000)),
+              contentHash(*makeClay(*loadMesh(file("box.obj"), vs), 1000)));
+
+    // Binary little endian: a 16-unit cube, vertices with normals, quads with a uchar count and
+    // int indices, then an element the reader skips.
+    std::string bin = "ply\nformat binary_little_endian 1.0\ncomment test\nelement vertex 8\n"
+                      "property float x\nproperty float y\nproperty double z\nproperty uchar red\n"
+                      "element face 6\nproperty list uchar int vertex_indices\nproperty float quality\n"
+                      "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n";
+    auto put = [&bin](const auto v) { bin.append(reinterpret_cast<const char*>(&v), sizeof v); };
+    for (int c = 0; c < 8; ++c) {
+        put(float((c & 1) ? 8 : -8));
+        put(float((c & 2) ? 8 : -8));
+        put(double((c & 4) ? 8 : -8));
+        put(uint8_t(200));
+    }
+    const int q[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    for (const auto& f : q) {
+        put(uint8_t(4));
+        for (int i : f)
+            put(int32_t(i));
+        put(0.5f);
+    }
+    put(int32_t(0));
+    put(int32_t(1));
+    writeText(file("cube.ply"), bin);
+    const MassGridPtr cube = makeClay(*loadMesh(file("cube.ply")), 1000);
+    EXPECT_EQ(totalMass(*cube), int64_t(4096) * 1000);
+    EXPECT_EQ(cube->tree().getValue(Coord(8, 8, 8)), 125);
+
+    struct Bad {
+        const char* text;
+        const char* part;
+    };
+    for (
+        const Bad& b :
+        {Bad{"ply\nformat binary_big_endian 1.0\nelement vertex 0\nend_header\n", "binary_big_endian"},
+         Bad{"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nelement face 1\n"
+             "property list uchar int vertex_indices\nend_header\n0 0\n1 0\n0 1\n3 0 1 2\n",
+             "element \"vertex\" has no scalar properties x, y and z"},
+         Bad{"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+             "end_header\n0 0 0\n1 0 0\n0 1 0\n",
+             "no element \"face\""},
+         Bad{"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+             "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 "
+             "7\n",
+             "element \"face\" item 0: vertex index 7 out of range"},
+         Bad{"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+             "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
+             "element \"vertex\" ends after 2 of 3 items"}}) {
+        writeText(file("bad.ply"), b.text);
+        const std::string e = errorOf([&] { loadMesh(file("bad.ply")); });
+        EXPECT_TRUE(contains(e, "bad.ply") && contains(e, b.part)) << e;
+    }
+}
+
+// Fog volumes (a FloatGrid of class fog volume, density 1 = a full cell): round(density x M) per
+// voxel, tiles included, voxel for voxel at the grid's voxel size; what is not a fog volume, or
+// holds a negative density, is refused naming the file and the grid.
+TEST_F(InteropTest, FogVolumesImportAsClay)
+{
+    auto fog = openvdb::FloatGrid::create(0.f);
+    fog->setName("smoke");
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->setTransform(openvdb::math::Transform::createLinearTransform(0.25));
+    fog->tree().setValue(Coord(1, 2, 3), 0.25f);
+    fog->tree().setValue(Coord(-4, 0, 0), 1.5f);        // overfull
+    fog->tree().setValue(Coord(5, 0, 0), 0.0004f);      // rounds to no clay
+    fog->tree().addTile(1, Coord(64, 0, 0), 1.f, true); // an 8^3 tile of full cells
+    openvdb::io::File(file("fog.vdb")).write({fog});
+    EXPECT_EQ(fogGridToImport(file("fog.vdb"), ""), "smoke");
+    const FogClay c = readFogAsClay(file("fog.vdb"), "smoke", 1000);
+    EXPECT_EQ(c.voxelSize, 0.25);
+    EXPECT_EQ(c.mass->tree().getValue(Coord(1, 2, 3)), 250);
+    EXPECT_EQ(c.mass->tree().getValue(Coord(-4, 0, 0)), 1500);
+    EXPECT_EQ(c.mass->tree().getValue(Coord(70, 7, 7)), 1000);
+    EXPECT_EQ(clayVoxelCount(*c.mass), uint64_t(2 + 512));
+    EXPECT_EQ(totalMass(*c.mass), int64_t(250 + 1500 + 512 * 1000));
+    EXPECT_TRUE(contains(c.note, "fog volume") && contains(c.note, "smoke") &&
+                contains(c.note, "round(density x 1000)"))
+        << c.note;
+    // 2D: the z = 0 layer only.
+    EXPECT_EQ(totalMass(*readFogAsClay(file("fog.vdb"), "smoke", 1000, 2).mass), int64_t(1500 + 64 * 1000));
+
+    // A clay file: its surface level set comes first; its density, asked for, is the clay again.
+    const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(3, 3, 3), 700, 1.0);
+    clay->tree().setValue(Coord(1, 1, 1), 1234);
+    ClayMeta meta;
+    writeClayFile(file("clay.vdb"), *clay, meta);
+    EXPECT_EQ(fogGridToImport(file("clay.vdb"), ""), "");
+    EXPECT_EQ(fogGridToImport(file("clay.vdb"), "density"), "density");
+    EXPECT_EQ(contentHash(*readFogAsClay(file("clay.vdb"), "density", 1000).mass), contentHash(*clay));
+
+    fog->tree().setValue(Coord(0, 0, 0), -0.5f);
+    openvdb::io::File(file("neg.vdb")).write({fog});
+    std::string e = errorOf([&] { readFogAsClay(file("neg.vdb"), "smoke", 1000); });
+    EXPECT_TRUE(contains(e, "neg.vdb") && contains(e, "\"smoke\"") && contains(e, "-0.5")) << e;
+    e = errorOf([&] { readFogAsClay(file("clay.vdb"), "surface", 1000); });
+    EXPECT_TRUE(contains(e, "clay.vdb") && contains(e, "\"surface\"") && contains(e, "level set")) << e;
+    e = errorOf([&] { readFogAsClay(file("clay.vdb"), "mass", 1000); });
+    EXPECT_TRUE(contains(e, "\"mass\"") && contains(e, "expected a FloatGrid fog volume")) << e;
+}

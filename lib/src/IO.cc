@@ -329,6 +329,133 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
 }
 
+namespace {
+std::string num(double v)
+{
+    std::ostringstream o;
+    o << std::setprecision(9) << v;
+    return o.str();
+}
+bool isFog(const openvdb::GridBase& g)
+{
+    return g.isType<openvdb::FloatGrid>() && g.getGridClass() == openvdb::GRID_FOG_VOLUME;
+}
+bool isLevelSet(const openvdb::GridBase& g)
+{
+    return g.isType<openvdb::FloatGrid>() && g.getGridClass() == openvdb::GRID_LEVEL_SET;
+}
+} // namespace
+
+std::string fogGridToImport(const std::string& path, const std::string& gridName)
+{
+    initOpenVDB();
+    openvdb::io::File file(path);
+    openChecked(file, path);
+    openvdb::GridPtrVecPtr grids;
+    try {
+        grids = file.readAllGridMetadata();
+    } catch (const std::exception& e) {
+        throw Error(damaged(path) + reason(e));
+    }
+    file.close();
+    if (!gridName.empty()) {
+        for (const auto& g : *grids)
+            if (g->getName() == gridName) return isFog(*g) ? gridName : std::string();
+        return ""; // the level set reader says it is missing
+    }
+    for (const auto& g : *grids)
+        if (isLevelSet(*g)) return ""; // a level set first
+    for (const auto& g : *grids)
+        if (isFog(*g)) return g->getName();
+    return "";
+}
+
+FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass, int dimensions)
+{
+    initOpenVDB();
+    if (fullMass <= 0) throw Error("the mass per voxel must be > 0, not " + std::to_string(fullMass));
+    openvdb::io::File file(path);
+    const auto layout = openChecked(file, path);
+    const std::string what = path + ": grid \"" + gridName + "\"";
+    if (!file.hasGrid(gridName)) {
+        throw Error(path + " has no grid named \"" + gridName + "\" (grids: " + gridNames(file) + ")");
+    }
+    for (const auto& g : layout) {
+        if (g.baseName() == gridName && g.type != "Tree_float_5_4_3") {
+            throw Error(what + " is a " + valueTypeOf(g.type) + " grid, expected a FloatGrid fog volume");
+        }
+    }
+    openvdb::FloatGrid::Ptr fog;
+    try {
+        fog = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(gridName));
+    } catch (const std::exception& e) {
+        throw Error(damaged(path) + reason(e));
+    }
+    file.close();
+    if (!fog || !isFog(*fog)) {
+        throw Error(what + " is not a FloatGrid fog volume (class " +
+                    (fog ? openvdb::GridBase::gridClassToString(fog->getGridClass()) : std::string("?")) +
+                    ")");
+    }
+    const openvdb::Vec3d vs = fog->voxelSize();
+    if (!fog->transform().isLinear() || !(vs[0] > 0) || vs[0] != vs[1] || vs[0] != vs[2]) {
+        throw Error(what +
+                    ": a fog volume is taken voxel for voxel, which needs a linear transform with "
+                    "cubic voxels (voxel size " +
+                    num(vs[0]) + " x " + num(vs[1]) + " x " + num(vs[2]) + ")");
+    }
+    if (fog->background() != 0.f) {
+        throw Error(what + " has background density " + num(fog->background()) +
+                    ", expected 0 (a non-zero background fills all of space)");
+    }
+    FogClay out;
+    out.voxelSize = vs[0];
+    out.mass = openvdb::Int32Grid::create(0);
+    out.mass->setName("mass");
+    auto acc = out.mass->getAccessor();
+    uint64_t tileVoxels = 0;
+    for (auto it = fog->tree().cbeginValueOn(); it; ++it) {
+        const double d = *it;
+        if (!std::isfinite(d) || d < 0) {
+            throw Error(what + " holds density " + num(d) + " at voxel " + coordText(it.getCoord()) +
+                        ", expected a finite value >= 0");
+        }
+        const double m = std::round(d * fullMass);
+        if (m > double(INT32_MAX)) {
+            throw Error(what + ": density " + num(d) + " at voxel " + coordText(it.getCoord()) + " x " +
+                        std::to_string(fullMass) + " does not fit a cell (int32)");
+        }
+        if (m <= 0) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        if (!it.isVoxelValue()) {
+            tileVoxels += it.getVoxelCount();
+            if (tileVoxels > kMaxTileVoxels) {
+                throw Error(what + " holds tiles of more than " + std::to_string(kMaxTileVoxels) +
+                            " voxels in all; vdbclay expands tiles into voxels");
+            }
+        }
+        if (dimensions == 2) {
+            if (box.min().z() > 0 || box.max().z() < 0) continue;
+            box.min().setZ(0);
+            box.max().setZ(0);
+        }
+        for (auto c = box.begin(); c; ++c)
+            acc.setValueOn(*c, int32_t(m));
+    }
+    if (out.mass->activeVoxelCount() == 0) {
+        throw Error(what + ": no voxel" + (dimensions == 2 ? " of the z = 0 layer" : "") +
+                    " holds enough density for a unit of mass (" + std::to_string(fullMass) +
+                    " per full voxel)");
+    }
+    normalizeClay(*out.mass, path, gridName);
+    out.note = "grid \"" + gridName + "\" is a fog volume (class " +
+               openvdb::GridBase::gridClassToString(fog->getGridClass()) +
+               "): each voxel holds round(density x " + std::to_string(fullMass) +
+               "), voxel for voxel at its voxel size " + num(vs[0]);
+    return out;
+}
+
 ClayFile readClayFile(const std::string& path, const std::string& gridName)
 {
     initOpenVDB();

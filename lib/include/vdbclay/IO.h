@@ -47,6 +47,27 @@ struct ClayFile {
 ///        of that name, or the grid is not an Int32Grid, or holds negative mass.
 ClayFile readClayFile(const std::string& path, const std::string& gridName = "mass");
 
+/// The fog volume `vdbclay import` reads from @a path: @a gridName when it names a FloatGrid fog
+/// volume; with @a gridName empty, the first fog volume if the file holds no FloatGrid level set
+/// (level sets come first). Empty: import reads a level set instead.
+/// @throw Error as readClayFile if the file is not a readable .vdb.
+std::string fogGridToImport(const std::string& path, const std::string& gridName);
+
+/// Clay from a fog volume: a float density per voxel (1 = a full cell).
+struct FogClay {
+    MassGridPtr mass;
+    double voxelSize = 1; ///< the fog volume's own
+    std::string note;     ///< one line for the user: the grid, its class and the rule applied
+};
+/// Reads the FloatGrid fog volume @a gridName of @a path as clay: each voxel (active voxels and
+/// tiles) holds round(density x @a fullMass), voxel for voxel in the grid's index space at its voxel
+/// size (2D: only the z = 0 layer). Density above 1 is overfull clay.
+/// @throw Error naming the file and grid if it is missing, not a FloatGrid fog volume, has
+///        non-cubic voxels or a non-linear transform, a non-zero background, a negative or
+///        non-finite density, a cell that does not fit an int32, or holds no clay.
+FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass,
+                      int dimensions = 3);
+
 /// A human-readable description of any .vdb: each grid's name, type, class, active voxel count,
 /// index bounding box, voxel size, metadata, and for Int32 grids the total mass.
 /// @throw Error as readClayFile.

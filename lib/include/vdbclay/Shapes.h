@@ -150,7 +150,8 @@ Vec3 indexToWorld(const Vec3& p, double voxelSize, UpAxis up);
 ///        FloatGrid level set (of that name).
 ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std::string& gridName = "",
                       UpAxis up = UpAxis::Y);
-/// A closed triangle mesh (OBJ or STL, ASCII or binary STL), in world units with @a up as its up
+/// A triangle mesh (OBJ; STL, ASCII or binary; PLY, ASCII or binary little endian, vertex x y z and
+/// face vertex_indices), in world units with @a up as its up
 /// axis, brought into index space (@a voxelSize), its vertices placed by @a placement (in index
 /// space), then converted with openvdb::tools::meshToLevelSet.
 /// @throw Error naming the file if it is unreadable, empty, malformed (with the line), or not closed.
