@@ -826,7 +826,10 @@ int main(int argc, char** argv)
     double iso = 0.5;
     int32_t meshTc = 0;
     CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ or PLY");
-    mesh->add_option("file", meshIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    mesh->add_option("file", meshIn,
+                     "a clay .vdb (grid \"mass\"), else its first fog volume, else its first level set")
+        ->required()
+        ->check(fileName);
     mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required()->check(fileName);
     mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)")
         ->check(finiteIn(1e-9, 1e9));
@@ -844,7 +847,10 @@ int main(int argc, char** argv)
     int32_t renTc = 0;
     CLI::App* ren =
         app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
-    ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    ren->add_option("file", renIn,
+                    "a clay .vdb (grid \"mass\"), else its first fog volume, else its first level set")
+        ->required()
+        ->check(fileName);
     ren->add_option("-o,--output", renOut, "OUT.png")->required()->check(fileName);
     ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
     ren->add_option("--height", ro.height, "image height")->check(CLI::Range(1, kMaxImageSide));
@@ -928,7 +934,9 @@ int main(int argc, char** argv)
         if (*mesh) {
             checkMeshName({"-o", meshOut});
             checkOutputs({{"-o", meshOut}}, {{{"the input file", meshIn}, {}}});
-            const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
+            std::string note;
+            const vdbclay::ClayFile f = vdbclay::readAsClay(meshIn, note);
+            if (!note.empty()) std::printf("note: %s\n", note.c_str());
             if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
             gWriting.store(true);
             vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso, meshKeepVolume);
@@ -937,7 +945,9 @@ int main(int argc, char** argv)
         }
         if (*ren) {
             checkOutputs({{"-o", renOut}}, {{{"the input file", renIn}, {}}});
-            const vdbclay::ClayFile f = vdbclay::readClayFile(renIn);
+            std::string note;
+            const vdbclay::ClayFile f = vdbclay::readAsClay(renIn, note);
+            if (!note.empty()) std::printf("note: %s\n", note.c_str());
             const int dims = renDims ? renDims : f.meta.dimensions;
             gWriting.store(true);
             vdbclay::renderPng(renOut, *f.mass, thresholdOf(f, renTc), dims, ro);

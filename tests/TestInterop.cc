@@ -752,3 +752,49 @@ TEST_F(InteropTest, FogVolumesImportAsClay)
     e = errorOf([&] { readFogAsClay(file("clay.vdb"), "mass", 1000); });
     EXPECT_TRUE(contains(e, "\"mass\"") && contains(e, "expected a FloatGrid fog volume")) << e;
 }
+
+// Issue 14 item 9: `render` and `mesh` take any .vdb: the clay grid "mass", else the first fog
+// volume, else the first level set (readAsClay), in the file's world units; a note names the grid.
+TEST_F(InteropTest, RenderAndMeshReadFogVolumesAndLevelSets)
+{
+    auto ball =
+        openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(5.f, openvdb::Vec3f(2.f, 1.f, 0.f), 0.5f);
+    ball->setName("ball");
+    openvdb::io::File(file("ls.vdb")).write({ball});
+    std::string note;
+    const ClayFile ls = readAsClay(file("ls.vdb"), note);
+    EXPECT_TRUE(contains(note, "level set \"ball\"")) << note;
+    EXPECT_EQ(ls.meta.voxelSize, 0.5);
+    const double want = 4.0 / 3.0 * M_PI * 1000; // radius 10 voxels
+    EXPECT_NEAR(double(totalMass(*ls.mass)) / 1000, want, 0.005 * want);
+    writeSurfaceMesh(file("ls.obj"), *ls.mass, ls.meta.rule.threshold);
+    Vec3 lo, hi;
+    objBounds(file("ls.obj"), lo, hi);
+    EXPECT_NEAR(lo[0], 2 - 5, 0.1); // world units: the ball's own place and size
+    EXPECT_NEAR(hi[0], 2 + 5, 0.1);
+    EXPECT_NEAR(lo[1], 1 - 5, 0.1);
+
+    auto fog = openvdb::FloatGrid::create(0.f);
+    fog->setName("smoke");
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->setTransform(openvdb::math::Transform::createLinearTransform(2.0));
+    fog->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(3, 3, 3)), 0.5f, true);
+    openvdb::io::File(file("fog.vdb")).write({ball, fog}); // a fog volume comes before a level set
+    const ClayFile f = readAsClay(file("fog.vdb"), note);
+    EXPECT_TRUE(contains(note, "fog volume \"smoke\"")) << note;
+    EXPECT_EQ(totalMass(*f.mass), int64_t(64) * 500);
+    EXPECT_EQ(f.mass->transform().indexToWorld(openvdb::Vec3d(1, 0, 0)), openvdb::Vec3d(2, 0, 0));
+
+    const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(3, 3, 3), 700, 1.0);
+    writeClayFile(file("clay.vdb"), *clay, ClayMeta());
+    EXPECT_EQ(contentHash(*readAsClay(file("clay.vdb"), note).mass), contentHash(*clay));
+    EXPECT_EQ(note, "");
+
+    auto other = openvdb::Int32Grid::create(0);
+    other->setName("counts");
+    openvdb::io::File(file("other.vdb")).write({other});
+    const std::string e = errorOf([&] { readAsClay(file("other.vdb"), note); });
+    EXPECT_TRUE(contains(e, "other.vdb") && contains(e, "no clay grid \"mass\", fog volume or level set") &&
+                contains(e, "\"counts\""))
+        << e;
+}

@@ -456,6 +456,59 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
     return out;
 }
 
+ClayFile readAsClay(const std::string& path, std::string& note)
+{
+    initOpenVDB();
+    note.clear();
+    openvdb::GridPtrVecPtr grids;
+    {
+        openvdb::io::File file(path);
+        openChecked(file, path);
+        try {
+            grids = file.readAllGridMetadata();
+        } catch (const std::exception& e) {
+            throw Error(damaged(path) + reason(e));
+        }
+        file.close();
+    }
+    std::string fog, levelSet, names;
+    double levelSetVoxel = 1;
+    for (const auto& g : *grids) {
+        if (g->getName() == "mass") return readClayFile(path);
+        if (fog.empty() && isFog(*g)) fog = g->getName();
+        if (levelSet.empty() && isLevelSet(*g)) {
+            levelSet = g->getName();
+            levelSetVoxel = g->voxelSize()[0];
+        }
+        names += (names.empty() ? "" : ", ") + ("\"" + g->getName() + "\"");
+    }
+    ClayFile out;
+    if (!fog.empty()) {
+        FogClay c = readFogAsClay(path, fog, out.meta.rule.threshold);
+        openvdb::io::File file(path);
+        file.open(false);
+        c.mass->setTransform(file.readGridMetadata(fog)->transform().copy());
+        file.close();
+        out.mass = c.mass;
+        out.meta.voxelSize = c.voxelSize;
+        note = "no clay grid \"mass\" in " + path + ": using fog volume \"" + fog +
+               "\" as density (1 = a full cell)";
+        return out;
+    }
+    if (!levelSet.empty()) {
+        const ShapePtr shape = loadLevelSet(path, levelSetVoxel, levelSet);
+        out.mass = makeClay(*shape, out.meta.rule.threshold);
+        setClayTransform(*out.mass, levelSetVoxel, UpAxis::Y);
+        out.meta.voxelSize = levelSetVoxel;
+        note = "no clay grid \"mass\" in " + path + ": using level set \"" + levelSet +
+               "\" (inside = full clay, boundary voxels by the part they cover)";
+        return out;
+    }
+    throw Error(path + ": no clay grid \"mass\", fog volume or level set among its " +
+                std::to_string(grids->size()) + " grid(s)" +
+                (names.empty() ? std::string() : " (" + names + ")"));
+}
+
 ClayFile readClayFile(const std::string& path, const std::string& gridName)
 {
     initOpenVDB();

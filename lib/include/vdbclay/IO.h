@@ -68,6 +68,13 @@ struct FogClay {
 FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass,
                       int dimensions = 3);
 
+/// A clay file, or any other .vdb as clay (for `vdbclay render` and `mesh`): the Int32 grid "mass"
+/// if there is one (readClayFile); else the first FloatGrid fog volume, density x Tc (default Tc,
+/// the fog's own transform); else the first FloatGrid level set, as clay at its own voxel size
+/// (makeClay with Tc per voxel). @a note says which grid was used when it is not "mass".
+/// @throw Error naming the file if it holds none of these, or as readClayFile.
+ClayFile readAsClay(const std::string& path, std::string& note);
+
 /// A human-readable description of any .vdb: each grid's name, type, class, active voxel count,
 /// index bounding box, voxel size, metadata, and for Int32 grids the total mass.
 /// @throw Error as readClayFile.
