@@ -97,8 +97,8 @@ template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimen
 /// The fraction is the shape's own coverage() when it has one (closed meshes: the exact volume of
 /// the mesh inside the voxel, by column integrals), else clamp(0.5 - distance(centre), 0, 1): the
 /// part of the voxel below a plane at that distance, averaged over the plane's orientations. That
-/// ramp is exact for faces parallel to the axes, on voxel centres or between them, and in sum for
-/// planes of any orientation; on a ball of radius r voxels it adds 1 / (4 r^2) of the volume
+/// ramp is exact for a face parallel to the axes (away from its edges) and unbiased in sum for a
+/// plane of any orientation; on a ball of radius r voxels it adds 1 / (4 r^2) of the volume
 /// (0.25 % at r = 10). docs/INTEROP.md, "Coverage".
 void forEachVoxelCovered(const Shape& shape, int dimensions,
                          const std::function<void(int32_t, int32_t, int32_t, double)>& covered);
