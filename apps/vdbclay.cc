@@ -829,7 +829,10 @@ int main(int argc, char** argv)
     double iso = 0.5;
     int32_t meshTc = 0;
     CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ or PLY");
-    mesh->add_option("file", meshIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    mesh->add_option("file", meshIn,
+                     "a clay .vdb (grid \"mass\"), else its first fog volume, else its first level set")
+        ->required()
+        ->check(fileName);
     mesh->add_option("-o,--output", meshOut, "OUT.obj or OUT.ply")->required()->check(fileName);
     mesh->add_option("--isovalue", iso, "surface where density (mass / Tc) equals this (default 0.5)")
         ->check(finiteIn(1e-9, 1e9));
@@ -837,6 +840,9 @@ int main(int argc, char** argv)
         ->check(CLI::Range(1, INT32_MAX));
     std::string meshUp;
     mesh->add_option("--up", meshUp, "y or z: orient the mesh for this up axis (default: the file's)");
+    bool meshKeepVolume = false;
+    mesh->add_flag("--keep-volume", meshKeepVolume,
+                   "move the surface along its normals (at most half a voxel) to enclose the clay's volume");
 
     std::string renIn, renOut;
     vdbclay::RenderOptions ro;
@@ -844,7 +850,10 @@ int main(int argc, char** argv)
     int32_t renTc = 0;
     CLI::App* ren =
         app.add_subcommand("render", "Render a clay .vdb to PNG (2D density map or 3D shaded surface)");
-    ren->add_option("file", renIn, "a clay .vdb (grid \"mass\")")->required()->check(fileName);
+    ren->add_option("file", renIn,
+                    "a clay .vdb (grid \"mass\"), else its first fog volume, else its first level set")
+        ->required()
+        ->check(fileName);
     ren->add_option("-o,--output", renOut, "OUT.png")->required()->check(fileName);
     ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
     ren->add_option("--height", ro.height, "image height")->check(CLI::Range(1, kMaxImageSide));
@@ -860,17 +869,22 @@ int main(int argc, char** argv)
     double impVoxel = 0; // 0: the level set's own voxel size, or 1 for meshes
     int impDims = 3;
     CLI::App* imp =
-        app.add_subcommand("import", "Turn a closed mesh (OBJ/STL) or a level set .vdb into clay");
-    imp->add_option("file", impIn, "MESH.obj, MESH.stl or LEVELSET.vdb")->required()->check(fileName);
+        app.add_subcommand("import", "Turn a mesh (OBJ/STL/PLY), a level set or a fog volume .vdb into clay");
+    imp->add_option("file", impIn, "MESH.obj, MESH.stl, MESH.ply, LEVELSET.vdb or FOG.vdb")
+        ->required()
+        ->check(fileName);
     imp->add_option("-o,--output", impOut, "CLAY.vdb")->required()->check(fileName);
-    imp->add_option("--mass", impMass, "clay per voxel inside the shape")
+    imp->add_option("--mass", impMass, "clay per voxel inside the shape (a fog volume: per unit of density)")
         ->required()
         ->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
     imp->add_option("--voxel-size", impVoxel,
                     "world units per voxel (default: a level set's own voxel size; 1 for meshes)")
         ->check(finiteIn(vdbclay::kMinVoxelSize, vdbclay::kMaxVoxelSize));
     std::string impGrid;
-    imp->add_option("--grid", impGrid, "LEVELSET.vdb: the level set grid to import (default: the first)");
+    imp->add_option(
+        "--grid", impGrid,
+        ".vdb: the level set or fog volume to import (default: the first level set, else the first fog "
+        "volume)");
     imp->add_option("--dims", impDims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
     std::string impUp = "y";
     imp->add_option("--up", impUp, "y or z: the input's up axis, also written into the clay's transform");
@@ -923,16 +937,20 @@ int main(int argc, char** argv)
         if (*mesh) {
             checkMeshName({"-o", meshOut});
             checkOutputs({{"-o", meshOut}}, {{{"the input file", meshIn}, {}}});
-            const vdbclay::ClayFile f = vdbclay::readClayFile(meshIn);
+            std::string note;
+            const vdbclay::ClayFile f = vdbclay::readAsClay(meshIn, note);
+            if (!note.empty()) std::printf("note: %s\n", note.c_str());
             if (!meshUp.empty()) vdbclay::setClayTransform(*f.mass, f.meta.voxelSize, upOption(meshUp));
             gWriting.store(true);
-            vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso);
+            vdbclay::writeSurfaceMesh(meshOut, *f.mass, thresholdOf(f, meshTc), iso, meshKeepVolume);
             std::printf("wrote %s\n", meshOut.c_str());
             return 0;
         }
         if (*ren) {
             checkOutputs({{"-o", renOut}}, {{{"the input file", renIn}, {}}});
-            const vdbclay::ClayFile f = vdbclay::readClayFile(renIn);
+            std::string note;
+            const vdbclay::ClayFile f = vdbclay::readAsClay(renIn, note);
+            if (!note.empty()) std::printf("note: %s\n", note.c_str());
             const int dims = renDims ? renDims : f.meta.dimensions;
             gWriting.store(true);
             vdbclay::renderPng(renOut, *f.mass, thresholdOf(f, renTc), dims, ro);
@@ -942,8 +960,29 @@ int main(int argc, char** argv)
         if (*imp) {
             checkOutputs({{"-o", impOut}}, {{{"the input file", impIn}, {}}});
             const bool isVdb = impIn.size() > 4 && impIn.compare(impIn.size() - 4, 4, ".vdb") == 0;
-            if (!isVdb && !impGrid.empty())
-                throw vdbclay::Error("--grid: only for a level set .vdb, not " + impIn);
+            if (!isVdb && !impGrid.empty()) throw vdbclay::Error("--grid: only for a .vdb, not " + impIn);
+            const std::string fogGrid = isVdb ? vdbclay::fogGridToImport(impIn, impGrid) : std::string();
+            if (!fogGrid.empty()) {
+                // A fog volume: round(density x M) per voxel, voxel for voxel at its own voxel size.
+                const vdbclay::FogClay fog =
+                    vdbclay::readFogAsClay(impIn, fogGrid, int32_t(impMass), impDims);
+                if (impVoxel != 0 && impVoxel != fog.voxelSize) {
+                    throw vdbclay::Error("--voxel-size: fog volume \"" + fogGrid + "\" in " + impIn +
+                                         " is taken voxel for voxel at its own voxel size " +
+                                         std::to_string(fog.voxelSize) + "; leave --voxel-size out");
+                }
+                vdbclay::ClayMeta meta;
+                meta.dimensions = impDims;
+                meta.voxelSize = fog.voxelSize;
+                meta.up = upOption(impUp);
+                gWriting.store(true);
+                vdbclay::writeClayFile(impOut, *fog.mass, meta);
+                std::printf("note: %s\n", fog.note.c_str());
+                std::printf("wrote %s: %llu voxels, mass %lld\n", impOut.c_str(),
+                            (unsigned long long)vdbclay::clayVoxelCount(*fog.mass),
+                            (long long)vdbclay::totalMass(*fog.mass));
+                return 0;
+            }
             if (impVoxel == 0 && isVdb) {
                 // The level set's own voxel size; loadLevelSet checks the file before OpenVDB reads it.
                 vdbclay::loadLevelSet(impIn, 1.0, impGrid, upOption(impUp));

@@ -289,7 +289,7 @@ PYBIND11_MODULE(_vdbclay, m)
             return PyShape{loadMesh(path, vs, parseUpAxis(up))};
         },
         py::arg("path"), py::arg("voxel_size") = 1.0, py::arg("up") = "y",
-        "A closed triangle mesh (OBJ or STL) in world units with up axis 'y' or 'z', at voxel_size world "
+        "A triangle mesh (OBJ, STL or PLY) in world units with up axis 'y' or 'z', at voxel_size world "
         "units per voxel.");
     m.def(
         "level_set",
@@ -359,14 +359,15 @@ PYBIND11_MODULE(_vdbclay, m)
             "Writes a clay .vdb (grids mass, density, surface; atomically) with this clay's metadata.")
         .def(
             "write_mesh",
-            [](const Clay& c, const std::string& path, double iso) {
+            [](const Clay& c, const std::string& path, double iso, bool keepVolume) {
                 // In world units through this clay's voxel size and up axis, like write().
                 MassGridPtr view = c.mass->copy(); // shares the tree
                 setClayTransform(*view, c.meta.voxelSize, c.meta.up);
-                writeSurfaceMesh(path, *view, c.meta.rule.threshold, iso);
+                writeSurfaceMesh(path, *view, c.meta.rule.threshold, iso, keepVolume);
             },
-            py::arg("path"), py::arg("isovalue") = 0.5,
-            "Writes the surface where density = isovalue as .obj or .ply, in world units.")
+            py::arg("path"), py::arg("isovalue") = 0.5, py::arg("keep_volume") = false,
+            "Writes the surface where density = isovalue as .obj or .ply, in world units; keep_volume "
+            "moves it along its normals (at most half a voxel) to enclose the clay's volume.")
         .def(
             "render",
             [](const Clay& c, const std::string& path, int width, int height, double az, double el) {

@@ -451,8 +451,10 @@ TEST_F(ShapesTest, MeshErrors)
     const std::string bin = tetraBinaryStl();
     const std::string pt = file("trunc.stl", bin.substr(0, bin.size() - 7));
     EXPECT_TRUE(throwsWith([&] { loadMesh(pt); }, {pt}));
-    const std::string pu = file("mesh.ply", "ply\n");
+    const std::string pu = file("mesh.3ds", "MM\n");
     EXPECT_TRUE(throwsWith([&] { loadMesh(pu); }, {pu, "unknown mesh format"}));
+    const std::string pp = file("mesh.ply", "ply\n"); // PLY is read (TestInterop), a header alone is not
+    EXPECT_TRUE(throwsWith([&] { loadMesh(pp); }, {pp, "no end_header"}));
     EXPECT_TRUE(throwsWith([&] { loadMesh(file("c.obj", kCubeObj), 0.0); }, {"voxelSize"}));
 }
 

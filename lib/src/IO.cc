@@ -22,6 +22,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -328,6 +329,186 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
 }
 
+namespace {
+std::string num(double v)
+{
+    std::ostringstream o;
+    o << std::setprecision(9) << v;
+    return o.str();
+}
+bool isFog(const openvdb::GridBase& g)
+{
+    return g.isType<openvdb::FloatGrid>() && g.getGridClass() == openvdb::GRID_FOG_VOLUME;
+}
+bool isLevelSet(const openvdb::GridBase& g)
+{
+    return g.isType<openvdb::FloatGrid>() && g.getGridClass() == openvdb::GRID_LEVEL_SET;
+}
+} // namespace
+
+std::string fogGridToImport(const std::string& path, const std::string& gridName)
+{
+    initOpenVDB();
+    openvdb::io::File file(path);
+    openChecked(file, path);
+    openvdb::GridPtrVecPtr grids;
+    try {
+        grids = file.readAllGridMetadata();
+    } catch (const std::exception& e) {
+        throw Error(damaged(path) + reason(e));
+    }
+    file.close();
+    if (!gridName.empty()) {
+        for (const auto& g : *grids)
+            if (g->getName() == gridName) return isFog(*g) ? gridName : std::string();
+        return ""; // the level set reader says it is missing
+    }
+    for (const auto& g : *grids)
+        if (isLevelSet(*g)) return ""; // a level set first
+    for (const auto& g : *grids)
+        if (isFog(*g)) return g->getName();
+    return "";
+}
+
+FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass, int dimensions)
+{
+    initOpenVDB();
+    if (fullMass <= 0) throw Error("the mass per voxel must be > 0, not " + std::to_string(fullMass));
+    openvdb::io::File file(path);
+    const auto layout = openChecked(file, path);
+    const std::string what = path + ": grid \"" + gridName + "\"";
+    if (!file.hasGrid(gridName)) {
+        throw Error(path + " has no grid named \"" + gridName + "\" (grids: " + gridNames(file) + ")");
+    }
+    for (const auto& g : layout) {
+        if (g.baseName() == gridName && g.type != "Tree_float_5_4_3") {
+            throw Error(what + " is a " + valueTypeOf(g.type) + " grid, expected a FloatGrid fog volume");
+        }
+    }
+    openvdb::FloatGrid::Ptr fog;
+    try {
+        fog = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(gridName));
+    } catch (const std::exception& e) {
+        throw Error(damaged(path) + reason(e));
+    }
+    file.close();
+    if (!fog || !isFog(*fog)) {
+        throw Error(what + " is not a FloatGrid fog volume (class " +
+                    (fog ? openvdb::GridBase::gridClassToString(fog->getGridClass()) : std::string("?")) +
+                    ")");
+    }
+    const openvdb::Vec3d vs = fog->voxelSize();
+    if (!fog->transform().isLinear() || !(vs[0] > 0) || vs[0] != vs[1] || vs[0] != vs[2]) {
+        throw Error(what +
+                    ": a fog volume is taken voxel for voxel, which needs a linear transform with "
+                    "cubic voxels (voxel size " +
+                    num(vs[0]) + " x " + num(vs[1]) + " x " + num(vs[2]) + ")");
+    }
+    if (fog->background() != 0.f) {
+        throw Error(what + " has background density " + num(fog->background()) +
+                    ", expected 0 (a non-zero background fills all of space)");
+    }
+    FogClay out;
+    out.voxelSize = vs[0];
+    out.mass = openvdb::Int32Grid::create(0);
+    out.mass->setName("mass");
+    auto acc = out.mass->getAccessor();
+    uint64_t tileVoxels = 0;
+    for (auto it = fog->tree().cbeginValueOn(); it; ++it) {
+        const double d = *it;
+        if (!std::isfinite(d) || d < 0) {
+            throw Error(what + " holds density " + num(d) + " at voxel " + coordText(it.getCoord()) +
+                        ", expected a finite value >= 0");
+        }
+        const double m = std::round(d * fullMass);
+        if (m > double(INT32_MAX)) {
+            throw Error(what + ": density " + num(d) + " at voxel " + coordText(it.getCoord()) + " x " +
+                        std::to_string(fullMass) + " does not fit a cell (int32)");
+        }
+        if (m <= 0) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        if (!it.isVoxelValue()) {
+            tileVoxels += it.getVoxelCount();
+            if (tileVoxels > kMaxTileVoxels) {
+                throw Error(what + " holds tiles of more than " + std::to_string(kMaxTileVoxels) +
+                            " voxels in all; vdbclay expands tiles into voxels");
+            }
+        }
+        if (dimensions == 2) {
+            if (box.min().z() > 0 || box.max().z() < 0) continue;
+            box.min().setZ(0);
+            box.max().setZ(0);
+        }
+        for (auto c = box.begin(); c; ++c)
+            acc.setValueOn(*c, int32_t(m));
+    }
+    if (out.mass->activeVoxelCount() == 0) {
+        throw Error(what + ": no voxel" + (dimensions == 2 ? " of the z = 0 layer" : "") +
+                    " holds enough density for a unit of mass (" + std::to_string(fullMass) +
+                    " per full voxel)");
+    }
+    normalizeClay(*out.mass, path, gridName);
+    out.note = "grid \"" + gridName + "\" is a fog volume (class " +
+               openvdb::GridBase::gridClassToString(fog->getGridClass()) +
+               "): each voxel holds round(density x " + std::to_string(fullMass) +
+               "), voxel for voxel at its voxel size " + num(vs[0]);
+    return out;
+}
+
+ClayFile readAsClay(const std::string& path, std::string& note)
+{
+    initOpenVDB();
+    note.clear();
+    openvdb::GridPtrVecPtr grids;
+    {
+        openvdb::io::File file(path);
+        openChecked(file, path);
+        try {
+            grids = file.readAllGridMetadata();
+        } catch (const std::exception& e) {
+            throw Error(damaged(path) + reason(e));
+        }
+        file.close();
+    }
+    std::string fog, levelSet, names;
+    double levelSetVoxel = 1;
+    for (const auto& g : *grids) {
+        if (g->getName() == "mass") return readClayFile(path);
+        if (fog.empty() && isFog(*g)) fog = g->getName();
+        if (levelSet.empty() && isLevelSet(*g)) {
+            levelSet = g->getName();
+            levelSetVoxel = g->voxelSize()[0];
+        }
+        names += (names.empty() ? "" : ", ") + ("\"" + g->getName() + "\"");
+    }
+    ClayFile out;
+    if (!fog.empty()) {
+        FogClay c = readFogAsClay(path, fog, out.meta.rule.threshold);
+        openvdb::io::File file(path);
+        file.open(false);
+        c.mass->setTransform(file.readGridMetadata(fog)->transform().copy());
+        file.close();
+        out.mass = c.mass;
+        out.meta.voxelSize = c.voxelSize;
+        note = "no clay grid \"mass\" in " + path + ": using fog volume \"" + fog +
+               "\" as density (1 = a full cell)";
+        return out;
+    }
+    if (!levelSet.empty()) {
+        const ShapePtr shape = loadLevelSet(path, levelSetVoxel, levelSet);
+        out.mass = makeClay(*shape, out.meta.rule.threshold);
+        setClayTransform(*out.mass, levelSetVoxel, UpAxis::Y);
+        out.meta.voxelSize = levelSetVoxel;
+        note = "no clay grid \"mass\" in " + path + ": using level set \"" + levelSet +
+               "\" (inside = full clay, boundary voxels by the part they cover)";
+        return out;
+    }
+    throw Error(path + ": no clay grid \"mass\", fog volume or level set among its " +
+                std::to_string(grids->size()) + " grid(s)" +
+                (names.empty() ? std::string() : " (" + names + ")"));
+}
+
 ClayFile readClayFile(const std::string& path, const std::string& gridName)
 {
     initOpenVDB();
@@ -538,7 +719,46 @@ std::string describeVdb(const std::string& path)
     return s.str();
 }
 
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue)
+namespace {
+
+/// Moves every vertex of @a mesh (index space, outward faces) along its normal by one distance,
+/// so that the mesh encloses @a target voxels: marching cubes cuts convex edges and rounds convex
+/// surfaces inward. Two Newton steps (volume' = area); the move is at most half a voxel.
+void keepVolume(io_internal::SurfaceMesh& mesh, double target)
+{
+    std::vector<std::array<uint32_t, 3>> tris;
+    tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+    for (const auto& t : mesh.triangles)
+        tris.push_back({{t[0], t[1], t[2]}});
+    for (const auto& q : mesh.quads) {
+        tris.push_back({{q[0], q[1], q[2]}});
+        tris.push_back({{q[0], q[2], q[3]}});
+    }
+    for (int iteration = 0; iteration < 2; ++iteration) {
+        std::vector<openvdb::Vec3d> normals(mesh.points.size(), openvdb::Vec3d(0.0));
+        double volume = 0, area = 0;
+        for (const auto& t : tris) {
+            const openvdb::Vec3d a(mesh.points[t[0]]), b(mesh.points[t[1]]), c(mesh.points[t[2]]);
+            const openvdb::Vec3d n = (b - a).cross(c - a); // twice the area, outward
+            volume += a.dot(b.cross(c)) / 6;
+            area += n.length() / 2;
+            for (int i = 0; i < 3; ++i)
+                normals[t[i]] += n;
+        }
+        if (!(area > 0)) return;
+        const double shift = std::max(-0.5, std::min(0.5, (target - volume) / area));
+        for (size_t i = 0; i < mesh.points.size(); ++i) {
+            const double l = normals[i].length();
+            if (l > 0)
+                mesh.points[i] = openvdb::Vec3s(openvdb::Vec3d(mesh.points[i]) + normals[i] * (shift / l));
+        }
+    }
+}
+
+} // namespace
+
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue,
+                      bool keepClayVolume)
 {
     initOpenVDB();
     const std::string ext = io_internal::extensionOf(path);
@@ -554,6 +774,13 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
     try {
         auto density = io_internal::densityGrid(mass, threshold, 1.0);
         mesh = io_internal::surfaceMesh(*density, isovalue);
+        if (keepClayVolume && !mesh.points.empty()) {
+            // The clay's volume: each cell counts for its fill, up to 1.
+            double volume = 0;
+            for (auto it = mass.cbeginValueOn(); it; ++it)
+                volume += std::min(1.0, double(*it) / double(threshold)) * double(it.getVoxelCount());
+            keepVolume(mesh, volume);
+        }
     } catch (const Error& e) {
         throw Error("cannot write " + path + ": " + e.what());
     }
@@ -623,9 +850,24 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
     auto grid = openvdb::Int32Grid::create(0);
     grid->setName("mass");
     auto acc = grid->getAccessor();
-    forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
-        acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
-    });
+    if (shape.keepsVolume()) {
+        // Meshes and level sets: each voxel holds round(m0 x the fraction of it the shape covers)
+        // (Coverage.cc), so the clay's mass is the shape's volume x m0. A boundary voxel holding
+        // less than Tc is under-full clay, which the automaton may fill like any other.
+        forEachVoxelCovered(shape, dimensions, [&](int32_t x, int32_t y, int32_t z, double fraction) {
+            const int64_t m = std::llround(double(massPerVoxel) * fraction);
+            if (m > 0) acc.setValueOn(openvdb::Coord(x, y, z), int32_t(std::min<int64_t>(m, massPerVoxel)));
+        });
+        if (grid->activeVoxelCount() == 0) {
+            throw Error(shape.describe() + " covers no voxel" +
+                        (dimensions == 2 ? " of the z = 0 layer" : "") + " enough to hold a unit of mass (" +
+                        std::to_string(massPerVoxel) + " per voxel)");
+        }
+    } else {
+        forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
+            acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
+        });
+    }
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));

@@ -57,6 +57,7 @@ public:
     }
     Box bounds() const override { return mBounds; }
     std::string describe() const override { return mWhat; }
+    bool keepsVolume() const override { return true; }
 
 private:
     openvdb::FloatGrid::ConstPtr mGrid;

@@ -373,9 +373,26 @@ bool Placement::isIdentity() const
     return scale == Vec3{{1, 1, 1}} && pose.isIdentity();
 }
 
+namespace {
+/// A placed level set keeps its volume (coverage-weighted clay) as the shape it places does.
+class KeepsVolume final : public Shape {
+public:
+    explicit KeepsVolume(ShapePtr inner) : mInner(std::move(inner)) {}
+    double distance(const Vec3& p) const override { return mInner->distance(p); }
+    Vec3 normal(const Vec3& p) const override { return mInner->normal(p); }
+    Box bounds() const override { return mInner->bounds(); }
+    std::string describe() const override { return mInner->describe(); }
+    bool keepsVolume() const override { return true; }
+
+private:
+    ShapePtr mInner;
+};
+} // namespace
+
 ShapePtr makePlaced(ShapePtr shape, const Placement& placement)
 {
     if (!shape) throw Error("transform: shape is null");
+    const bool keepsVolume = shape->keepsVolume();
     requireFinite(placement.translate, "transform", "translate");
     requireFinite(placement.rotateDeg, "transform", "rotate");
     requireFinite(placement.pivot, "transform", "pivot");
@@ -392,7 +409,9 @@ ShapePtr makePlaced(ShapePtr shape, const Placement& placement)
     pose.translation = placement.translate;
     pose.rotationDeg = placement.rotateDeg;
     pose.pivot = placement.pivot;
-    return makeTransformed(std::move(shape), pose);
+    ShapePtr placed = makeTransformed(std::move(shape), pose);
+    if (keepsVolume && !placed->keepsVolume()) placed = std::make_shared<KeepsVolume>(std::move(placed));
+    return placed;
 }
 
 ShapePtr makeTransformed(ShapePtr shape, const Pose& pose)

@@ -2,6 +2,7 @@
 
 #include "vdbclay/Shapes.h"
 
+#include "Coverage.h"
 #include "LevelSetShape.h"
 
 #include <openvdb/openvdb.h>
@@ -209,6 +210,203 @@ void readStlBinary(const std::string& path, const std::string& data, Mesh& mesh)
     }
 }
 
+// PLY (Turk 1994; what `vdbclay mesh` writes, and Blender, MeshLab, Open3D, ...): ASCII or binary
+// little endian; element "vertex" with float or double properties x, y, z (others skipped), element
+// "face" with a list property vertex_indices (or vertex_index), polygons fanned into triangles; any
+// other element is skipped. Written here rather than taken from a library: the format needs ~150
+// lines, and Debian's candidates are heavy (assimp) or do not read the properties by name.
+struct PlyProperty {
+    std::string name, type; // type: scalar type, or the item type of a list
+    std::string countType;  // non-empty for a list
+};
+struct PlyElement {
+    std::string name;
+    uint64_t count = 0;
+    std::vector<PlyProperty> properties;
+};
+
+int plyTypeSize(const std::string& t)
+{
+    if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+    if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+    if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" || t == "float32")
+        return 4;
+    if (t == "double" || t == "float64") return 8;
+    return 0;
+}
+
+/// One binary little-endian value of PLY type @a t at @a p, as a double.
+double plyValue(const char* p, const std::string& t)
+{
+    auto get = [p](auto v) {
+        std::memcpy(&v, p, sizeof v);
+        return double(v);
+    };
+    if (t == "char" || t == "int8") return get(int8_t());
+    if (t == "uchar" || t == "uint8") return get(uint8_t());
+    if (t == "short" || t == "int16") return get(int16_t());
+    if (t == "ushort" || t == "uint16") return get(uint16_t());
+    if (t == "int" || t == "int32") return get(int32_t());
+    if (t == "uint" || t == "uint32") return get(uint32_t());
+    if (t == "float" || t == "float32") return get(float());
+    return get(double());
+}
+
+void readPly(const std::string& path, const std::string& data, Mesh& mesh)
+{
+    // The header: lines up to "end_header".
+    size_t pos = 0, line = 0;
+    auto nextLine = [&](std::string& out) {
+        if (pos >= data.size()) return false;
+        size_t e = data.find('\n', pos);
+        if (e == std::string::npos) e = data.size();
+        out = data.substr(pos, e - pos);
+        if (!out.empty() && out.back() == '\r') out.pop_back();
+        pos = e + 1;
+        ++line;
+        return true;
+    };
+    std::string l;
+    if (!nextLine(l) || l != "ply") malformed(path, 1, "a PLY file starts with the line \"ply\"");
+    std::string format;
+    std::vector<PlyElement> elements;
+    bool ended = false;
+    while (nextLine(l)) {
+        const std::vector<std::string> t = tokens(l);
+        if (t.empty() || t[0] == "comment" || t[0] == "obj_info") continue;
+        if (t[0] == "end_header") {
+            ended = true;
+            break;
+        }
+        if (t[0] == "format") {
+            if (t.size() != 3) malformed(path, line, "expected \"format ascii|binary_little_endian 1.0\"");
+            format = t[1];
+            if (format != "ascii" && format != "binary_little_endian") {
+                malformed(path, line,
+                          "PLY format \"" + format +
+                              "\" is not read (ascii or binary_little_endian; convert it, e.g. "
+                              "in MeshLab or Blender)");
+            }
+        } else if (t[0] == "element") {
+            long n = 0;
+            if (t.size() != 3 || !parseLong(t[2], n) || n < 0)
+                malformed(path, line, "expected \"element NAME COUNT\"");
+            elements.push_back({t[1], uint64_t(n), {}});
+        } else if (t[0] == "property") {
+            if (elements.empty()) malformed(path, line, "a property before any element");
+            PlyProperty p;
+            if (t.size() == 5 && t[1] == "list") {
+                p.countType = t[2];
+                p.type = t[3];
+                p.name = t[4];
+                if (plyTypeSize(p.countType) == 0 || plyTypeSize(p.type) == 0 || p.countType == "float" ||
+                    p.countType == "double" || p.countType == "float32" || p.countType == "float64")
+                    malformed(path, line, "bad list types \"" + t[2] + " " + t[3] + "\"");
+            } else if (t.size() == 3) {
+                p.type = t[1];
+                p.name = t[2];
+                if (plyTypeSize(p.type) == 0) malformed(path, line, "unknown property type \"" + t[1] + "\"");
+            } else {
+                malformed(path, line, "expected \"property TYPE NAME\" or \"property list COUNT ITEM NAME\"");
+            }
+            elements.back().properties.push_back(p);
+        } else {
+            malformed(path, line, "unexpected \"" + t[0] + "\" in a PLY header");
+        }
+    }
+    if (!ended) malformed(path, line, "the PLY header has no end_header");
+    if (format.empty()) malformed(path, line, "the PLY header has no format line");
+
+    Welder weld(mesh);
+    std::vector<uint32_t> vertexIds;
+    bool sawVertex = false, sawFace = false;
+    const bool ascii = format == "ascii";
+    size_t bin = pos; // binary: the byte after the header
+    std::istringstream text(ascii ? data.substr(pos) : std::string());
+    for (const PlyElement& e : elements) {
+        int ix = -1, iy = -1, iz = -1, iv = -1;
+        for (size_t i = 0; i < e.properties.size(); ++i) {
+            const PlyProperty& p = e.properties[i];
+            if (p.countType.empty() && p.name == "x") ix = int(i);
+            if (p.countType.empty() && p.name == "y") iy = int(i);
+            if (p.countType.empty() && p.name == "z") iz = int(i);
+            if (!p.countType.empty() && (p.name == "vertex_indices" || p.name == "vertex_index")) iv = int(i);
+        }
+        const bool isVertex = e.name == "vertex", isFace = e.name == "face";
+        if (isVertex && (ix < 0 || iy < 0 || iz < 0))
+            throw Error(path + ": element \"vertex\" has no scalar properties x, y and z");
+        if (isFace && iv < 0) throw Error(path + ": element \"face\" has no list property vertex_indices");
+        sawVertex |= isVertex;
+        if (isFace && !sawVertex) throw Error(path + ": element \"face\" comes before element \"vertex\"");
+        sawFace |= isFace;
+        std::vector<double> scalars(e.properties.size());
+        std::vector<uint32_t> face;
+        for (uint64_t item = 0; item < e.count; ++item) {
+            face.clear();
+            std::vector<std::string> t;
+            size_t next = 0;
+            if (ascii) {
+                std::string raw;
+                do {
+                    if (!std::getline(text, raw))
+                        throw Error(path + ": element \"" + e.name + "\" ends after " + std::to_string(item) +
+                                    " of " + std::to_string(e.count) + " items (truncated?)");
+                    ++line;
+                    t = tokens(raw);
+                } while (t.empty());
+            }
+            const std::string where = "element \"" + e.name + "\" item " + std::to_string(item);
+            auto value = [&](const std::string& type) {
+                if (ascii) {
+                    double v;
+                    if (next >= t.size())
+                        throw Error(path + ":" + std::to_string(line) + ": " + where + ": too few values");
+                    if (!parseDouble(t[next++], v))
+                        throw Error(path + ":" + std::to_string(line) + ": " + where + ": bad number \"" +
+                                    t[next - 1] + "\"");
+                    return v;
+                }
+                const int size = plyTypeSize(type);
+                if (bin + size > data.size())
+                    throw Error(path + ": " + where + ": the file ends inside it (truncated?)");
+                const double v = plyValue(data.data() + bin, type);
+                bin += size;
+                return v;
+            };
+            for (size_t i = 0; i < e.properties.size(); ++i) {
+                const PlyProperty& p = e.properties[i];
+                if (p.countType.empty()) {
+                    scalars[i] = value(p.type);
+                    continue;
+                }
+                const double n = value(p.countType);
+                if (!(n >= 0) || n > 1e6) throw Error(path + ": " + where + ": bad list length");
+                for (int64_t k = 0; k < int64_t(n); ++k) {
+                    const double v = value(p.type);
+                    if (isFace && int(i) == iv) {
+                        if (!(v >= 0) || v >= double(vertexIds.size()) || v != std::floor(v))
+                            throw Error(path + ": " + where + ": vertex index " + num(v) + " out of range (" +
+                                        std::to_string(vertexIds.size()) + " vertices)");
+                        face.push_back(vertexIds[size_t(v)]);
+                    }
+                }
+            }
+            if (isVertex) {
+                for (double c : {scalars[ix], scalars[iy], scalars[iz]})
+                    if (!std::isfinite(c)) throw Error(path + ": " + where + " has a non-finite coordinate");
+                vertexIds.push_back(
+                    weld.add(openvdb::Vec3s(float(scalars[ix]), float(scalars[iy]), float(scalars[iz]))));
+            } else if (isFace) {
+                if (face.size() < 3) throw Error(path + ": " + where + ": a face needs at least 3 vertices");
+                for (size_t i = 1; i + 1 < face.size(); ++i)
+                    addTriangle(mesh, face[0], face[i], face[i + 1]);
+            }
+        }
+    }
+    if (!sawVertex) throw Error(path + ": no element \"vertex\" in the PLY header");
+    if (!sawFace) throw Error(path + ": no element \"face\" in the PLY header (a point cloud is not a mesh)");
+}
+
 std::string lowerExtension(const std::string& path)
 {
     std::string e = std::filesystem::path(path).extension().string();
@@ -324,6 +522,37 @@ openvdb::FloatGrid::Ptr windingLevelSet(const Mesh& m, const openvdb::FloatGrid&
     return grid;
 }
 
+/// A mesh: inside and distance from its level set (or winding-number level set); the clay it makes
+/// keeps its volume exactly (Coverage.h) when it is closed and consistently oriented, else by the
+/// level set's distance (forEachVoxelCovered).
+class MeshShape final : public Shape {
+public:
+    MeshShape(std::shared_ptr<const LevelSet> levelSet, std::vector<Vec3> points,
+              std::vector<std::array<uint32_t, 3>> triangles)
+        : mLevelSet(std::move(levelSet)), mPoints(std::move(points)), mTriangles(std::move(triangles))
+    {
+        mOriented = isOrientedClosed(mTriangles);
+    }
+    double distance(const Vec3& p) const override { return mLevelSet->distance(p); }
+    Vec3 normal(const Vec3& p) const override { return mLevelSet->normal(p); }
+    Box bounds() const override { return mLevelSet->bounds(); }
+    std::string describe() const override { return mLevelSet->describe(); }
+    bool keepsVolume() const override { return true; }
+    bool coverage(int dimensions,
+                  const std::function<void(int32_t, int32_t, int32_t, double)>& covered) const override
+    {
+        if (dimensions != 3 || !mOriented) return false;
+        meshCoverage(mPoints, mTriangles, covered);
+        return true;
+    }
+
+private:
+    std::shared_ptr<const LevelSet> mLevelSet;
+    std::vector<Vec3> mPoints;
+    std::vector<std::array<uint32_t, 3>> mTriangles;
+    bool mOriented = false;
+};
+
 } // namespace
 
 ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement)
@@ -347,6 +576,8 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
     std::istringstream text(data);
     if (ext == ".obj") {
         readObj(path, text, mesh);
+    } else if (ext == ".ply" || data.compare(0, 4, "ply\n") == 0 || data.compare(0, 5, "ply\r\n") == 0) {
+        readPly(path, data, mesh);
     } else if (binaryStl && (!asciiStl || data.find('\0') != std::string::npos)) {
         // A binary header may start with "solid" too; text never holds NUL bytes.
         readStlBinary(path, data, mesh);
@@ -358,7 +589,7 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         throw Error(path + ": neither ASCII STL (\"solid ... facet\") nor binary STL of consistent size "
                            "(truncated?)");
     } else {
-        throw Error(path + ": unknown mesh format (expected .obj or .stl)");
+        throw Error(path + ": unknown mesh format (expected .obj, .stl or .ply)");
     }
     if (mesh.triangles.empty()) throw Error(path + ": the mesh has no faces");
     // Open (edges of an odd number of faces: rims of holes) or non-manifold (edges of 4, 6, ...
@@ -381,8 +612,11 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         placed = " placed (scale " + vecStr(placement.scale) + ", rotate " + vecStr(placement.rotateDeg) +
                  ", translate " + vecStr(placement.translate) + ", pivot " + vecStr(placement.pivot) + ")";
     }
+    std::vector<Vec3> indexPoints;
+    indexPoints.reserve(mesh.points.size());
     for (auto& p : mesh.points) {
         const Vec3 q = placement.apply(worldToIndex(Vec3{{p[0], p[1], p[2]}}, voxelSize, up));
+        indexPoints.push_back(q);
         p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
     }
     openvdb::initialize();
@@ -413,7 +647,12 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         }
     }
     grid->setName(std::filesystem::path(path).filename().string());
-    return std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + how + placed);
+    std::vector<std::array<uint32_t, 3>> triangles;
+    triangles.reserve(mesh.triangles.size());
+    for (const auto& t : mesh.triangles)
+        triangles.push_back({{t[0], t[1], t[2]}});
+    return std::make_shared<MeshShape>(std::make_shared<LevelSet>(grid, 1.0, "mesh " + path + how + placed),
+                                       std::move(indexPoints), std::move(triangles));
 }
 
 } // namespace vdbclay

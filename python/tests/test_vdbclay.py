@@ -114,6 +114,17 @@ class FilesAndScenes(unittest.TestCase):
             vdbclay.read(os.path.join(d, "missing.vdb"))
         self.assertIn("missing.vdb", str(e.exception))
 
+    def test_mesh_clay_keeps_the_volume_of_a_mesh_written_to_keep_it(self):
+        d = tmpdir()
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (9, 5, 7)), mass=1000, voxel_size=0.5, up="z")
+        mesh = os.path.join(d, "box.obj")
+        clay.write_mesh(mesh, keep_volume=True)
+        back = vdbclay.make_clay(vdbclay.mesh(mesh, voxel_size=0.5, up="z"), mass=1000)
+        self.assertAlmostEqual(back.total_mass() / 1000, 10 * 6 * 8, delta=0.005 * 480)
+        clay.write_mesh(mesh)  # marching cubes cuts the box's edges
+        self.assertLess(vdbclay.make_clay(vdbclay.mesh(mesh, voxel_size=0.5, up="z"), mass=1000).total_mass(),
+                        0.99 * 480000)
+
     def test_scene_runs_frame_by_frame_with_progress_and_continues_from_its_file(self):
         d = tmpdir()
         scene = vdbclay.Scene.default()

@@ -22,4 +22,18 @@ if "$bin" run tall.json --quiet --up x -o x.vdb 2> err.txt; then fail "--up x ac
 grep -q -- '--up' err.txt || fail "--up x: $(cat err.txt)"
 if "$bin" import tall.json --grid a -o g.vdb --mass 1 2> err.txt; then fail "--grid on a mesh accepted"; fi
 grep -q -- '--grid' err.txt || fail "--grid: $(cat err.txt)"
+# mesh --keep-volume: the box's mesh read back as mesh clay holds the box's 8 x 16 x 4 = 512 voxels
+# of volume within 0.5 % (without it, marching cubes cuts the box's edges: 2 % less).
+"$bin" mesh z.vdb -o kept.obj --keep-volume > /dev/null
+"$bin" import kept.obj --voxel-size 0.25 --up z -o kept.vdb --mass 1000 > kept.log
+mass=$(sed -n 's/.*mass \([0-9]*\).*/\1/p' kept.log)
+[ -n "$mass" ] && [ "$mass" -ge 509440 ] && [ "$mass" -le 514560 ] || fail "mesh --keep-volume: $(cat kept.log), expected mass 512000 +- 0.5 %"
+# A fog volume: the clay file's own density grid gives its mass back, with a note naming the class.
+"$bin" import z.vdb --grid density -o fog.vdb --mass 1000 > fog.log
+grep -q 'fog volume' fog.log || fail "import of a fog volume: no note: $(cat fog.log)"
+grep -q 'mass 512000' fog.log || fail "import of a fog volume: $(cat fog.log), expected mass 512000"
+# A PLY written by vdbclay mesh reads back as mesh clay.
+"$bin" mesh z.vdb -o z.ply > /dev/null
+"$bin" import z.ply --voxel-size 0.25 --up z -o ply.vdb --mass 1000 > ply.log
+grep -q 'wrote ply.vdb' ply.log || fail "import of a PLY: $(cat ply.log)"
 echo "INTEROP CLI OK"

@@ -47,6 +47,34 @@ struct ClayFile {
 ///        of that name, or the grid is not an Int32Grid, or holds negative mass.
 ClayFile readClayFile(const std::string& path, const std::string& gridName = "mass");
 
+/// The fog volume `vdbclay import` reads from @a path: @a gridName when it names a FloatGrid fog
+/// volume; with @a gridName empty, the first fog volume if the file holds no FloatGrid level set
+/// (level sets come first). Empty: import reads a level set instead.
+/// @throw Error as readClayFile if the file is not a readable .vdb.
+std::string fogGridToImport(const std::string& path, const std::string& gridName);
+
+/// Clay from a fog volume: a float density per voxel (1 = a full cell).
+struct FogClay {
+    MassGridPtr mass;
+    double voxelSize = 1; ///< the fog volume's own
+    std::string note;     ///< one line for the user: the grid, its class and the rule applied
+};
+/// Reads the FloatGrid fog volume @a gridName of @a path as clay: each voxel (active voxels and
+/// tiles) holds round(density x @a fullMass), voxel for voxel in the grid's index space at its voxel
+/// size (2D: only the z = 0 layer). Density above 1 is overfull clay.
+/// @throw Error naming the file and grid if it is missing, not a FloatGrid fog volume, has
+///        non-cubic voxels or a non-linear transform, a non-zero background, a negative or
+///        non-finite density, a cell that does not fit an int32, or holds no clay.
+FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass,
+                      int dimensions = 3);
+
+/// A clay file, or any other .vdb as clay (for `vdbclay render` and `mesh`): the Int32 grid "mass"
+/// if there is one (readClayFile); else the first FloatGrid fog volume, density x Tc (default Tc,
+/// the fog's own transform); else the first FloatGrid level set, as clay at its own voxel size
+/// (makeClay with Tc per voxel). @a note says which grid was used when it is not "mass".
+/// @throw Error naming the file if it holds none of these, or as readClayFile.
+ClayFile readAsClay(const std::string& path, std::string& note);
+
 /// A human-readable description of any .vdb: each grid's name, type, class, active voxel count,
 /// index bounding box, voxel size, metadata, and for Int32 grids the total mass.
 /// @throw Error as readClayFile.
@@ -56,10 +84,13 @@ std::string describeVdb(const std::string& path);
 /// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension, in world units: the
 /// vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform),
 /// so the mesh lies on the .vdb and loadMesh() with the same voxel size and up axis puts it back on
-/// the same voxels. Atomic like writeClayFile. @throw Error on an unknown extension or a write
-/// failure.
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold,
-                      double isovalue = 0.5);
+/// the same voxels. With @a keepClayVolume, every vertex then moves along its normal by one distance
+/// (at most half a voxel) so that the mesh encloses the clay's volume (the sum of min(mass / Tc, 1)
+/// over the cells): marching cubes cuts convex edges and rounds convex surfaces inward, and mesh
+/// clay made from the mesh then keeps the clay's volume. Atomic like writeClayFile.
+/// @throw Error on an unknown extension or a write failure.
+void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue = 0.5,
+                      bool keepClayVolume = false);
 
 /// Gives @a mass the transform a clay file records: @a voxelSize world units per voxel, rotated for
 /// @a up (Shapes.h: UpAxis).
@@ -73,7 +104,10 @@ void writeTextFile(const std::string& path, const std::string& text);
 /// write in progress, if any. Async-signal-safe (one unlink(2) of a name kept in a fixed buffer).
 void removePendingTempFile() noexcept;
 
-/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0).
+/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0), for
+/// the analytic shapes. Shapes that keepsVolume() (meshes, level sets) give every voxel
+/// round(massPerVoxel x the fraction of it they cover) instead (forEachVoxelCovered), so that the
+/// clay's mass is their volume x massPerVoxel; boundary voxels are under-full clay.
 /// @throw Error if massPerVoxel <= 0 or the shape is empty.
 MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);
 

@@ -10,6 +10,7 @@
 #include "vdbclay/Types.h"
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -46,6 +47,21 @@ public:
     virtual Box bounds() const = 0;
     /// A short description for messages, e.g. "sphere (center [1,2,3], radius 4)".
     virtual std::string describe() const = 0;
+    /// True for shapes that stand for a volume given in world units (meshes, level sets): makeClay
+    /// gives their boundary voxels mass in proportion to the part of each voxel they cover
+    /// (forEachVoxelCovered), so that the clay keeps their volume. False (the analytic shapes, in
+    /// voxel indices): a voxel is in or out by its centre (forEachVoxelInside).
+    virtual bool keepsVolume() const { return false; }
+    /// For shapes that know their covered fractions better than forEachVoxelCovered's estimate from
+    /// distance() (closed meshes: exactly): calls @a covered(x, y, z, fraction) as
+    /// forEachVoxelCovered does and returns true; returns false (calling nothing) otherwise.
+    virtual bool coverage(int dimensions,
+                          const std::function<void(int32_t, int32_t, int32_t, double)>& covered) const
+    {
+        (void)dimensions;
+        (void)covered;
+        return false;
+    }
 };
 using ShapePtr = std::shared_ptr<const Shape>;
 
@@ -74,6 +90,18 @@ template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimen
 {
     forEachVoxelInside(shape, dimensions, inside, [](int32_t, int32_t, int32_t) { return false; });
 }
+
+/// The coverage variant of forEachVoxelInside, for shapes that keepsVolume(): calls
+/// @a covered(x, y, z, fraction) for every voxel (only the z = 0 layer when @a dimensions == 2) of
+/// which the shape covers a fraction in (0, 1], each voxel once, in x, then y, then z order.
+/// The fraction is the shape's own coverage() when it has one (closed meshes: the exact volume of
+/// the mesh inside the voxel, by column integrals), else clamp(0.5 - distance(centre), 0, 1): the
+/// part of the voxel below a plane at that distance, averaged over the plane's orientations. That
+/// ramp is exact for a face parallel to the axes (away from its edges) and unbiased in sum for a
+/// plane of any orientation; on a ball of radius r voxels it adds 1 / (4 r^2) of the volume
+/// (0.25 % at r = 10). docs/INTEROP.md, "Coverage".
+void forEachVoxelCovered(const Shape& shape, int dimensions,
+                         const std::function<void(int32_t, int32_t, int32_t, double)>& covered);
 
 /// @throw Error (naming the parameter) on NaN/infinite values, radius/height <= 0, min > max,
 /// an axis other than 0, 1, 2.
@@ -122,7 +150,8 @@ Vec3 indexToWorld(const Vec3& p, double voxelSize, UpAxis up);
 ///        FloatGrid level set (of that name).
 ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std::string& gridName = "",
                       UpAxis up = UpAxis::Y);
-/// A closed triangle mesh (OBJ or STL, ASCII or binary STL), in world units with @a up as its up
+/// A triangle mesh (OBJ; STL, ASCII or binary; PLY, ASCII or binary little endian, vertex x y z and
+/// face vertex_indices), in world units with @a up as its up
 /// axis, brought into index space (@a voxelSize), its vertices placed by @a placement (in index
 /// space), then converted with openvdb::tools::meshToLevelSet.
 /// @throw Error naming the file if it is unreadable, empty, malformed (with the line), or not closed.
