@@ -1009,11 +1009,9 @@ int main(int argc, char** argv)
                     throw vdbclay::Error(std::string("--memory-budget: ") + e.what());
                 }
             }
-            if (!isVdb)
-                vdbclay::checkMeshFits(impIn, impVoxel, budget ? budget : vdbclay::defaultMemoryBudget());
             const vdbclay::ShapePtr shape =
                 isVdb ? vdbclay::loadLevelSet(impIn, impVoxel, impGrid, upOption(impUp))
-                      : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp));
+                      : vdbclay::loadMesh(impIn, impVoxel, upOption(impUp), vdbclay::Placement(), budget);
             { // the clay makeClay builds must fit the default memory budget
                 vdbclay::Scene sc;
                 sc.source = "import " + impIn;

@@ -272,11 +272,9 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     } else if (s.kind == "mesh") {
         allowed({"file"});
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
-        // Bounds and the level set's size are checked before the mesh is voxelized.
-        s.shape = wrap([&] {
-            checkMeshFits(s.file, voxelSize, meshBudget);
-            return loadMesh(s.file, voxelSize, up, place ? *place : Placement());
-        });
+        // Bounds and the level set's size (placed) are checked before the mesh is voxelized.
+        s.shape =
+            wrap([&] { return loadMesh(s.file, voxelSize, up, place ? *place : Placement(), meshBudget); });
     } else if (s.kind == "vdb" && forClay) {
         extra.clear(); // exact masses come from the file
         allowed({"file", "grid"});

@@ -24,6 +24,7 @@
 #include "ClayLeaves.h"
 #include "Format.h"
 #include "ParallelFor.h"
+#include "TreeBytes.h"
 #include "VdbCheck.h"
 
 #include <openvdb/openvdb.h>
@@ -96,22 +97,13 @@ void checkResumable(const Scene& scene, const ClayMeta& m)
 
 // ---- memory estimate ------------------------------------------------------------------------------
 
-/// glibc's per-allocation overhead (chunk header, 16-byte rounding), counted once per node and
-/// once per leaf buffer.
-constexpr uint64_t kMallocOverhead = 16;
+using tree_bytes::kMallocOverhead;
+using tree_bytes::leafBytes;
 
 using MassTreeT = openvdb::Int32Tree;
 using MaskTreeT = openvdb::MaskTree;
 using FloatTreeT = openvdb::FloatTree;
 
-/// Bytes of one leaf of tree type T: the node, and for value trees its separately allocated buffer.
-template <typename TreeT> constexpr uint64_t leafBytes()
-{
-    using Leaf = typename TreeT::LeafNodeType;
-    using V = typename TreeT::ValueType;
-    const bool separateBuffer = !std::is_same<V, bool>::value && !std::is_same<V, openvdb::ValueMask>::value;
-    return sizeof(Leaf) + kMallocOverhead + (separateBuffer ? Leaf::SIZE * sizeof(V) + kMallocOverhead : 0);
-}
 /// The two internal levels (16^3 children of 8^3 leaves: 128^3 voxels; 32^3 of those: 4096^3) and
 /// the root's map entry for each upper node.
 template <typename TreeT> constexpr uint64_t lowerNodeBytes()
@@ -631,75 +623,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         workers * 2 * upperNodeBytes<FloatTreeT>() *
             std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
     return e;
-}
-
-void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget)
-{
-    std::ifstream in(path, std::ios::binary);
-    if (!in) return; // loadMesh says what is wrong with it
-    std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    auto add = [&](const double* v) {
-        for (int a = 0; a < 3; ++a) {
-            if (!std::isfinite(v[a])) continue; // loadMesh refuses it with the line
-            lo[a] = std::min(lo[a], v[a]);
-            hi[a] = std::max(hi[a], v[a]);
-        }
-    };
-    bool binaryStl = false;
-    if (data.size() >= 84) {
-        uint32_t n = 0;
-        std::memcpy(&n, data.data() + 80, 4);
-        binaryStl = data.size() == 84 + 50 * uint64_t(n) &&
-                    (data.compare(0, 5, "solid") != 0 || data.find('\0') != std::string::npos);
-    }
-    if (binaryStl) {
-        for (size_t off = 84; off + 50 <= data.size(); off += 50) {
-            for (int k = 1; k <= 3; ++k) {
-                float f[3];
-                std::memcpy(f, data.data() + off + 12 * k, 12);
-                const double v[3] = {f[0], f[1], f[2]};
-                add(v);
-            }
-        }
-    } else {
-        std::istringstream text(data);
-        std::string line;
-        while (std::getline(text, line)) {
-            std::istringstream ls(line);
-            std::string word;
-            ls >> word;
-            if (word != "v" && word != "vertex") continue;
-            double v[3];
-            if (ls >> v[0] >> v[1] >> v[2]) add(v);
-        }
-    }
-    if (!(lo[0] <= hi[0]) || !(lo[1] <= hi[1]) || !(lo[2] <= hi[2])) return; // no vertices: loadMesh says so
-    double side[3];
-    for (int a = 0; a < 3; ++a) {
-        const double l = lo[a] / voxelSize, h = hi[a] / voxelSize;
-        if (!(std::fabs(l) <= double(1 << 30)) || !(std::fabs(h) <= double(1 << 30))) {
-            char buf[160];
-            std::snprintf(buf, sizeof buf, "%.6g .. %.6g voxels along axis %d (at voxel size %g)", l, h, a,
-                          voxelSize);
-            throw Error(path + ": the mesh spans " + buf + ", outside the coordinate range +-2^30");
-        }
-        side[a] = h - l + 1;
-    }
-    if (budget == kNoMemoryBudget) return;
-    // meshToLevelSet: a float distance and an Int32 index grid over the band, each built in
-    // partial copies by the worker threads and merged (counted three times), plus leaf overhead.
-    const double bandVoxels = 2 * (side[0] * side[1] + side[1] * side[2] + side[0] * side[2]) * 6;
-    const double bytes = 3 * bandVoxels / 512 * double(leafBytes<FloatTreeT>() + leafBytes<MassTreeT>());
-    if (bytes > double(budget)) {
-        char surface[96];
-        std::snprintf(surface, sizeof surface, " (a surface of about %.3g voxels at voxel size %g)",
-                      bandVoxels / 6, voxelSize);
-        throw Error(path + ": turning the mesh into a level set needs about " +
-                    formatBytes(uint64_t(std::min(bytes, 9e18))) + surface +
-                    ", more than the memory budget of " + formatBytes(budget) +
-                    "; use a larger voxel size or raise the budget");
-    }
 }
 
 uint64_t clayMemoryInUse(const MassGrid& mass)

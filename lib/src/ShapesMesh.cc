@@ -1,9 +1,12 @@
 // Closed triangle meshes (OBJ, STL) as shapes: read, welded, checked, converted to a level set.
 
 #include "vdbclay/Shapes.h"
+#include "vdbclay/Scene.h"  // formatBytes
+#include "vdbclay/Sculpt.h" // defaultMemoryBudget
 
 #include "Coverage.h"
 #include "LevelSetShape.h"
+#include "TreeBytes.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/MeshToVolume.h>
@@ -553,9 +556,50 @@ private:
     bool mOriented = false;
 };
 
+/// Checks the placed mesh before meshToLevelSet: its vertices (index space) within +-2^30 voxels,
+/// and the level set's band within @a budget bytes (UINT64_MAX: no limit). meshToLevelSet builds a
+/// float distance and an Int32 index grid over the band, each in partial copies by the worker
+/// threads that are then merged (counted three times), over the surface of the vertices' bounding
+/// box, 6 voxels thick.
+void checkMeshFits(const std::string& path, const std::vector<Vec3>& indexPoints, double voxelSize,
+                   uint64_t budget)
+{
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (const Vec3& p : indexPoints)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], p[a]);
+            hi[a] = std::max(hi[a], p[a]);
+        }
+    double side[3];
+    for (int a = 0; a < 3; ++a) {
+        if (!(std::fabs(lo[a]) <= double(1 << 30)) || !(std::fabs(hi[a]) <= double(1 << 30))) {
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "%.6g .. %.6g voxels along axis %d (at voxel size %g)", lo[a],
+                          hi[a], a, voxelSize);
+            throw Error(path + ": the mesh spans " + buf + ", outside the coordinate range +-2^30");
+        }
+        side[a] = hi[a] - lo[a] + 1;
+    }
+    if (budget == UINT64_MAX) return;
+    using tree_bytes::leafBytes;
+    const double bandVoxels = 2 * (side[0] * side[1] + side[1] * side[2] + side[0] * side[2]) * 6;
+    const double bytes =
+        3 * bandVoxels / 512 * double(leafBytes<openvdb::FloatTree>() + leafBytes<openvdb::Int32Tree>());
+    if (bytes > double(budget)) {
+        char surface[96];
+        std::snprintf(surface, sizeof surface, " (a surface of about %.3g voxels at voxel size %g)",
+                      bandVoxels / 6, voxelSize);
+        throw Error(path + ": turning the mesh into a level set needs about " +
+                    formatBytes(uint64_t(std::min(bytes, 9e18))) + surface +
+                    ", more than the memory budget of " + formatBytes(budget) +
+                    "; use a larger voxel size or raise the budget");
+    }
+}
+
 } // namespace
 
-ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement)
+ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement,
+                  uint64_t memoryBudget)
 {
     requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
     requireFile(path);
@@ -619,6 +663,7 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         indexPoints.push_back(q);
         p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
     }
+    checkMeshFits(path, indexPoints, voxelSize, memoryBudget ? memoryBudget : defaultMemoryBudget());
     openvdb::initialize();
     openvdb::FloatGrid::Ptr grid;
     try {

@@ -102,6 +102,17 @@ rm -f m.vdb
 refused mesh-cli-budget "mesh-default.json: clay\[0\]: c40.obj: .* memory budget of 1.00 MiB" \
   "$bin" run mesh-default.json --frames 1 -o m.vdb --memory-budget 1M
 [ -e m.vdb ] && fail "mesh-cli-budget: an output was written"
+# The check is on the mesh as placed, whatever its format: a PLY file, and a small cube scaled up.
+{ printf 'ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n'
+  printf 'element face 12\nproperty list uchar int vertex_indices\nend_header\n'
+  grep '^v ' big-cube.obj | cut -c3-
+  grep '^f ' big-cube.obj | awk '{print 3, $2-1, $3-1, $4-1}'; } > big-cube.ply
+printf '{"memory_budget": "1G", "clay": [{"shape": "mesh", "file": "big-cube.ply", "mass": 800}]}' > mesh-ply.json
+refused mesh-ply-too-big "clay\[0\]: big-cube.ply: turning the mesh into a level set needs about" "$bin" run mesh-ply.json -o big.vdb
+refused import-ply-too-big "big-cube.ply: turning the mesh into a level set" "$bin" import big-cube.ply -o big.vdb --mass 100 --memory-budget 1G
+printf '{"memory_budget": "1G", "clay": [{"shape": "mesh", "file": "c40.obj", "mass": 800, "transform": {"scale": 125}}]}' > mesh-scaled.json
+refused mesh-scaled-too-big "clay\[0\]: c40.obj: turning the mesh into a level set needs about" "$bin" run mesh-scaled.json -o big.vdb
+[ -e big.vdb ] && fail "placed mesh checks: an output was written"
 
 # 6. The budget is kept while the run goes on (item 5): clay read from a file at 2^31 - 1 per voxel
 #    spreads far beyond what the estimate can see in the file, and the run stops with a checkpoint

@@ -80,13 +80,6 @@ struct MemoryEstimate {
 /// @throw Error if a file the scene names cannot be read.
 MemoryEstimate estimateSceneMemory(const Scene& scene);
 
-/// Checks a mesh file before it is turned into a level set (loadMesh): its vertices, at
-/// @a voxelSize world units per voxel, must lie within +-2^30 voxels, and the level set's narrow
-/// band (taken as the surface of its bounding box, 6 voxels thick) must fit in @a budget bytes
-/// (kNoMemoryBudget: no limit). Reads only the vertices (OBJ "v", STL ASCII "vertex", binary STL).
-/// @throw Error "PATH: ..." naming the extent, or the estimate and the budget, when it does not fit.
-void checkMeshFits(const std::string& path, double voxelSize, uint64_t budget);
-
 /// What @a mass takes now by the measure estimateSceneMemory() uses for the clay: its tree, the
 /// automaton's state for each of its leaves, and the output grids writing it would build. A run
 /// compares this (plus the estimate's obstacle and tool bytes) with its budget as the clay grows.

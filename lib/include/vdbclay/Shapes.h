@@ -153,9 +153,13 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std
 /// A triangle mesh (OBJ; STL, ASCII or binary; PLY, ASCII or binary little endian, vertex x y z and
 /// face vertex_indices), in world units with @a up as its up
 /// axis, brought into index space (@a voxelSize), its vertices placed by @a placement (in index
-/// space), then converted with openvdb::tools::meshToLevelSet.
-/// @throw Error naming the file if it is unreadable, empty, malformed (with the line), or not closed.
+/// space), then converted with openvdb::tools::meshToLevelSet. Before that conversion the placed
+/// vertices must lie within +-2^30 voxels, and the level set's narrow band (taken as the surface of
+/// their bounding box, 6 voxels thick) must fit in @a memoryBudget bytes (0: the default budget,
+/// defaultMemoryBudget(); UINT64_MAX: no limit), whatever the format.
+/// @throw Error naming the file if it is unreadable, empty, malformed (with the line), not closed,
+/// out of range, or over the budget (with the estimate).
 ShapePtr loadMesh(const std::string& path, double voxelSize = 1.0, UpAxis up = UpAxis::Y,
-                  const Placement& placement = Placement());
+                  const Placement& placement = Placement(), uint64_t memoryBudget = 0);
 
 } // namespace vdbclay
