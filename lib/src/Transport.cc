@@ -303,19 +303,25 @@ private:
         l.dense = true;
     }
 
+    /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels).
+    static double residual(const Level& l, size_t k)
+    {
+        double s = l.r[k] - l.diag[k] * l.x[k];
+        if (l.w.empty())
+            for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
+                s += l.x[size_t(l.col[e])];
+        else
+            for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
+                s += double(l.w[e]) * l.x[size_t(l.col[e])];
+        return s;
+    }
+
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l)
     {
         forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k) {
-                double s = l.r[k] - l.diag[k] * l.x[k];
-                if (l.w.empty())
-                    for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
-                        s += l.x[size_t(l.col[e])];
-                else
-                    for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
-                        s += double(l.w[e]) * l.x[size_t(l.col[e])];
-                l.t[k] = l.x[k] + kOmega * l.invDiag[k] * s;
+                l.t[k] = l.x[k] + kOmega * l.invDiag[k] * residual(l, k);
             }
         });
         l.x.swap(l.t);
@@ -356,14 +362,7 @@ private:
         // Residual, restricted: c.r[i] = sum over i's members of (r - A x).
         forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k) {
-                double s = l.r[k] - l.diag[k] * l.x[k];
-                if (l.w.empty())
-                    for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
-                        s += l.x[size_t(l.col[e])];
-                else
-                    for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
-                        s += double(l.w[e]) * l.x[size_t(l.col[e])];
-                l.t[k] = s;
+                l.t[k] = residual(l, k);
             }
         });
         forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
