@@ -87,10 +87,13 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 "$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1
 "$BUILD_DIR/tests/test_transport" --gtest_brief=1 --gtest_filter='*Thread*'
 # A whole scene through the CLI (scene, push, settle, the parallel output) on 2 and 3 threads.
+# Not --mesh: OpenVDB's volumeToMesh locks a tbb::concurrent_hash_map whose spin_rw_mutex is compiled
+# into libopenvdb.so, which is not instrumented, so TSan cannot see the lock and reports a race in
+# OpenVDB's own code (seen here, 2026-11-28); vdbclay's mesh output calls it once, from one thread.
 tsan_work=$BUILD_DIR/tsan-scene
 rm -rf "$tsan_work"; mkdir -p "$tsan_work"
 for t in 2 3; do
   "$BUILD_DIR/apps/vdbclay" run data/scenes/cube-small-plate.json --frames 3 --threads $t --quiet \
-    -o "$tsan_work/t$t.vdb" --mesh "$tsan_work/t$t.obj" > /dev/null
+    -o "$tsan_work/t$t.vdb" > /dev/null
 done
 echo "test-tsan: no data race reported"
