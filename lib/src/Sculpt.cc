@@ -487,7 +487,11 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     } else {
         for (const ClaySpec& c : scene.clay) {
             if (c.shape.kind == "vdb") {
-                addFileClay(c.shape.file, c.shape.grid);
+                try {
+                    addFileClay(c.shape.file, c.shape.grid);
+                } catch (const Error& e) {
+                    throw Error(scene.source + ": " + c.shape.field + ": " + e.what()); // the scene and field
+                }
                 continue;
             }
             const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);

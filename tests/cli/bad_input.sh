@@ -27,6 +27,11 @@ expect_refused unknown-rule "rule4" run badrule.json -o result.vdb
 expect_refused negative-mass "clay\[0\].mass" run negative.json -o result.vdb
 expect_refused missing-start "missing.vdb" run nostart.json -o result.vdb
 expect_refused info-not-vdb "notvdb.vdb" info notvdb.vdb
+# Clay imported from a .vdb ("shape": "vdb"): the message names the scene and the field.
+printf '{"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5}, {"shape": "vdb", "file": "missing.vdb"}]}' > vdbmissing.json
+printf '{"clay": [{"shape": "vdb", "file": "notvdb.vdb"}]}' > vdbdamaged.json
+expect_refused vdb-clay-missing "vdbmissing.json: clay\[1\]: missing.vdb: no such file" run vdbmissing.json -o result.vdb
+expect_refused vdb-clay-damaged "vdbdamaged.json: clay\[0\]: notvdb.vdb is not a .vdb file" run vdbdamaged.json -o result.vdb
 expect_refused info-missing "missing.vdb" info missing.vdb
 expect_refused render-not-vdb "notvdb.vdb" render notvdb.vdb -o result.png
 expect_refused unknown-option "--bogus" run --bogus
