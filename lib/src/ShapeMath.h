@@ -44,6 +44,21 @@ inline void requirePositive(double v, const std::string& what, const char* name)
     }
 }
 
+/// A scene "transform": finite translate, rotate and pivot, each scale factor finite and > 0.
+/// @throw Error "transform: FIELD ..." naming the first bad value.
+inline void requireValidPlacement(const Placement& placement)
+{
+    requireFinite(placement.translate, "transform", "translate");
+    requireFinite(placement.rotateDeg, "transform", "rotate");
+    requireFinite(placement.pivot, "transform", "pivot");
+    for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
+            throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
+                        num(placement.scale[i]));
+        }
+    }
+}
+
 /// The voxel box [floor(lo), ceil(hi)]; throws if it leaves the coordinate range.
 inline Box boxOf(const Vec3& lo, const Vec3& hi, const std::string& what)
 {

@@ -393,15 +393,7 @@ ShapePtr makePlaced(ShapePtr shape, const Placement& placement)
 {
     if (!shape) throw Error("transform: shape is null");
     const bool keepsVolume = shape->keepsVolume();
-    requireFinite(placement.translate, "transform", "translate");
-    requireFinite(placement.rotateDeg, "transform", "rotate");
-    requireFinite(placement.pivot, "transform", "pivot");
-    for (int i = 0; i < 3; ++i) {
-        if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
-            throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
-                        num(placement.scale[i]));
-        }
-    }
+    requireValidPlacement(placement);
     if (placement.scale != Vec3{{1, 1, 1}}) {
         shape = std::make_shared<Scaled>(std::move(shape), placement.scale, placement.pivot);
     }

@@ -417,8 +417,12 @@ std::string lowerExtension(const std::string& path)
     return e;
 }
 
-/// Number of undirected edges bounding an odd number of triangles (boundary edges of holes).
-size_t openEdges(const Mesh& m)
+/// The mesh's undirected edges by how many triangles they bound.
+struct EdgeCounts {
+    size_t open = 0;        ///< edges of an odd number of triangles (rims of holes)
+    size_t nonManifold = 0; ///< edges of more than two triangles (closed when even)
+};
+EdgeCounts countEdges(const Mesh& m)
 {
     std::unordered_map<uint64_t, uint32_t> count;
     count.reserve(m.triangles.size() * 3);
@@ -431,27 +435,11 @@ size_t openEdges(const Mesh& m)
     }
     // Closed means every edge bounds an even number of faces: 2 (manifold) or 4, 6, ... (closed but
     // non-manifold, e.g. two boxes sharing an edge, which meshToLevelSet fills correctly).
-    size_t open = 0;
-    for (const auto& e : count)
-        if (e.second % 2 != 0) ++open;
-    return open;
-}
-
-/// Number of edges bounding more than two triangles (non-manifold edges; closed if even).
-size_t nonManifoldEdges(const Mesh& m)
-{
-    std::unordered_map<uint64_t, uint32_t> count;
-    count.reserve(m.triangles.size() * 3);
-    for (const auto& t : m.triangles) {
-        for (int i = 0; i < 3; ++i) {
-            uint32_t a = t[i], b = t[(i + 1) % 3];
-            if (a > b) std::swap(a, b);
-            ++count[(uint64_t(a) << 32) | b];
-        }
+    EdgeCounts n;
+    for (const auto& e : count) {
+        if (e.second % 2 != 0) ++n.open;
+        if (e.second > 2) ++n.nonManifold;
     }
-    size_t n = 0;
-    for (const auto& e : count)
-        if (e.second > 2) ++n;
     return n;
 }
 
@@ -639,20 +627,13 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
     // Open (edges of an odd number of faces: rims of holes) or non-manifold (edges of 4, 6, ...
     // faces) meshes cannot be filled by meshToLevelSet's flood fill: their inside is decided by the
     // generalized winding number instead, and describe() says so.
-    const size_t open = openEdges(mesh), nonManifold = nonManifoldEdges(mesh);
+    const EdgeCounts edges = countEdges(mesh);
+    const size_t open = edges.open, nonManifold = edges.nonManifold;
     // Into the clay's index space (voxel size, up axis), then placed: the level set is built from
     // the placed vertices, so scaling costs no resolution.
     std::string placed;
     if (!placement.isIdentity()) {
-        requireFinite(placement.translate, "transform", "translate");
-        requireFinite(placement.rotateDeg, "transform", "rotate");
-        requireFinite(placement.pivot, "transform", "pivot");
-        for (int i = 0; i < 3; ++i) {
-            if (!std::isfinite(placement.scale[i]) || !(placement.scale[i] > 0)) {
-                throw Error("transform: scale[" + std::to_string(i) + "] must be finite and > 0, got " +
-                            num(placement.scale[i]));
-            }
-        }
+        requireValidPlacement(placement);
         placed = " placed (scale " + vecStr(placement.scale) + ", rotate " + vecStr(placement.rotateDeg) +
                  ", translate " + vecStr(placement.translate) + ", pivot " + vecStr(placement.pivot) + ")";
     }
