@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "TempDirTest.h"
+
 #include <png.h>
 
 #include <cmath>
@@ -60,21 +62,8 @@ private:
     double r_;
 };
 
-class IOTest : public ::testing::Test {
+class IOTest : public vdbclay_test::TempDirTest {
 protected:
-    static void SetUpTestSuite() { openvdb::initialize(); }
-    void SetUp() override
-    {
-        char tmpl[] = "/tmp/vdbclay-test-io-XXXXXX";
-        ASSERT_NE(mkdtemp(tmpl), nullptr);
-        dir = tmpl;
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-    std::string file(const std::string& name) const { return dir + "/" + name; }
     /// Names in the test directory, to prove no temporary file is left behind.
     std::set<std::string> listing() const
     {
@@ -83,7 +72,6 @@ protected:
             names.insert(e.path().filename().string());
         return names;
     }
-    std::string dir;
 };
 
 std::string slurp(const std::string& path)

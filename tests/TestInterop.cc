@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include "TempDirTest.h"
+
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -26,23 +28,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class InteropTest : public ::testing::Test {
-protected:
-    static void SetUpTestSuite() { openvdb::initialize(); }
-    void SetUp() override
-    {
-        char tmpl[] = "/tmp/vdbclay-test-interop-XXXXXX";
-        ASSERT_NE(mkdtemp(tmpl), nullptr);
-        dir = tmpl;
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-    std::string file(const std::string& name) const { return dir + "/" + name; }
-    std::string dir;
-};
+using InteropTest = vdbclay_test::TempDirTest;
 
 std::string errorOf(const std::function<void()>& f)
 {
