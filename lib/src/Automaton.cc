@@ -528,10 +528,7 @@ StepReport Automaton::settle(const SettleOptions& so)
     // After 8192 steps of one settle (counted with so.stepsDone), then at each doubling: is there
     // room for the overload at all? A flood can cost as much as a few hundred steps of a large lump
     // (measured: 0.17 s for a 48^3 lump, ~500 steps' worth), so it waits until settling is long;
-    // callers settling in short chunks never pay it.
-    uint64_t roomCheck = kNoRoomCheckSteps;
-    while (roomCheck < so.stepsDone)
-        roomCheck *= 2;
+    // callers settling in short chunks never pay it (noRoomCheckDue).
     const uint64_t tolerance = uint64_t(std::max<int64_t>(so.tolerance, 0));
     for (;;) {
         const uint64_t done = so.stepsDone + total.steps;
@@ -544,8 +541,7 @@ StepReport Automaton::settle(const SettleOptions& so)
             total.reason = StopReason::Tolerance;
             break;
         }
-        if (done >= roomCheck) {
-            roomCheck *= 2;
+        if (noRoomCheckDue(done)) {
             if (mImpl->overloadHasNoRoom()) {
                 total.reason = StopReason::NoRoom;
                 break;

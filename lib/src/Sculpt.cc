@@ -745,8 +745,7 @@ struct Sculptor::Impl {
     void keepToolsAhead(uint64_t frameSteps, bool afterPush)
     {
         if (placed.empty() || coveredAll) return;
-        const bool floodNext =
-            frameSteps >= Automaton::kNoRoomCheckSteps && (frameSteps & (frameSteps - 1)) == 0;
+        const bool floodNext = Automaton::noRoomCheckDue(frameSteps);
         const openvdb::Index64 leaves = mass->constTree().leafCount();
         if (!afterPush && !floodNext && leaves == leavesAtCover) return;
         int64_t reach = 1;

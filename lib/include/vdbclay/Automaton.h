@@ -141,6 +141,13 @@ public:
     /// settle() checks for StopReason::NoRoom once a call has run this many steps, then at each
     /// doubling (a flood costs about as much as a few hundred steps of a large lump).
     static constexpr uint64_t kNoRoomCheckSteps = 8192;
+    /// True when settle() runs the no-room flood before the step that follows @a stepsDone steps
+    /// (counted with SettleOptions::stepsDone): at kNoRoomCheckSteps and at each doubling. Callers
+    /// that prepare what the flood reads (the Sculptor's tool cells) ask here.
+    static constexpr bool noRoomCheckDue(uint64_t stepsDone)
+    {
+        return stepsDone >= kNoRoomCheckSteps && (stepsDone & (stepsDone - 1)) == 0;
+    }
     /// True when the overload provably cannot vanish: a flood from every over cell through the
     /// non-obstacle cells closes on walled-in regions holding more than Tc per cell. Bounded by the
     /// clay's volume. For callers that settle step by step (Sculptor, to stop between steps) and
