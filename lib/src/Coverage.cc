@@ -24,6 +24,7 @@
 // of the voxel below a plane at distance d, averaged over the plane's orientations (Shapes.h).
 
 #include "Coverage.h"
+#include "DistanceCoverage.h"
 
 #include <algorithm>
 #include <cmath>
@@ -196,6 +197,12 @@ void forEachVoxelCovered(const Shape& shape, int dimensions,
         b.max[2] = b.max[2] < 0 ? b.max[2] : 0;
     }
     if (b.empty()) return;
+    if (dimensions == 3) {
+        // Planes, edges and corners recognised in the distance field (DistanceCoverage.cc).
+        shapes_internal::distanceCoverage(shape, b, covered);
+        return;
+    }
+    // 2D: the z = 0 layer by the ramp (the 3D distance's planes do not bound a 2D section).
     for (int32_t x = b.min[0]; x <= b.max[0]; ++x)
         for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
             for (int32_t z = b.min[2]; z <= b.max[2]; ++z) {

@@ -845,7 +845,7 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
         throw Error("the mass per voxel must be > 0, not " + std::to_string(massPerVoxel));
     }
     if (dimensions != 2 && dimensions != 3) {
-        throw Error("makeClay: dimensions must be 2 or 3, not " + std::to_string(dimensions));
+        throw Error("clay: dimensions must be 2 or 3, not " + std::to_string(dimensions));
     }
     auto grid = openvdb::Int32Grid::create(0);
     grid->setName("mass");

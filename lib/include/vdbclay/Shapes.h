@@ -95,11 +95,12 @@ template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimen
 /// @a covered(x, y, z, fraction) for every voxel (only the z = 0 layer when @a dimensions == 2) of
 /// which the shape covers a fraction in (0, 1], each voxel once, in x, then y, then z order.
 /// The fraction is the shape's own coverage() when it has one (closed meshes: the exact volume of
-/// the mesh inside the voxel, by column integrals), else clamp(0.5 - distance(centre), 0, 1): the
-/// part of the voxel below a plane at that distance, averaged over the plane's orientations. That
-/// ramp is exact for a face parallel to the axes (away from its edges) and unbiased in sum for a
-/// plane of any orientation; on a ball of radius r voxels it adds 1 / (4 r^2) of the volume
-/// (0.25 % at r = 10). docs/INTEROP.md, "Coverage".
+/// the mesh inside the voxel, by column integrals), else estimated from distance() at voxel centres:
+/// exact where the distance field shows planes near the voxel (a face, a convex edge or corner as
+/// the max of planes, a concave edge as their min), else clamp(0.5 - distance(centre), 0, 1), the
+/// part of the voxel below a plane at that distance averaged over the plane's orientations (on a
+/// ball of radius r voxels it adds 1 / (4 r^2) of the volume, 0.25 % at r = 10). 2D: the ramp.
+/// docs/INTEROP.md, "Coverage".
 void forEachVoxelCovered(const Shape& shape, int dimensions,
                          const std::function<void(int32_t, int32_t, int32_t, double)>& covered);
 
