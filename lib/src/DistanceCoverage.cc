@@ -195,8 +195,11 @@ double fractionNear(const SampleWindow& w, int32_t x, int32_t y, int32_t z, doub
                     lo = std::min(lo, p);
                     hi = std::max(hi, p);
                 }
-                if (!(v >= hi - kTol) || (v < 0 && !(v - hi <= kTol + kSlack))) convex = false;
-                if (!(v <= lo + kTol) || (v > 0 && !(lo - v <= kTol + kSlack))) concave = false;
+                // Where the samples lie inside all the planes (or inside the shape), the distance
+                // must be the largest plane's: else a face is missing (an open mesh's opening, a
+                // curved side), and the planes would cover what the shape does not.
+                if (!(v >= hi - kTol) || ((v < 0 || hi <= 0) && !(v - hi <= kTol + kSlack))) convex = false;
+                if (!(v <= lo + kTol) || ((v > 0 || lo >= 0) && !(lo - v <= kTol + kSlack))) concave = false;
             }
     if (convex == concave) return ramp(d);
     if (convex) return clippedCubeVolume(planes, count);
