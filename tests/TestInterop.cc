@@ -578,6 +578,26 @@ TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
         "level-set ball r = %g: %.3f voxels (%+.3f %%), placed x2: %+.3f %%, voxel size 0.5: %+.3f %%\n", r,
         got, 100 * (got - want) / want, 100 * (gotBig - 8 * want) / (8 * want),
         100 * (gotFine - 8 * want) / (8 * want));
+    // Balls of other radii, at the level set's own voxel size: the ramp adds 1 / (4 r^2); the
+    // curvature-corrected ramp (DistanceCoverage.cc, curvedRamp) does not.
+    for (const double radius : {4.0, 6.0, 10.0, 20.0}) {
+        auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius),
+                                                                         openvdb::Vec3f(0.2f, 0.45f, 0.1f), 1.f);
+        openvdb::io::File(file("b.vdb")).write({b});
+        const ShapePtr s = loadLevelSet(file("b.vdb"));
+        const double exact = 4.0 / 3.0 * M_PI * radius * radius * radius;
+        const double v = double(totalMass(*makeClay(*s, 1 << 20))) / (1 << 20);
+        double rampSum = 0;
+        const Box bb = s->bounds();
+        for (int32_t x = bb.min[0] - 1; x <= bb.max[0] + 1; ++x)
+            for (int32_t y = bb.min[1] - 1; y <= bb.max[1] + 1; ++y)
+                for (int32_t z = bb.min[2] - 1; z <= bb.max[2] + 1; ++z)
+                    rampSum += std::min(std::max(0.5 - s->distance(Vec3{{double(x), double(y), double(z)}}), 0.0), 1.0);
+        std::printf("level-set ball r = %g: %+.3f %% (the ramp %+.3f %%)\n", radius, 100 * (v - exact) / exact,
+                    100 * (rampSum - exact) / exact);
+        EXPECT_NEAR(v, exact, 0.005 * exact);
+        EXPECT_LT(std::fabs(v - exact), std::fabs(rampSum - exact)) << radius;
+    }
     // Analytic shapes keep the voxel-centre rule.
     EXPECT_FALSE(makeSphere({{0, 0, 0}}, 3)->keepsVolume());
     EXPECT_FALSE(makePlaced(makeBox({{0, 0, 0}}, {{2, 2, 2}}), twice)->keepsVolume());

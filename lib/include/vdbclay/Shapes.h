@@ -98,8 +98,9 @@ template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimen
 /// the mesh inside the voxel, by column integrals), else estimated from distance() at voxel centres:
 /// exact where the distance field shows planes near the voxel (a face, a convex edge or corner as
 /// the max of planes, a concave edge as their min), else clamp(0.5 - distance(centre), 0, 1), the
-/// part of the voxel below a plane at that distance averaged over the plane's orientations (on a
-/// ball of radius r voxels it adds 1 / (4 r^2) of the volume, 0.25 % at r = 10). 2D: the ramp.
+/// part of the voxel below a plane at that distance averaged over the plane's orientations,
+/// corrected for curvature on curved surfaces (a ball of radius 4 voxels within 0.1 %). 2D: the
+/// plain ramp.
 /// docs/INTEROP.md, "Coverage".
 void forEachVoxelCovered(const Shape& shape, int dimensions,
                          const std::function<void(int32_t, int32_t, int32_t, double)>& covered);
