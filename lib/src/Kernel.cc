@@ -8,6 +8,17 @@
 // count), and write back only the cells that changed. The overload changes only where a cell
 // changed, so its delta is summed over those cells alone. Checks that can fire only rarely (a result
 // over INT32_MAX, a write into a missing leaf) run only when the pass or the anchor allows them.
+//
+// The surplus branch in registers (SSE2, every x86-64). A settling press spends most of its updates
+// in prorata's and sorted's E > A branch (every room filled, the surplus shared equally). There the
+// block stays in two SSE2 registers from load to store (surplusBranch): over/under masks, E and A by
+// horizontal sums, the result by lane selects, the changed mask by one compare, all 8 cells written by
+// four 8-byte stores for blocks inside one leaf; the overload delta is -A and the largest value
+// Tc + share (+1), both without a per-cell loop. No scalar store is reloaded as a vector (the
+// store-forwarding stall that made an earlier int32 variant slower). Every other case (E <= A, the
+// other rules, a pass that may overflow, Tc > 2^27) runs the scalar rule as before; the result is
+// bit-identical either way (tests/TestKernel.cc runs both paths, PassInput::portable, on the same
+// grids; tests/TestGolden.cc pins whole runs).
 #include "Kernel.h"
 
 #include "BlockMasks.h"
@@ -54,31 +65,127 @@ inline uint64_t popcount64(uint64_t x)
     return (x * 0x0101010101010101ull) >> 56;
 }
 
-/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a m (in corner
-/// order); returns whether one is over @a tc.
-template <int N>
-__attribute__((always_inline)) inline bool loadInside(const int32_t* d, int32_t tc, int32_t* m)
-{
 #if defined(__SSE2__)
-    // Corners (dx, dy) pairs along z are adjacent in the leaf: four 8-byte loads, two shuffles.
-    // In 2D (z = 0) the z = 1 neighbours are read (inside the leaf) and ignored.
+/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a lo (corners 0-3)
+/// and @a hi (corners 4-7; 3D only). Corners (dx, dy) pairs along z are adjacent in the leaf: four
+/// 8-byte loads, two shuffles. In 2D (z = 0) the z = 1 neighbours are read (inside the leaf) and
+/// ignored.
+template <int N>
+__attribute__((always_inline)) inline void loadInside(const int32_t* d, __m128i& lo, __m128i& hi)
+{
     const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d));
     const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 64));
     const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 8));
     const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 72));
-    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);  // d0 d64 d1 d65
-    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);  // d8 d72 d9 d73
-    const __m128i lo = _mm_unpacklo_epi64(a01, a23); // corners 0-3
+    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);                   // d0 d64 d1 d65
+    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);                   // d8 d72 d9 d73
+    lo = _mm_unpacklo_epi64(a01, a23);                                // corners 0-3
+    hi = N == 8 ? _mm_unpackhi_epi64(a01, a23) : _mm_setzero_si128(); // corners 4-7
+}
+
+/// Bit c of the result: lane c of (lo, hi) is greater than the matching lane of @a t (N lanes).
+template <int N> __attribute__((always_inline)) inline uint32_t laneMaskGt(__m128i lo, __m128i hi, __m128i t)
+{
+    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(lo, t))));
+    if constexpr (N == 8) m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(hi, t)))) << 4;
+    return m;
+}
+
+/// Lanes of -1 where bit c of @a mask is set (c = 0-3 in the low register, 4-7 in the high one).
+__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i laneBits)
+{
+    return _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(mask4)), laneBits), laneBits);
+}
+
+__attribute__((always_inline)) inline int32_t hsum(__m128i x)
+{
+    x = _mm_add_epi32(x, _mm_shuffle_epi32(x, 0x4E));
+    x = _mm_add_epi32(x, _mm_shuffle_epi32(x, 0xB1));
+    return _mm_cvtsi128_si32(x);
+}
+
+/// The first @a r set bits of @a x (r below the number of bits set).
+inline uint32_t firstBits(uint32_t x, int64_t r)
+{
+    uint32_t rest = x;
+    for (; r > 0; --r)
+        rest &= rest - 1;
+    return x & ~rest;
+}
+
+/// The surplus branch of prorata and sorted (E > A: every room filled, the surplus E - A shared
+/// equally among the under cells, the remainder to the first under cells of the hash's rotation),
+/// on the block in registers, in int32 lanes. Exactly repartitionT's result (see the comment in
+/// processRangeT for why int32 cannot wrap here). Returns Done when it applied the branch, or when
+/// the block is not in that branch: Unchanged when the block has no over or no under cell (the rule
+/// would change nothing), Rule when E <= A (the caller runs the rule).
+enum class Branch { Unchanged, Done, Rule };
+struct Surplus {
+    __m128i lo, hi;    // the block's new cells
+    uint32_t changed;  // cells whose value changed
+    int64_t overDelta; // change of the overload: -A (E before, E - A after)
+    int64_t maxOut;    // the largest value written
+};
+template <int N, typename Hash>
+__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, uint32_t overCells,
+                                                           uint32_t valid, int32_t tc, const Hash& hash,
+                                                           Surplus& s)
+{
+    constexpr uint32_t kAll = (1u << N) - 1;
+    const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
+    s.changed = 0;
+    if (!over || !under) return Branch::Unchanged;
+    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), zero = _mm_setzero_si128();
     const __m128i t = _mm_set1_epi32(tc);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(m), lo);
-    int any = _mm_movemask_epi8(_mm_cmpgt_epi32(lo, t));
+    // e = sum over over cells of (m - Tc), a = sum over under cells of (Tc - m).
+    const __m128i xLo = _mm_sub_epi32(lo, t);
+    __m128i eV = _mm_and_si128(xLo, lanesOf(over & 15u, bitsLo));
+    __m128i aV = _mm_and_si128(_mm_sub_epi32(zero, xLo), lanesOf(under & 15u, bitsLo));
     if constexpr (N == 8) {
-        const __m128i hi = _mm_unpackhi_epi64(a01, a23); // corners 4-7
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(m + 4), hi);
-        any |= _mm_movemask_epi8(_mm_cmpgt_epi32(hi, t));
+        const __m128i xHi = _mm_sub_epi32(hi, t);
+        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, lanesOf(over >> 4, bitsLo)));
+        aV = _mm_add_epi32(aV, _mm_and_si128(_mm_sub_epi32(zero, xHi), lanesOf(under >> 4, bitsLo)));
     }
-    return any != 0;
-#else
+    const int64_t e = hsum(eV), a = hsum(aV);
+    if (e <= a) return Branch::Rule;
+    const int nu = rules_internal::popcount8(under);
+    const int64_t surplus = e - a;
+    const int64_t share = rules_internal::divideBySmall(surplus, nu);
+    const int64_t r = surplus - share * nu;
+    uint32_t extra = 0; // cells that get one unit of the remainder
+    if (r) {
+        const int start = int(hash() & uint64_t(N - 1));
+        const uint32_t rot = ((under >> start) | (under << ((N - start) & (N - 1)))) & kAll;
+        const uint32_t first = firstBits(rot, r);
+        extra = ((first << start) | (first >> ((N - start) & (N - 1)))) & kAll;
+    }
+    const __m128i shareV = _mm_set1_epi32(int32_t(share));
+    auto finish = [&](__m128i m, uint32_t valid4, uint32_t under4, uint32_t extra4) {
+        const __m128i v = lanesOf(valid4, bitsLo);
+        __m128i out = _mm_or_si128(_mm_and_si128(v, t), _mm_andnot_si128(v, m));
+        out = _mm_add_epi32(out, _mm_and_si128(lanesOf(under4, bitsLo), shareV));
+        return _mm_sub_epi32(out, lanesOf(extra4, bitsLo)); // -(-1): one more unit
+    };
+    s.lo = finish(lo, valid & 15u, under & 15u, extra & 15u);
+    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.lo, lo))));
+    if constexpr (N == 8) {
+        s.hi = finish(hi, valid >> 4, under >> 4, extra >> 4);
+        same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.hi, hi)))) << 4;
+    } else {
+        s.hi = zero;
+    }
+    s.changed = ~same & kAll;
+    s.overDelta = -a;
+    s.maxOut = tc + share + (r ? 1 : 0);
+    return Branch::Done;
+}
+#endif
+
+/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a m (in corner
+/// order); returns whether one is over @a tc. (The portable path.)
+template <int N>
+__attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, int32_t tc, int32_t* m)
+{
     int32_t top = d[0];
     VDBCLAY_UNROLL
     for (int c = 0; c < N; ++c) {
@@ -86,7 +193,6 @@ __attribute__((always_inline)) inline bool loadInside(const int32_t* d, int32_t 
         top = std::max(top, m[c]);
     }
     return top > tc;
-#endif
 }
 
 /// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
@@ -140,6 +246,16 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const uint64_t prefix = rules_internal::stepPrefix(in.step, in.seed);
     const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun;
     const uint64_t insideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
+#if defined(__SSE2__)
+    // The surplus branch in int32 lanes (surplusBranch) is exact when no sum can wrap: with no cell
+    // over INT32_MAX / 8 (!mayOverflow), E < 8 * 2^28 = 2^31; with Tc <= 2^27, A <= 8 Tc <= 2^30;
+    // every result is at most the block's sum. Otherwise, and on the portable path, the rule runs.
+    constexpr bool kSurplusRule = R == Rule::Prorata || R == Rule::Sorted;
+    const bool simd = !in.portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
+    const __m128i tcV = _mm_set1_epi32(tc32);
+#else
+    const bool simd = false;
+#endif
     MassAcc acc(*in.tree);
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
@@ -164,8 +280,19 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             // leaf at constant offsets; the others go through the tables.
             const bool inside = P == 0 || ((insideOdd >> b) & 1u);
             alignas(16) int32_t m[8];
-            if (inside) {
-                if (!loadInside<N>(ls.read[0] + off[0], tc32, m)) continue;
+            uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
+#if defined(__SSE2__)
+            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128();
+            if (inside && !in.portable) {
+                loadInside<N>(ls.read[0] + off[0], lo, hi);
+                overCells = laneMaskGt<N>(lo, hi, tcV);
+                if (!overCells) continue;
+                _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
+                if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+            } else
+#endif
+                if (inside) {
+                if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
             } else {
                 int32_t top = 0;
                 VDBCLAY_UNROLL
@@ -174,6 +301,13 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     top = std::max(top, m[c]);
                 }
                 if (top <= tc32) continue;
+#if defined(__SSE2__)
+                if (simd) {
+                    lo = _mm_setr_epi32(m[0], m[1], m[2], m[3]);
+                    hi = N == 8 ? _mm_setr_epi32(m[4], m[5], m[6], m[7]) : _mm_setzero_si128();
+                    overCells = laneMaskGt<N>(lo, hi, tcV);
+                }
+#endif
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
@@ -186,7 +320,71 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             const rules_internal::PrefixHash hash{prefix, ax + 2 * (b & 3), ay + 2 * ((b >> 2) & 3),
                                                   D3 ? az + 2 * (b >> 4) : 0};
             int64_t out[8];
-            const uint32_t changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
+            uint32_t changed;
+#if defined(__SSE2__)
+            if (kSurplusRule && simd) {
+                Surplus sp;
+                const Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
+                if (br == Branch::Unchanged) continue;
+                if (br == Branch::Done) {
+                    if (P == 1 && ls.anyMissing && !inside) {
+                        bool missing = false;
+                        for (int c = 0; c < N; ++c)
+                            if (((sp.changed >> c) & 1u) && !ls.data[lf[c]]) missing = true;
+                        if (missing) {
+                            tot.deferred.push_back(
+                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(sp.changed)});
+                            continue;
+                        }
+                    }
+                    if (N == 8 && inside) {
+                        // Every cell of the block is this task's: write all 8, two to a store.
+                        int32_t* d = ls.data[0] + off[0];
+                        const __m128i t01 = _mm_unpacklo_epi32(sp.lo, sp.hi); // c0 c4 c1 c5
+                        const __m128i t23 = _mm_unpackhi_epi32(sp.lo, sp.hi); // c2 c6 c3 c7
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d), t01);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 64), _mm_unpackhi_epi64(t01, t01));
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 8), t23);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 72), _mm_unpackhi_epi64(t23, t23));
+                    } else {
+                        alignas(16) int32_t o32[8];
+                        _mm_store_si128(reinterpret_cast<__m128i*>(o32), sp.lo);
+                        if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(o32 + 4), sp.hi);
+                        uint32_t ch = sp.changed;
+                        while (ch) {
+                            const int c = __builtin_ctz(ch);
+                            ch &= ch - 1;
+                            const int li = inside ? 0 : lf[c];
+                            const int o = inside ? off[0] + kCornerOffset[c] : off[c];
+                            ls.data[li][o] = o32[c];
+                        }
+                    }
+                    // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
+                    const uint32_t zero =
+                        uint32_t(
+                            _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, _mm_setzero_si128())))) |
+                        (N == 8 ? uint32_t(_mm_movemask_ps(
+                                      _mm_castsi128_ps(_mm_cmpeq_epi32(hi, _mm_setzero_si128()))))
+                                      << 4
+                                : 0u);
+                    uint32_t fresh = zero & sp.changed;
+                    while (fresh) {
+                        const int c = __builtin_ctz(fresh);
+                        fresh &= fresh - 1;
+                        const int li = inside ? 0 : lf[c];
+                        const int o = inside ? off[0] + kCornerOffset[c] : off[c];
+                        auto& word = ls.leaf[li]->getValueMask().template getWord<uint64_t>(o >> 6);
+                        __atomic_fetch_or(&word, uint64_t(1) << (o & 63), __ATOMIC_RELAXED);
+                    }
+                    overloadDelta += sp.overDelta;
+                    maxWritten = std::max(maxWritten, sp.maxOut);
+                    ++updated;
+                    w.changed |= uint64_t(1) << b;
+                    continue;
+                }
+            }
+#endif
+            changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
             if (!changed) continue;
             // Both checks can only fire rarely: a result over INT32_MAX needs a cell over
             // INT32_MAX / 8 somewhere (mayOverflow), and a write into a missing leaf needs one of
