@@ -66,19 +66,20 @@ inline uint64_t popcount64(uint64_t x)
 }
 
 #if defined(__SSE2__)
-/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a lo (corners 0-3)
-/// and @a hi (corners 4-7; 3D only). Corners (dx, dy) pairs along z are adjacent in the leaf: four
-/// 8-byte loads, two shuffles. In 2D (z = 0) the z = 1 neighbours are read (inside the leaf) and
-/// ignored.
+/// Loads the N cells of a block into @a lo (corners 0-3) and @a hi (corners 4-7; 3D only), given
+/// where corner k (k = 0-3) lies: corner k + 4 (one voxel up in z) is the next int32. True of every
+/// block that does not straddle a z boundary between leaves: four 8-byte loads, two shuffles. In 2D
+/// (z = 0) the z = 1 neighbours are read (inside the leaf) and ignored.
 template <int N>
-__attribute__((always_inline)) inline void loadInside(const int32_t* d, __m128i& lo, __m128i& hi)
+__attribute__((always_inline)) inline void loadPairs(const int32_t* c0, const int32_t* c1, const int32_t* c2,
+                                                     const int32_t* c3, __m128i& lo, __m128i& hi)
 {
-    const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d));
-    const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 64));
-    const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 8));
-    const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 72));
-    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);                   // d0 d64 d1 d65
-    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);                   // d8 d72 d9 d73
+    const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c0));
+    const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c1));
+    const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c2));
+    const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c3));
+    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);                   // c0 c1 c4 c5
+    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);                   // c2 c3 c6 c7
     lo = _mm_unpacklo_epi64(a01, a23);                                // corners 0-3
     hi = N == 8 ? _mm_unpackhi_epi64(a01, a23) : _mm_setzero_si128(); // corners 4-7
 }
@@ -104,14 +105,21 @@ __attribute__((always_inline)) inline int32_t hsum(__m128i x)
     return _mm_cvtsi128_si32(x);
 }
 
-/// The first @a r set bits of @a x (r below the number of bits set).
-inline uint32_t firstBits(uint32_t x, int64_t r)
-{
-    uint32_t rest = x;
-    for (; r > 0; --r)
-        rest &= rest - 1;
-    return x & ~rest;
-}
+/// kFirstBits.t[x][r]: the first (lowest) r set bits of the 8-bit mask x, r = 0-7.
+struct FirstBitsTable {
+    uint8_t t[256][8];
+    constexpr FirstBitsTable() : t{}
+    {
+        for (int x = 0; x < 256; ++x) {
+            int rest = x;
+            for (int r = 0; r < 8; ++r) {
+                t[x][r] = uint8_t(x & ~rest);
+                rest &= rest - 1;
+            }
+        }
+    }
+};
+constexpr FirstBitsTable kFirstBits;
 
 /// The surplus branch of prorata and sorted (E > A: every room filled, the surplus E - A shared
 /// equally among the under cells, the remainder to the first under cells of the hash's rotation),
@@ -156,7 +164,7 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
     if (r) {
         const int start = int(hash() & uint64_t(N - 1));
         const uint32_t rot = ((under >> start) | (under << ((N - start) & (N - 1)))) & kAll;
-        const uint32_t first = firstBits(rot, r);
+        const uint32_t first = kFirstBits.t[rot][r]; // r < nu <= N <= 8
         extra = ((first << start) | (first >> ((N - start) & (N - 1)))) & kAll;
     }
     const __m128i shareV = _mm_set1_epi32(int32_t(share));
@@ -266,6 +274,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
         w.changed = 0;
+        uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
         fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
@@ -279,12 +288,21 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             // Even blocks, and odd blocks not reaching into a lower neighbour, lie in the anchor's
             // leaf at constant offsets; the others go through the tables.
             const bool inside = P == 0 || ((insideOdd >> b) & 1u);
+            // Blocks that do not straddle a z boundary (all but the odd blocks with bz = 0 in 3D)
+            // hold each corner k's z + 1 neighbour (corner k + 4) in the next int32.
+            const bool pairs = inside || !D3 || (b >> 4) != 0;
             alignas(16) int32_t m[8];
             uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
 #if defined(__SSE2__)
             __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128();
-            if (inside && !in.portable) {
-                loadInside<N>(ls.read[0] + off[0], lo, hi);
+            if (pairs && !in.portable) {
+                if (inside) {
+                    const int32_t* d = ls.read[0] + off[0];
+                    loadPairs<N>(d, d + 64, d + 8, d + 72, lo, hi);
+                } else {
+                    loadPairs<N>(ls.read[lf[0]] + off[0], ls.read[lf[1]] + off[1], ls.read[lf[2]] + off[2],
+                                 ls.read[lf[3]] + off[3], lo, hi);
+                }
                 overCells = laneMaskGt<N>(lo, hi, tcV);
                 if (!overCells) continue;
                 _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
@@ -311,9 +329,25 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
-                for (int c = 0; c < N; ++c) {
-                    const ObsLeaf* ol = ls.obs[lf[c]];
-                    if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
+                if (pairs && !in.portable) {
+                    // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
+                    uint32_t blocked = 0;
+                    VDBCLAY_UNROLL
+                    for (int k = 0; k < 4; ++k) {
+                        const ObsLeaf* ol = ls.obs[lf[k]];
+                        const int o = off[k];
+                        const uint32_t two =
+                            ol ? uint32_t(ol->getValueMask().template getWord<uint64_t>(o >> 6) >> (o & 63)) &
+                                     3u
+                               : (ls.obsTile[lf[k]] ? 3u : 0u);
+                        blocked |= ((two & 1u) << k) | ((two >> 1) << (k + 4));
+                    }
+                    valid &= ~blocked;
+                } else {
+                    for (int c = 0; c < N; ++c) {
+                        const ObsLeaf* ol = ls.obs[lf[c]];
+                        if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
+                    }
                 }
             }
             ++overTc;
@@ -337,15 +371,20 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                             continue;
                         }
                     }
-                    if (N == 8 && inside) {
+                    if (N == 8 && pairs && (inside || !ls.anyMissing)) {
                         // Every cell of the block is this task's: write all 8, two to a store.
-                        int32_t* d = ls.data[0] + off[0];
+                        int32_t* d0 = ls.data[0] + off[0];
+                        int32_t *p0 = d0, *p1 = d0 + 64, *p2 = d0 + 8, *p3 = d0 + 72;
+                        if (!inside) {
+                            p0 = ls.data[lf[0]] + off[0], p1 = ls.data[lf[1]] + off[1];
+                            p2 = ls.data[lf[2]] + off[2], p3 = ls.data[lf[3]] + off[3];
+                        }
                         const __m128i t01 = _mm_unpacklo_epi32(sp.lo, sp.hi); // c0 c4 c1 c5
                         const __m128i t23 = _mm_unpackhi_epi32(sp.lo, sp.hi); // c2 c6 c3 c7
-                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d), t01);
-                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 64), _mm_unpackhi_epi64(t01, t01));
-                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 8), t23);
-                        _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 72), _mm_unpackhi_epi64(t23, t23));
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p0), t01);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p1), _mm_unpackhi_epi64(t01, t01));
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p2), t23);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p3), _mm_unpackhi_epi64(t23, t23));
                     } else {
                         alignas(16) int32_t o32[8];
                         _mm_store_si128(reinterpret_cast<__m128i*>(o32), sp.lo);
@@ -379,7 +418,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     overloadDelta += sp.overDelta;
                     maxWritten = std::max(maxWritten, sp.maxOut);
                     ++updated;
-                    w.changed |= uint64_t(1) << b;
+                    itemChanged |= uint64_t(1) << b;
                     continue;
                 }
             }
@@ -429,8 +468,9 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 }
             }
             ++updated;
-            w.changed |= uint64_t(1) << b;
+            itemChanged |= uint64_t(1) << b;
         }
+        w.changed = itemChanged;
     }
     tot.examined += examined;
     tot.overTc += overTc;
