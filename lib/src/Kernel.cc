@@ -212,38 +212,59 @@ struct LeafSet {
     bool obsTile[8] = {};    // obstacle state of the whole region when obs[i] is null
     bool anyMissing = false; // a leaf the mask's blocks touch does not exist
     bool anyObs = false;     // a leaf they touch holds obstacles or lies in an obstacle tile
+    Origin anchor;           // the anchor these leaves were fetched for
+    uint32_t fetched = 0;    // which of the 8 slots were fetched (0: none yet)
 };
 
 // Out of line on purpose: inlined into the block loop it costs more than the call (register
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
 __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint64_t mask, MassAcc& acc,
-                                           ObsAcc* oacc)
+                                           ObsAcc* oacc, bool reuse)
 {
     const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
+    uint32_t need = 1;
+    for (int w = 1; w < kCount; ++w)
+        if (mask & t.needLeaf[D3][w]) need |= 1u << w;
+    // The work list runs along x (layer order): when the previous anchor is this one's -x
+    // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
+    uint32_t reused = 0;
+    if (P == 1 && reuse && ls.fetched && ls.anchor == Origin(anchor.x() - 8, anchor.y(), anchor.z())) {
+        for (int w = 1; w < kCount; w += 2) {
+            if (!((need >> w) & 1u) || !((ls.fetched >> (w - 1)) & 1u)) continue;
+            ls.leaf[w] = ls.leaf[w - 1];
+            ls.data[w] = ls.data[w - 1];
+            ls.read[w] = ls.read[w - 1];
+            ls.obs[w] = ls.obs[w - 1];
+            ls.obsTile[w] = ls.obsTile[w - 1];
+            reused |= 1u << w;
+        }
+    }
     ls.anyMissing = false;
     ls.anyObs = false;
     for (int w = 0; w < kCount; ++w) {
-        ls.leaf[w] = nullptr;
-        ls.data[w] = nullptr;
-        ls.read[w] = kZeroLeaf;
-        ls.obs[w] = nullptr;
-        ls.obsTile[w] = false;
-        if (w && !(mask & t.needLeaf[D3][w])) continue;
-        const Origin lo = leafOrigin(anchor, w);
-        const Coord o(lo.x(), lo.y(), lo.z());
-        ls.leaf[w] = acc.probeLeaf(o);
-        if (ls.leaf[w])
-            ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
-        else
-            ls.anyMissing = true;
-        if (oacc) {
-            ls.obs[w] = oacc->probeConstLeaf(o);
-            if (!ls.obs[w]) ls.obsTile[w] = oacc->isValueOn(o);
-            ls.anyObs |= ls.obs[w] || ls.obsTile[w];
+        if (!((reused >> w) & 1u)) {
+            ls.leaf[w] = nullptr;
+            ls.data[w] = nullptr;
+            ls.read[w] = kZeroLeaf;
+            ls.obs[w] = nullptr;
+            ls.obsTile[w] = false;
+            if (!((need >> w) & 1u)) continue;
+            const Origin lo = leafOrigin(anchor, w);
+            const Coord o(lo.x(), lo.y(), lo.z());
+            ls.leaf[w] = acc.probeLeaf(o);
+            if (ls.leaf[w]) ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
+            if (oacc) {
+                ls.obs[w] = oacc->probeConstLeaf(o);
+                if (!ls.obs[w]) ls.obsTile[w] = oacc->isValueOn(o);
+            }
         }
+        if (!ls.leaf[w]) ls.anyMissing = true;
+        ls.anyObs |= ls.obs[w] || ls.obsTile[w];
     }
+    ls.anchor = anchor;
+    ls.fetched = need;
 }
 
 /// A block's hash from the step's prefix, computed only when a remainder or a tie needs it (its
@@ -292,7 +313,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
-        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr);
+        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;
@@ -328,20 +349,29 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 if (inside) {
                 if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
             } else {
-                int32_t top = 0;
-                VDBCLAY_UNROLL
-                for (int c = 0; c < N; ++c) {
-                    m[c] = ls.read[lf[c]][off[c]];
-                    top = std::max(top, m[c]);
-                }
-                if (top <= tc32) continue;
 #if defined(__SSE2__)
-                if (simd) {
-                    lo = _mm_setr_epi32(m[0], m[1], m[2], m[3]);
-                    hi = N == 8 ? _mm_setr_epi32(m[4], m[5], m[6], m[7]) : _mm_setzero_si128();
+                if (!in.portable) {
+                    // Straddling a z boundary: corner k and k + 4 lie in different leaves.
+                    lo = _mm_setr_epi32(ls.read[lf[0]][off[0]], ls.read[lf[1]][off[1]],
+                                        ls.read[lf[2]][off[2]], ls.read[lf[3]][off[3]]);
+                    if constexpr (N == 8)
+                        hi = _mm_setr_epi32(ls.read[lf[4]][off[4]], ls.read[lf[5]][off[5]],
+                                            ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
                     overCells = laneMaskGt<N>(lo, hi, tcV);
-                }
+                    if (!overCells) continue;
+                    _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
+                    if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+                } else
 #endif
+                {
+                    int32_t top = 0;
+                    VDBCLAY_UNROLL
+                    for (int c = 0; c < N; ++c) {
+                        m[c] = ls.read[lf[c]][off[c]];
+                        top = std::max(top, m[c]);
+                    }
+                    if (top <= tc32) continue;
+                }
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
