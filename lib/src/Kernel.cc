@@ -133,7 +133,18 @@ struct Surplus {
     uint32_t changed;  // cells whose value changed
     int64_t overDelta; // change of the overload: -A (E before, E - A after)
     int64_t maxOut;    // the largest value written
+    int64_t e, a;      // the block's excess and room (set when the result is Rule)
 };
+
+/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N.
+template <int N> inline uint32_t rotr(uint32_t x, int s)
+{
+    return ((x >> s) | (x << ((N - s) & (N - 1)))) & ((1u << N) - 1);
+}
+template <int N> inline uint32_t rotl(uint32_t x, int s)
+{
+    return ((x << s) | (x >> ((N - s) & (N - 1)))) & ((1u << N) - 1);
+}
 template <int N, typename Hash>
 __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, uint32_t overCells,
                                                            uint32_t valid, int32_t tc, const Hash& hash,
@@ -155,6 +166,8 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
         aV = _mm_add_epi32(aV, _mm_and_si128(_mm_sub_epi32(zero, xHi), lanesOf(under >> 4, bitsLo)));
     }
     const int64_t e = hsum(eV), a = hsum(aV);
+    s.e = e;
+    s.a = a;
     if (e <= a) return Branch::Rule;
     const int nu = rules_internal::popcount8(under);
     const int64_t surplus = e - a;
@@ -186,6 +199,82 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
     s.overDelta = -a;
     s.maxOut = tc + share + (r ? 1 : 0);
     return Branch::Done;
+}
+
+/// Prorata's room branch (0 < E <= A: every over cell to Tc, each under cell i gets
+/// floor(E room_i / A), the remainder one unit per cell in the hash's rotation, first to cells still
+/// below Tc, then to the others) on the block in registers, as repartitionT computes it: the shares
+/// by double-precision reciprocal and a one-step correction to the exact floor, under the same
+/// condition (E Tc < 2^32; otherwise returns false and the caller runs the rule). Takes E and A
+/// from surplusBranch (@a s).
+template <int N, typename Hash>
+__attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, uint32_t overCells,
+                                                      uint32_t valid, int32_t tc, const Hash& hash,
+                                                      Surplus& s)
+{
+    const int64_t e = s.e, a = s.a;
+    if (uint64_t(e) * uint64_t(tc) > UINT32_MAX) return false;
+    constexpr uint32_t kAll = (1u << N) - 1;
+    const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
+    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), t = _mm_set1_epi32(tc);
+    const __m128d eD = _mm_set1_pd(double(e)), aD = _mm_set1_pd(double(a)),
+                  inv = _mm_set1_pd(1.0 / double(a));
+    const __m128d one = _mm_set1_pd(1.0);
+    // floor(E room / A) for lanes 0 and 1 of @a room (exact: x < 2^32, q A <= x + A < 2^53).
+    auto share2 = [&](__m128i room) {
+        const __m128d x = _mm_mul_pd(eD, _mm_cvtepi32_pd(room));
+        __m128d q = _mm_cvtepi32_pd(_mm_cvttpd_epi32(_mm_mul_pd(x, inv)));
+        const __m128d qa = _mm_mul_pd(q, aD);
+        q = _mm_sub_pd(q, _mm_and_pd(_mm_cmpgt_pd(qa, x), one));
+        q = _mm_add_pd(q, _mm_and_pd(_mm_cmple_pd(_mm_add_pd(qa, aD), x), one));
+        return _mm_cvttpd_epi32(q);
+    };
+    // Over cells to Tc, under cells plus their share; obstacle cells as they are.
+    auto fill = [&](__m128i m, uint32_t over4, uint32_t under4, __m128i& q) {
+        const __m128i room = _mm_and_si128(_mm_sub_epi32(t, m), lanesOf(under4, bitsLo));
+        q = _mm_unpacklo_epi64(share2(room), share2(_mm_shuffle_epi32(room, 0xEE)));
+        const __m128i ov = lanesOf(over4, bitsLo);
+        return _mm_add_epi32(_mm_or_si128(_mm_and_si128(ov, t), _mm_andnot_si128(ov, m)), q);
+    };
+    __m128i qLo, qHi = _mm_setzero_si128();
+    __m128i oLo = fill(lo, over & 15u, under & 15u, qLo), oHi = _mm_setzero_si128();
+    if constexpr (N == 8) oHi = fill(hi, over >> 4, under >> 4, qHi);
+    int64_t r = e - hsum(_mm_add_epi32(qLo, qHi));
+    uint32_t extra2 = 0;
+    if (r > 0) {
+        const int start = int(hash() & uint64_t(N - 1));
+        auto addOne = [&](uint32_t cells) {
+            oLo = _mm_sub_epi32(oLo, lanesOf(cells & 15u, bitsLo));
+            if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(cells >> 4, bitsLo));
+        };
+        // First the under cells still below Tc, then the others (giveRemainder); r < nu <= 8.
+        uint32_t below = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
+        if constexpr (N == 8)
+            below |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oHi)))) << 4;
+        below &= under;
+        const int64_t k1 = std::min<int64_t>(r, rules_internal::popcount8(below));
+        addOne(rotl<N>(kFirstBits.t[rotr<N>(below, start)][k1], start));
+        r -= k1;
+        if (r > 0) {
+            uint32_t below2 = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
+            if constexpr (N == 8)
+                below2 |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oHi)))) << 4;
+            const uint32_t cells = under & ~below2;
+            const int64_t k2 = std::min<int64_t>(r, rules_internal::popcount8(cells));
+            extra2 = rotl<N>(kFirstBits.t[rotr<N>(cells, start)][k2], start);
+            addOne(extra2);
+        }
+    }
+    s.lo = oLo;
+    s.hi = oHi;
+    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oLo, lo))));
+    if constexpr (N == 8) same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oHi, hi)))) << 4;
+    s.changed = ~same & kAll;
+    // Shares and the first remainder pass keep every under cell at or below Tc (E <= A); the second
+    // pass lifts cells at Tc to Tc + 1: the overload goes from E to the number of those cells.
+    s.overDelta = -e + rules_internal::popcount8(extra2);
+    s.maxOut = tc + (extra2 ? 1 : 0);
+    return true;
 }
 #endif
 
@@ -403,8 +492,12 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
 #if defined(__SSE2__)
             if (kSurplusRule && simd) {
                 Surplus sp;
-                const Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
+                Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
                 if (br == Branch::Unchanged) continue;
+                if constexpr (R == Rule::Prorata) {
+                    if (br == Branch::Rule && roomBranch<N>(lo, hi, overCells, valid, tc32, hash, sp))
+                        br = Branch::Done;
+                }
                 if (br == Branch::Done) {
                     if (P == 1 && ls.anyMissing && !inside) {
                         bool missing = false;
