@@ -175,4 +175,52 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                 }
 }
 
+/// One block at a time, so that the totals of each block (the largest value written and the
+/// overload delta, which a whole pass sums or maxes away) are compared block by block.
+TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
+{
+    vdbclay_test::Rng g(99);
+    int updated = 0;
+    for (int trial = 0; trial < 4000; ++trial) {
+        const bool is3D = trial % 2 == 0;
+        const Rule rule = (trial / 2) % 2 ? Rule::Prorata : Rule::Sorted;
+        const int32_t tc = (trial / 4) % 3 == 0 ? 7 : 1000;
+        const int n = is3D ? 8 : 4;
+        Scene s;
+        s.mass = std::make_shared<openvdb::Int32Tree>(0);
+        s.obstacles = std::make_shared<openvdb::MaskTree>(false);
+        s.mass->touchLeaf(Coord(0, 0, 0));
+        for (int c = 0; c < n; ++c) {
+            const Coord xyz(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            const int kind = g.range(0, 9);
+            int32_t v = kind <= 1 ? 0 : kind <= 5 ? g.range(0, tc) : kind == 6 ? tc : g.range(tc + 1, 3 * tc);
+            if (v) s.mass->setValueOn(xyz, v);
+            if (g.range(0, 15) == 0) s.obstacles->setValueOn(xyz);
+        }
+        Result r[2];
+        for (int portable = 0; portable < 2; ++portable) {
+            r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
+            std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
+            RuleParams p;
+            p.rule = rule;
+            p.threshold = tc;
+            PassInput in;
+            in.tree = r[portable].mass.get();
+            in.obstacles = s.obstacles.get();
+            in.rule = compileRule(p);
+            in.is3D = is3D;
+            in.phase = 0;
+            in.step = uint64_t(trial);
+            in.seed = 3;
+            in.portable = portable == 1;
+            processRange(in, work.data(), 0, 1, r[portable].tot);
+            r[portable].changed.push_back(work[0].changed);
+        }
+        updated += int(r[1].tot.updated);
+        expectSame(r[0], r[1], "trial " + std::to_string(trial));
+        if (HasFailure()) break;
+    }
+    EXPECT_GT(updated, 2000); // most random blocks hold an over cell and an under one
+}
+
 } // namespace

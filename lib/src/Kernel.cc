@@ -255,6 +255,8 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
         const int64_t k1 = std::min<int64_t>(r, rules_internal::popcount8(below));
         addOne(rotl<N>(kFirstBits.t[rotr<N>(below, start)][k1], start));
         r -= k1;
+        // (Never taken when E <= A: r is the sum of the shares' fractional parts, at most the number
+        // of cells with one, and each of those is still below Tc. Kept to mirror giveRemainder.)
         if (r > 0) {
             uint32_t below2 = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
             if constexpr (N == 8)
