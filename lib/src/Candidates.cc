@@ -59,14 +59,29 @@ void Candidates::addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D
 
 void Candidates::addPending(const Pending& p, int phase, bool is3D)
 {
+    // Every anchor touching the box (grown by one voxel), as phase-0 anchors with every block. Their
+    // dilation across the phase is one run per neighbour shift: the box's anchors in layer order,
+    // each moved by the same vector with the same spill mask, so every run is in layer order and
+    // merges with the others (no sort).
     const uint64_t full = fullMask(is3D);
     const Origin lo((p.box.min[0] - 1) & ~7, (p.box.min[1] - 1) & ~7, is3D ? ((p.box.min[2] - 1) & ~7) : 0);
     const int zmax = is3D ? p.box.max[2] + 1 : 0;
-    for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8) {
+    Anchor buf[8];
+    int shift[8];
+    int n = 1;
+    buf[0] = Anchor{lo, full};
+    if (phase != 0) n = dilateAcrossPhase(Anchor{lo, full}, 0, is3D, buf, shift);
+    for (int i = 0; i < n; ++i) {
+        const int dx = buf[i].origin.x() - lo.x(), dy = buf[i].origin.y() - lo.y(),
+                  dz = buf[i].origin.z() - lo.z();
+        const size_t start = mPendingAnchors.size();
         for (int y = lo.y(); y <= p.box.max[1] + 1; y += 8) {
-            for (int z = lo.z(); z <= zmax; z += 8)
-                addExtra(Anchor{Origin(x, y, z), full}, 0, phase, is3D);
+            for (int z = lo.z(); z <= zmax; z += 8) {
+                for (int x = lo.x(); x <= p.box.max[0] + 1; x += 8)
+                    mPendingAnchors.push_back(Anchor{Origin(x + dx, y + dy, z + dz), buf[i].mask});
+            }
         }
+        mPendingSpans.emplace_back(start, mPendingAnchors.size());
     }
 }
 
@@ -76,6 +91,8 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
     for (auto& st : mStreams)
         st.clear();
     mExtras.clear();
+    mPendingAnchors.clear();
+    mPendingSpans.clear();
     const uint64_t full = fullMask(is3D);
     if (mFullScanSteps > 0) {
         // After reset() only blocks holding an over cell can change, and those cells lie in the hot
@@ -96,6 +113,8 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
     }
     for (const auto& st : mStreams)
         mRuns.push_back(Run{st.data(), st.data() + st.size()});
+    for (const auto& sp : mPendingSpans) // mPendingAnchors is complete: its data no longer moves
+        mRuns.push_back(Run{mPendingAnchors.data() + sp.first, mPendingAnchors.data() + sp.second});
     if (!mExtras.empty()) {
         std::sort(mExtras.begin(), mExtras.end(),
                   [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });

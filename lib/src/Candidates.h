@@ -11,7 +11,8 @@
 // The list is built in layer order (y, z, x; one entry per anchor) by merging already-sorted runs:
 // changedPrev2 (in layer order, as every work list), and changedPrev dilated across the phase, which
 // splits into one run per neighbour shift (each is changedPrev moved by one constant vector, so
-// still in layer order). Only the rare extras (hot leaves, edited regions) need a sort. All scratch
+// still in layer order). An edited region gives one run per neighbour shift, generated in layer
+// order; only the hot leaves after a reset need a sort. All scratch
 // is kept in members, so a step allocates nothing once the buffers have grown.
 #pragma once
 
@@ -67,7 +68,9 @@ private:
     std::vector<Anchor> mChangedPrev2; // blocks changed at t-2 (phase of t)
     // scratch
     std::vector<Anchor> mStreams[8];
-    std::vector<Anchor> mExtras;
+    std::vector<Anchor> mExtras;                          // hot leaves (sorted)
+    std::vector<Anchor> mPendingAnchors;                  // edited regions: runs in layer order
+    std::vector<std::pair<size_t, size_t>> mPendingSpans; // the runs in mPendingAnchors
     std::vector<Anchor> mMergeBuf[2];
     std::vector<Run> mRuns;
     std::vector<std::pair<size_t, size_t>> mSpans;

@@ -8,6 +8,17 @@
 // count), and write back only the cells that changed. The overload changes only where a cell
 // changed, so its delta is summed over those cells alone. Checks that can fire only rarely (a result
 // over INT32_MAX, a write into a missing leaf) run only when the pass or the anchor allows them.
+//
+// The surplus branch in registers (SSE2, every x86-64). A settling press spends most of its updates
+// in prorata's and sorted's E > A branch (every room filled, the surplus shared equally). There the
+// block stays in two SSE2 registers from load to store (surplusBranch): over/under masks, E and A by
+// horizontal sums, the result by lane selects, the changed mask by one compare, all 8 cells written by
+// four 8-byte stores for blocks inside one leaf; the overload delta is -A and the largest value
+// Tc + share (+1), both without a per-cell loop. No scalar store is reloaded as a vector (the
+// store-forwarding stall that made an earlier int32 variant slower). Every other case (E <= A, the
+// other rules, a pass that may overflow, Tc > 2^27) runs the scalar rule as before; the result is
+// bit-identical either way (tests/TestKernel.cc runs both paths, PassInput::portable, on the same
+// grids; tests/TestGolden.cc pins whole runs).
 #include "Kernel.h"
 
 #include "BlockMasks.h"
@@ -54,31 +65,226 @@ inline uint64_t popcount64(uint64_t x)
     return (x * 0x0101010101010101ull) >> 56;
 }
 
-/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a m (in corner
-/// order); returns whether one is over @a tc.
-template <int N>
-__attribute__((always_inline)) inline bool loadInside(const int32_t* d, int32_t tc, int32_t* m)
-{
 #if defined(__SSE2__)
-    // Corners (dx, dy) pairs along z are adjacent in the leaf: four 8-byte loads, two shuffles.
-    // In 2D (z = 0) the z = 1 neighbours are read (inside the leaf) and ignored.
-    const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d));
-    const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 64));
-    const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 8));
-    const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(d + 72));
-    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);  // d0 d64 d1 d65
-    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);  // d8 d72 d9 d73
-    const __m128i lo = _mm_unpacklo_epi64(a01, a23); // corners 0-3
-    const __m128i t = _mm_set1_epi32(tc);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(m), lo);
-    int any = _mm_movemask_epi8(_mm_cmpgt_epi32(lo, t));
-    if constexpr (N == 8) {
-        const __m128i hi = _mm_unpackhi_epi64(a01, a23); // corners 4-7
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(m + 4), hi);
-        any |= _mm_movemask_epi8(_mm_cmpgt_epi32(hi, t));
+/// Loads the N cells of a block into @a lo (corners 0-3) and @a hi (corners 4-7; 3D only), given
+/// where corner k (k = 0-3) lies: corner k + 4 (one voxel up in z) is the next int32. True of every
+/// block that does not straddle a z boundary between leaves: four 8-byte loads, two shuffles. In 2D
+/// (z = 0) the z = 1 neighbours are read (inside the leaf) and ignored.
+template <int N>
+__attribute__((always_inline)) inline void loadPairs(const int32_t* c0, const int32_t* c1, const int32_t* c2,
+                                                     const int32_t* c3, __m128i& lo, __m128i& hi)
+{
+    const __m128i p0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c0));
+    const __m128i p1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c1));
+    const __m128i p2 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c2));
+    const __m128i p3 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(c3));
+    const __m128i a01 = _mm_unpacklo_epi32(p0, p1);                   // c0 c1 c4 c5
+    const __m128i a23 = _mm_unpacklo_epi32(p2, p3);                   // c2 c3 c6 c7
+    lo = _mm_unpacklo_epi64(a01, a23);                                // corners 0-3
+    hi = N == 8 ? _mm_unpackhi_epi64(a01, a23) : _mm_setzero_si128(); // corners 4-7
+}
+
+/// Bit c of the result: lane c of (lo, hi) is greater than the matching lane of @a t (N lanes).
+template <int N> __attribute__((always_inline)) inline uint32_t laneMaskGt(__m128i lo, __m128i hi, __m128i t)
+{
+    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(lo, t))));
+    if constexpr (N == 8) m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(hi, t)))) << 4;
+    return m;
+}
+
+/// Lanes of -1 where bit c of @a mask is set (c = 0-3 in the low register, 4-7 in the high one).
+__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i laneBits)
+{
+    return _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(mask4)), laneBits), laneBits);
+}
+
+__attribute__((always_inline)) inline int32_t hsum(__m128i x)
+{
+    x = _mm_add_epi32(x, _mm_shuffle_epi32(x, 0x4E));
+    x = _mm_add_epi32(x, _mm_shuffle_epi32(x, 0xB1));
+    return _mm_cvtsi128_si32(x);
+}
+
+/// kFirstBits.t[x][r]: the first (lowest) r set bits of the 8-bit mask x, r = 0-7.
+struct FirstBitsTable {
+    uint8_t t[256][8];
+    constexpr FirstBitsTable() : t{}
+    {
+        for (int x = 0; x < 256; ++x) {
+            int rest = x;
+            for (int r = 0; r < 8; ++r) {
+                t[x][r] = uint8_t(x & ~rest);
+                rest &= rest - 1;
+            }
+        }
     }
-    return any != 0;
-#else
+};
+constexpr FirstBitsTable kFirstBits;
+
+/// The surplus branch of prorata and sorted (E > A: every room filled, the surplus E - A shared
+/// equally among the under cells, the remainder to the first under cells of the hash's rotation),
+/// on the block in registers, in int32 lanes. Exactly repartitionT's result (see the comment in
+/// processRangeT for why int32 cannot wrap here). Returns Done when it applied the branch, or when
+/// the block is not in that branch: Unchanged when the block has no over or no under cell (the rule
+/// would change nothing), Rule when E <= A (the caller runs the rule).
+enum class Branch { Unchanged, Done, Rule };
+struct Surplus {
+    __m128i lo, hi;    // the block's new cells
+    uint32_t changed;  // cells whose value changed
+    int64_t overDelta; // change of the overload: -A (E before, E - A after)
+    int64_t maxOut;    // the largest value written
+    int64_t e, a;      // the block's excess and room (set when the result is Rule)
+};
+
+/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N.
+template <int N> inline uint32_t rotr(uint32_t x, int s)
+{
+    return ((x >> s) | (x << ((N - s) & (N - 1)))) & ((1u << N) - 1);
+}
+template <int N> inline uint32_t rotl(uint32_t x, int s)
+{
+    return ((x << s) | (x >> ((N - s) & (N - 1)))) & ((1u << N) - 1);
+}
+template <int N, typename Hash>
+__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, uint32_t overCells,
+                                                           uint32_t valid, int32_t tc, const Hash& hash,
+                                                           Surplus& s)
+{
+    constexpr uint32_t kAll = (1u << N) - 1;
+    const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
+    s.changed = 0;
+    if (!over || !under) return Branch::Unchanged;
+    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), zero = _mm_setzero_si128();
+    const __m128i t = _mm_set1_epi32(tc);
+    // e = sum over over cells of (m - Tc), a = sum over under cells of (Tc - m).
+    const __m128i xLo = _mm_sub_epi32(lo, t);
+    __m128i eV = _mm_and_si128(xLo, lanesOf(over & 15u, bitsLo));
+    __m128i aV = _mm_and_si128(_mm_sub_epi32(zero, xLo), lanesOf(under & 15u, bitsLo));
+    if constexpr (N == 8) {
+        const __m128i xHi = _mm_sub_epi32(hi, t);
+        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, lanesOf(over >> 4, bitsLo)));
+        aV = _mm_add_epi32(aV, _mm_and_si128(_mm_sub_epi32(zero, xHi), lanesOf(under >> 4, bitsLo)));
+    }
+    const int64_t e = hsum(eV), a = hsum(aV);
+    s.e = e;
+    s.a = a;
+    if (e <= a) return Branch::Rule;
+    const int nu = rules_internal::popcount8(under);
+    const int64_t surplus = e - a;
+    const int64_t share = rules_internal::divideBySmall(surplus, nu);
+    const int64_t r = surplus - share * nu;
+    uint32_t extra = 0; // cells that get one unit of the remainder
+    if (r) {
+        const int start = int(hash() & uint64_t(N - 1));
+        const uint32_t rot = ((under >> start) | (under << ((N - start) & (N - 1)))) & kAll;
+        const uint32_t first = kFirstBits.t[rot][r]; // r < nu <= N <= 8
+        extra = ((first << start) | (first >> ((N - start) & (N - 1)))) & kAll;
+    }
+    const __m128i shareV = _mm_set1_epi32(int32_t(share));
+    auto finish = [&](__m128i m, uint32_t valid4, uint32_t under4, uint32_t extra4) {
+        const __m128i v = lanesOf(valid4, bitsLo);
+        __m128i out = _mm_or_si128(_mm_and_si128(v, t), _mm_andnot_si128(v, m));
+        out = _mm_add_epi32(out, _mm_and_si128(lanesOf(under4, bitsLo), shareV));
+        return _mm_sub_epi32(out, lanesOf(extra4, bitsLo)); // -(-1): one more unit
+    };
+    s.lo = finish(lo, valid & 15u, under & 15u, extra & 15u);
+    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.lo, lo))));
+    if constexpr (N == 8) {
+        s.hi = finish(hi, valid >> 4, under >> 4, extra >> 4);
+        same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.hi, hi)))) << 4;
+    } else {
+        s.hi = zero;
+    }
+    s.changed = ~same & kAll;
+    s.overDelta = -a;
+    s.maxOut = tc + share + (r ? 1 : 0);
+    return Branch::Done;
+}
+
+/// Prorata's room branch (0 < E <= A: every over cell to Tc, each under cell i gets
+/// floor(E room_i / A), the remainder one unit per cell in the hash's rotation, first to cells still
+/// below Tc, then to the others) on the block in registers, as repartitionT computes it: the shares
+/// by double-precision reciprocal and a one-step correction to the exact floor, under the same
+/// condition (E Tc < 2^32; otherwise returns false and the caller runs the rule). Takes E and A
+/// from surplusBranch (@a s).
+template <int N, typename Hash>
+__attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, uint32_t overCells,
+                                                      uint32_t valid, int32_t tc, const Hash& hash,
+                                                      Surplus& s)
+{
+    const int64_t e = s.e, a = s.a;
+    if (uint64_t(e) * uint64_t(tc) > UINT32_MAX) return false;
+    constexpr uint32_t kAll = (1u << N) - 1;
+    const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
+    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), t = _mm_set1_epi32(tc);
+    const __m128d eD = _mm_set1_pd(double(e)), aD = _mm_set1_pd(double(a)),
+                  inv = _mm_set1_pd(1.0 / double(a));
+    const __m128d one = _mm_set1_pd(1.0);
+    // floor(E room / A) for lanes 0 and 1 of @a room (exact: x < 2^32, q A <= x + A < 2^53).
+    auto share2 = [&](__m128i room) {
+        const __m128d x = _mm_mul_pd(eD, _mm_cvtepi32_pd(room));
+        __m128d q = _mm_cvtepi32_pd(_mm_cvttpd_epi32(_mm_mul_pd(x, inv)));
+        const __m128d qa = _mm_mul_pd(q, aD);
+        q = _mm_sub_pd(q, _mm_and_pd(_mm_cmpgt_pd(qa, x), one));
+        q = _mm_add_pd(q, _mm_and_pd(_mm_cmple_pd(_mm_add_pd(qa, aD), x), one));
+        return _mm_cvttpd_epi32(q);
+    };
+    // Over cells to Tc, under cells plus their share; obstacle cells as they are.
+    auto fill = [&](__m128i m, uint32_t over4, uint32_t under4, __m128i& q) {
+        const __m128i room = _mm_and_si128(_mm_sub_epi32(t, m), lanesOf(under4, bitsLo));
+        q = _mm_unpacklo_epi64(share2(room), share2(_mm_shuffle_epi32(room, 0xEE)));
+        const __m128i ov = lanesOf(over4, bitsLo);
+        return _mm_add_epi32(_mm_or_si128(_mm_and_si128(ov, t), _mm_andnot_si128(ov, m)), q);
+    };
+    __m128i qLo, qHi = _mm_setzero_si128();
+    __m128i oLo = fill(lo, over & 15u, under & 15u, qLo), oHi = _mm_setzero_si128();
+    if constexpr (N == 8) oHi = fill(hi, over >> 4, under >> 4, qHi);
+    int64_t r = e - hsum(_mm_add_epi32(qLo, qHi));
+    uint32_t extra2 = 0;
+    if (r > 0) {
+        const int start = int(hash() & uint64_t(N - 1));
+        auto addOne = [&](uint32_t cells) {
+            oLo = _mm_sub_epi32(oLo, lanesOf(cells & 15u, bitsLo));
+            if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(cells >> 4, bitsLo));
+        };
+        // First the under cells still below Tc, then the others (giveRemainder); r < nu <= 8.
+        uint32_t below = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
+        if constexpr (N == 8)
+            below |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oHi)))) << 4;
+        below &= under;
+        const int64_t k1 = std::min<int64_t>(r, rules_internal::popcount8(below));
+        addOne(rotl<N>(kFirstBits.t[rotr<N>(below, start)][k1], start));
+        r -= k1;
+        // (Never taken when E <= A: r is the sum of the shares' fractional parts, at most the number
+        // of cells with one, and each of those is still below Tc. Kept to mirror giveRemainder.)
+        if (r > 0) {
+            uint32_t below2 = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
+            if constexpr (N == 8)
+                below2 |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oHi)))) << 4;
+            const uint32_t cells = under & ~below2;
+            const int64_t k2 = std::min<int64_t>(r, rules_internal::popcount8(cells));
+            extra2 = rotl<N>(kFirstBits.t[rotr<N>(cells, start)][k2], start);
+            addOne(extra2);
+        }
+    }
+    s.lo = oLo;
+    s.hi = oHi;
+    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oLo, lo))));
+    if constexpr (N == 8) same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oHi, hi)))) << 4;
+    s.changed = ~same & kAll;
+    // Shares and the first remainder pass keep every under cell at or below Tc (E <= A); the second
+    // pass lifts cells at Tc to Tc + 1: the overload goes from E to the number of those cells.
+    s.overDelta = -e + rules_internal::popcount8(extra2);
+    s.maxOut = tc + (extra2 ? 1 : 0);
+    return true;
+}
+#endif
+
+/// Loads the N cells of a block lying inside one leaf, first cell at @a d, into @a m (in corner
+/// order); returns whether one is over @a tc. (The portable path.)
+template <int N>
+__attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, int32_t tc, int32_t* m)
+{
     int32_t top = d[0];
     VDBCLAY_UNROLL
     for (int c = 0; c < N; ++c) {
@@ -86,7 +292,6 @@ __attribute__((always_inline)) inline bool loadInside(const int32_t* d, int32_t 
         top = std::max(top, m[c]);
     }
     return top > tc;
-#endif
 }
 
 /// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
@@ -98,36 +303,73 @@ struct LeafSet {
     bool obsTile[8] = {};    // obstacle state of the whole region when obs[i] is null
     bool anyMissing = false; // a leaf the mask's blocks touch does not exist
     bool anyObs = false;     // a leaf they touch holds obstacles or lies in an obstacle tile
+    Origin anchor;           // the anchor these leaves were fetched for
+    uint32_t fetched = 0;    // which of the 8 slots were fetched (0: none yet)
 };
 
+// Out of line on purpose: inlined into the block loop it costs more than the call (register
+// pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
-inline void fetchLeaves(LeafSet& ls, const Origin& anchor, uint64_t mask, MassAcc& acc, ObsAcc* oacc)
+__attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint64_t mask, MassAcc& acc,
+                                           ObsAcc* oacc, bool reuse)
 {
     const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
+    uint32_t need = 1;
+    for (int w = 1; w < kCount; ++w)
+        if (mask & t.needLeaf[D3][w]) need |= 1u << w;
+    // The work list runs along x (layer order): when the previous anchor is this one's -x
+    // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
+    uint32_t reused = 0;
+    if (P == 1 && reuse && ls.fetched && ls.anchor == Origin(anchor.x() - 8, anchor.y(), anchor.z())) {
+        for (int w = 1; w < kCount; w += 2) {
+            if (!((need >> w) & 1u) || !((ls.fetched >> (w - 1)) & 1u)) continue;
+            ls.leaf[w] = ls.leaf[w - 1];
+            ls.data[w] = ls.data[w - 1];
+            ls.read[w] = ls.read[w - 1];
+            ls.obs[w] = ls.obs[w - 1];
+            ls.obsTile[w] = ls.obsTile[w - 1];
+            reused |= 1u << w;
+        }
+    }
     ls.anyMissing = false;
     ls.anyObs = false;
     for (int w = 0; w < kCount; ++w) {
-        ls.leaf[w] = nullptr;
-        ls.data[w] = nullptr;
-        ls.read[w] = kZeroLeaf;
-        ls.obs[w] = nullptr;
-        ls.obsTile[w] = false;
-        if (w && !(mask & t.needLeaf[D3][w])) continue;
-        const Origin lo = leafOrigin(anchor, w);
-        const Coord o(lo.x(), lo.y(), lo.z());
-        ls.leaf[w] = acc.probeLeaf(o);
-        if (ls.leaf[w])
-            ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
-        else
-            ls.anyMissing = true;
-        if (oacc) {
-            ls.obs[w] = oacc->probeConstLeaf(o);
-            if (!ls.obs[w]) ls.obsTile[w] = oacc->isValueOn(o);
-            ls.anyObs |= ls.obs[w] || ls.obsTile[w];
+        if (!((reused >> w) & 1u)) {
+            ls.leaf[w] = nullptr;
+            ls.data[w] = nullptr;
+            ls.read[w] = kZeroLeaf;
+            ls.obs[w] = nullptr;
+            ls.obsTile[w] = false;
+            if (!((need >> w) & 1u)) continue;
+            const Origin lo = leafOrigin(anchor, w);
+            const Coord o(lo.x(), lo.y(), lo.z());
+            ls.leaf[w] = acc.probeLeaf(o);
+            if (ls.leaf[w]) ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
+            if (oacc) {
+                ls.obs[w] = oacc->probeConstLeaf(o);
+                if (!ls.obs[w]) ls.obsTile[w] = oacc->isValueOn(o);
+            }
         }
+        if (!ls.leaf[w]) ls.anyMissing = true;
+        ls.anyObs |= ls.obs[w] || ls.obsTile[w];
     }
+    ls.anchor = anchor;
+    ls.fetched = need;
 }
+
+/// A block's hash from the step's prefix, computed only when a remainder or a tie needs it (its
+/// coordinates too: most updated blocks need no hash).
+template <bool D3> struct BlockHash {
+    uint64_t prefix;
+    int32_t ax, ay, az; // the anchor's first block corner
+    int b;
+    uint64_t operator()() const
+    {
+        return rules_internal::finishHash(prefix, ax + 2 * (b & 3), ay + 2 * ((b >> 2) & 3),
+                                          D3 ? az + 2 * (b >> 4) : 0);
+    }
+};
 
 template <Rule R, bool D3, int P>
 void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
@@ -140,6 +382,16 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const uint64_t prefix = rules_internal::stepPrefix(in.step, in.seed);
     const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun;
     const uint64_t insideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
+#if defined(__SSE2__)
+    // The surplus branch in int32 lanes (surplusBranch) is exact when no sum can wrap: with no cell
+    // over INT32_MAX / 8 (!mayOverflow), E < 8 * 2^28 = 2^31; with Tc <= 2^27, A <= 8 Tc <= 2^30;
+    // every result is at most the block's sum. Otherwise, and on the portable path, the rule runs.
+    constexpr bool kSurplusRule = R == Rule::Prorata || R == Rule::Sorted;
+    const bool simd = !in.portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
+    const __m128i tcV = _mm_set1_epi32(tc32);
+#else
+    const bool simd = false;
+#endif
     MassAcc acc(*in.tree);
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
@@ -150,8 +402,9 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
         w.changed = 0;
+        uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
-        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr);
+        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;
@@ -163,30 +416,154 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             // Even blocks, and odd blocks not reaching into a lower neighbour, lie in the anchor's
             // leaf at constant offsets; the others go through the tables.
             const bool inside = P == 0 || ((insideOdd >> b) & 1u);
+            // Blocks that do not straddle a z boundary (all but the odd blocks with bz = 0 in 3D)
+            // hold each corner k's z + 1 neighbour (corner k + 4) in the next int32.
+            const bool pairs = inside || !D3 || (b >> 4) != 0;
             alignas(16) int32_t m[8];
-            if (inside) {
-                if (!loadInside<N>(ls.read[0] + off[0], tc32, m)) continue;
-            } else {
-                int32_t top = 0;
-                VDBCLAY_UNROLL
-                for (int c = 0; c < N; ++c) {
-                    m[c] = ls.read[lf[c]][off[c]];
-                    top = std::max(top, m[c]);
+            uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
+#if defined(__SSE2__)
+            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128();
+            if (pairs && !in.portable) {
+                if (inside) {
+                    const int32_t* d = ls.read[0] + off[0];
+                    loadPairs<N>(d, d + 64, d + 8, d + 72, lo, hi);
+                } else {
+                    loadPairs<N>(ls.read[lf[0]] + off[0], ls.read[lf[1]] + off[1], ls.read[lf[2]] + off[2],
+                                 ls.read[lf[3]] + off[3], lo, hi);
                 }
-                if (top <= tc32) continue;
+                overCells = laneMaskGt<N>(lo, hi, tcV);
+                if (!overCells) continue;
+                _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
+                if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+            } else
+#endif
+                if (inside) {
+                if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
+            } else {
+#if defined(__SSE2__)
+                if (!in.portable) {
+                    // Straddling a z boundary: corner k and k + 4 lie in different leaves.
+                    lo = _mm_setr_epi32(ls.read[lf[0]][off[0]], ls.read[lf[1]][off[1]],
+                                        ls.read[lf[2]][off[2]], ls.read[lf[3]][off[3]]);
+                    if constexpr (N == 8)
+                        hi = _mm_setr_epi32(ls.read[lf[4]][off[4]], ls.read[lf[5]][off[5]],
+                                            ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
+                    overCells = laneMaskGt<N>(lo, hi, tcV);
+                    if (!overCells) continue;
+                    _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
+                    if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+                } else
+#endif
+                {
+                    int32_t top = 0;
+                    VDBCLAY_UNROLL
+                    for (int c = 0; c < N; ++c) {
+                        m[c] = ls.read[lf[c]][off[c]];
+                        top = std::max(top, m[c]);
+                    }
+                    if (top <= tc32) continue;
+                }
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
-                for (int c = 0; c < N; ++c) {
-                    const ObsLeaf* ol = ls.obs[lf[c]];
-                    if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
+                if (pairs && !in.portable) {
+                    // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
+                    uint32_t blocked = 0;
+                    VDBCLAY_UNROLL
+                    for (int k = 0; k < 4; ++k) {
+                        const ObsLeaf* ol = ls.obs[lf[k]];
+                        const int o = off[k];
+                        const uint32_t two =
+                            ol ? uint32_t(ol->getValueMask().template getWord<uint64_t>(o >> 6) >> (o & 63)) &
+                                     3u
+                               : (ls.obsTile[lf[k]] ? 3u : 0u);
+                        blocked |= ((two & 1u) << k) | ((two >> 1) << (k + 4));
+                    }
+                    valid &= ~blocked;
+                } else {
+                    for (int c = 0; c < N; ++c) {
+                        const ObsLeaf* ol = ls.obs[lf[c]];
+                        if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
+                    }
                 }
             }
             ++overTc;
-            const rules_internal::PrefixHash hash{prefix, ax + 2 * (b & 3), ay + 2 * ((b >> 2) & 3),
-                                                  D3 ? az + 2 * (b >> 4) : 0};
+            const BlockHash<D3> hash{prefix, ax, ay, az, b};
             int64_t out[8];
-            const uint32_t changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
+            uint32_t changed;
+#if defined(__SSE2__)
+            if (kSurplusRule && simd) {
+                Surplus sp;
+                Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
+                if (br == Branch::Unchanged) continue;
+                if constexpr (R == Rule::Prorata) {
+                    if (br == Branch::Rule && roomBranch<N>(lo, hi, overCells, valid, tc32, hash, sp))
+                        br = Branch::Done;
+                }
+                if (br == Branch::Done) {
+                    if (P == 1 && ls.anyMissing && !inside) {
+                        bool missing = false;
+                        for (int c = 0; c < N; ++c)
+                            if (((sp.changed >> c) & 1u) && !ls.data[lf[c]]) missing = true;
+                        if (missing) {
+                            tot.deferred.push_back(
+                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(sp.changed)});
+                            continue;
+                        }
+                    }
+                    if (N == 8 && pairs && (inside || !ls.anyMissing)) {
+                        // Every cell of the block is this task's: write all 8, two to a store.
+                        int32_t* d0 = ls.data[0] + off[0];
+                        int32_t *p0 = d0, *p1 = d0 + 64, *p2 = d0 + 8, *p3 = d0 + 72;
+                        if (!inside) {
+                            p0 = ls.data[lf[0]] + off[0], p1 = ls.data[lf[1]] + off[1];
+                            p2 = ls.data[lf[2]] + off[2], p3 = ls.data[lf[3]] + off[3];
+                        }
+                        const __m128i t01 = _mm_unpacklo_epi32(sp.lo, sp.hi); // c0 c4 c1 c5
+                        const __m128i t23 = _mm_unpackhi_epi32(sp.lo, sp.hi); // c2 c6 c3 c7
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p0), t01);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p1), _mm_unpackhi_epi64(t01, t01));
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p2), t23);
+                        _mm_storel_epi64(reinterpret_cast<__m128i*>(p3), _mm_unpackhi_epi64(t23, t23));
+                    } else {
+                        alignas(16) int32_t o32[8];
+                        _mm_store_si128(reinterpret_cast<__m128i*>(o32), sp.lo);
+                        if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(o32 + 4), sp.hi);
+                        uint32_t ch = sp.changed;
+                        while (ch) {
+                            const int c = __builtin_ctz(ch);
+                            ch &= ch - 1;
+                            const int li = inside ? 0 : lf[c];
+                            const int o = inside ? off[0] + kCornerOffset[c] : off[c];
+                            ls.data[li][o] = o32[c];
+                        }
+                    }
+                    // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
+                    const uint32_t zero =
+                        uint32_t(
+                            _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, _mm_setzero_si128())))) |
+                        (N == 8 ? uint32_t(_mm_movemask_ps(
+                                      _mm_castsi128_ps(_mm_cmpeq_epi32(hi, _mm_setzero_si128()))))
+                                      << 4
+                                : 0u);
+                    uint32_t fresh = zero & sp.changed;
+                    while (fresh) {
+                        const int c = __builtin_ctz(fresh);
+                        fresh &= fresh - 1;
+                        const int li = inside ? 0 : lf[c];
+                        const int o = inside ? off[0] + kCornerOffset[c] : off[c];
+                        auto& word = ls.leaf[li]->getValueMask().template getWord<uint64_t>(o >> 6);
+                        __atomic_fetch_or(&word, uint64_t(1) << (o & 63), __ATOMIC_RELAXED);
+                    }
+                    overloadDelta += sp.overDelta;
+                    maxWritten = std::max(maxWritten, sp.maxOut);
+                    ++updated;
+                    itemChanged |= uint64_t(1) << b;
+                    continue;
+                }
+            }
+#endif
+            changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
             if (!changed) continue;
             // Both checks can only fire rarely: a result over INT32_MAX needs a cell over
             // INT32_MAX / 8 somewhere (mayOverflow), and a write into a missing leaf needs one of
@@ -231,8 +608,9 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 }
             }
             ++updated;
-            w.changed |= uint64_t(1) << b;
+            itemChanged |= uint64_t(1) << b;
         }
+        w.changed = itemChanged;
     }
     tot.examined += examined;
     tot.overTc += overTc;

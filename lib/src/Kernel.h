@@ -38,6 +38,7 @@ struct PassInput {
     uint64_t step = 0, seed = 0;
     bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
     bool dryRun = false;      // check for overflow only, write nothing
+    bool portable = false;    // no SIMD: the plain C++ path (tests compare both on the same grids)
 };
 
 /// What one range of the pass accumulates.
