@@ -581,8 +581,8 @@ TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
     // Balls of other radii, at the level set's own voxel size: the ramp adds 1 / (4 r^2); the
     // curvature-corrected ramp (DistanceCoverage.cc, curvedRamp) does not.
     for (const double radius : {4.0, 6.0, 10.0, 20.0}) {
-        auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius),
-                                                                         openvdb::Vec3f(0.2f, 0.45f, 0.1f), 1.f);
+        auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            float(radius), openvdb::Vec3f(0.2f, 0.45f, 0.1f), 1.f);
         openvdb::io::File(file("b.vdb")).write({b});
         const ShapePtr s = loadLevelSet(file("b.vdb"));
         const double exact = 4.0 / 3.0 * M_PI * radius * radius * radius;
@@ -592,9 +592,10 @@ TEST_F(InteropTest, LevelSetClayHoldsItsVolume)
         for (int32_t x = bb.min[0] - 1; x <= bb.max[0] + 1; ++x)
             for (int32_t y = bb.min[1] - 1; y <= bb.max[1] + 1; ++y)
                 for (int32_t z = bb.min[2] - 1; z <= bb.max[2] + 1; ++z)
-                    rampSum += std::min(std::max(0.5 - s->distance(Vec3{{double(x), double(y), double(z)}}), 0.0), 1.0);
-        std::printf("level-set ball r = %g: %+.3f %% (the ramp %+.3f %%)\n", radius, 100 * (v - exact) / exact,
-                    100 * (rampSum - exact) / exact);
+                    rampSum += std::min(
+                        std::max(0.5 - s->distance(Vec3{{double(x), double(y), double(z)}}), 0.0), 1.0);
+        std::printf("level-set ball r = %g: %+.3f %% (the ramp %+.3f %%)\n", radius,
+                    100 * (v - exact) / exact, 100 * (rampSum - exact) / exact);
         EXPECT_NEAR(v, exact, 0.005 * exact);
         EXPECT_LT(std::fabs(v - exact), std::fabs(rampSum - exact)) << radius;
     }
@@ -609,16 +610,17 @@ namespace {
 void writeMeshLevelSet(const std::string& path, const std::vector<openvdb::Vec3s>& points,
                        const std::vector<openvdb::Vec4I>& quads)
 {
-    auto ls = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*openvdb::math::Transform::createLinearTransform(1.0),
-                                                                 points, std::vector<openvdb::Vec3I>(), quads, 3.f);
+    auto ls = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(
+        *openvdb::math::Transform::createLinearTransform(1.0), points, std::vector<openvdb::Vec3I>(), quads,
+        3.f);
     ls->setName("shape");
     openvdb::io::File(path).write({ls});
 }
 
 /// The 8 corners of the cube [-h, h]^3, rotated by @a degZ about z then @a degX about x, moved by @a t,
 /// and its 6 outward faces.
-void cubeMesh(double h, double degZ, double degX, const openvdb::Vec3d& t, std::vector<openvdb::Vec3s>& points,
-              std::vector<openvdb::Vec4I>& quads)
+void cubeMesh(double h, double degZ, double degX, const openvdb::Vec3d& t,
+              std::vector<openvdb::Vec3s>& points, std::vector<openvdb::Vec4I>& quads)
 {
     const double cz = std::cos(degZ * M_PI / 180), sz = std::sin(degZ * M_PI / 180);
     const double cx = std::cos(degX * M_PI / 180), sx = std::sin(degX * M_PI / 180);
@@ -674,14 +676,16 @@ TEST_F(InteropTest, LevelSetClayOfSharpShapesHoldsTheirVolume)
         double degZ, degX;
         openvdb::Vec3d t;
     };
-    for (const Case& c : {Case{0, 0, {0.25, 0.25, 0.25}}, Case{0, 0, {0.5, 0.5, 0.5}}, Case{0, 0, {0.1, 0.35, 0.7}},
-                          Case{30, 20, {0.13, 0.13, 0.13}}, Case{45, 0, {0.5, 0, 0.3}}}) {
+    for (const Case& c :
+         {Case{0, 0, {0.25, 0.25, 0.25}}, Case{0, 0, {0.5, 0.5, 0.5}}, Case{0, 0, {0.1, 0.35, 0.7}},
+          Case{30, 20, {0.13, 0.13, 0.13}}, Case{45, 0, {0.5, 0, 0.3}}}) {
         cubeMesh(8, c.degZ, c.degX, c.t, points, quads);
         writeMeshLevelSet(file("cube.vdb"), points, quads);
         const double v = clayVolumeOfLevelSet(file("cube.vdb"), m0);
         const double r = rampVolume(*loadLevelSet(file("cube.vdb")));
-        std::printf("level-set cube 16, rotated %g/%g, moved %g %g %g: %.4f voxels (%+.4f %%; the ramp %+.3f %%)\n",
-                    c.degZ, c.degX, c.t[0], c.t[1], c.t[2], v, 100 * (v - 4096) / 4096, 100 * (r - 4096) / 4096);
+        std::printf(
+            "level-set cube 16, rotated %g/%g, moved %g %g %g: %.4f voxels (%+.4f %%; the ramp %+.3f %%)\n",
+            c.degZ, c.degX, c.t[0], c.t[1], c.t[2], v, 100 * (v - 4096) / 4096, 100 * (r - 4096) / 4096);
         // Float samples of the level set; a rotated cube's edges cross voxels at every offset.
         EXPECT_NEAR(v, 4096, (c.degZ == 0 && c.degX == 0) ? 0.01 : 0.001 * 4096);
     }
@@ -697,9 +701,10 @@ TEST_F(InteropTest, LevelSetClayOfSharpShapesHoldsTheirVolume)
         const ShapePtr ls = makePlaced(loadLevelSet(file("cube.vdb"), vs), moved);
         const double want = 4096 / (vs * vs * vs);
         const double v = double(totalMass(*makeClay(*ls, m0))) / m0, r = rampVolume(*ls);
-        std::printf("level-set cube 16 rotated, read at voxel size %g and moved 0.37: %.4f voxels (%+.4f %%; the "
-                    "ramp %+.3f %%)\n",
-                    vs, v, 100 * (v - want) / want, 100 * (r - want) / want);
+        std::printf(
+            "level-set cube 16 rotated, read at voxel size %g and moved 0.37: %.4f voxels (%+.4f %%; the "
+            "ramp %+.3f %%)\n",
+            vs, v, 100 * (v - want) / want, 100 * (r - want) / want);
         EXPECT_NEAR(v, want, 0.003 * want);
     }
 
@@ -707,7 +712,8 @@ TEST_F(InteropTest, LevelSetClayOfSharpShapesHoldsTheirVolume)
     // meshToLevelSet is not exact there (at offset 0 the voxel on the edge reads -1, its diagonal
     // neighbours inside -1.81 for -1.41), so the edge's voxels fall back to the ramp: +0.2 % and
     // +0.4 % (the ramp alone: +1.8 %; with the exact distance, the rule gives +0.06 % / +0.03 %).
-    const std::vector<openvdb::Vec3s> l2 = {{-8, -8, 0}, {8, -8, 0}, {8, 0, 0}, {0, 0, 0}, {0, 8, 0}, {-8, 8, 0}};
+    const std::vector<openvdb::Vec3s> l2 = {{-8, -8, 0}, {8, -8, 0}, {8, 0, 0},
+                                            {0, 0, 0},   {0, 8, 0},  {-8, 8, 0}};
     for (const double off : {0.0, 0.3}) {
         points.clear();
         for (const float z : {-8.f, 8.f})
@@ -719,12 +725,13 @@ TEST_F(InteropTest, LevelSetClayOfSharpShapesHoldsTheirVolume)
         // The caps as fans from the concave corner (index 3): the L is star-shaped from it.
         const uint32_t inv = openvdb::util::INVALID_IDX;
         for (const auto& t : std::vector<std::array<uint32_t, 2>>{{4, 5}, {5, 0}, {0, 1}, {1, 2}}) {
-            quads.emplace_back(3, t[1], t[0], inv);             // bottom (z = -8), facing -z
-            quads.emplace_back(9, 6 + t[0], 6 + t[1], inv);     // top (z = 8), facing +z
+            quads.emplace_back(3, t[1], t[0], inv);         // bottom (z = -8), facing -z
+            quads.emplace_back(9, 6 + t[0], 6 + t[1], inv); // top (z = 8), facing +z
         }
         writeMeshLevelSet(file("l.vdb"), points, quads);
         const double want = (16 * 16 - 8 * 8) * 16;
-        const double v = clayVolumeOfLevelSet(file("l.vdb"), m0), r = rampVolume(*loadLevelSet(file("l.vdb")));
+        const double v = clayVolumeOfLevelSet(file("l.vdb"), m0),
+                     r = rampVolume(*loadLevelSet(file("l.vdb")));
         std::printf("level-set L prism moved %g: %.4f voxels (%+.4f %%; the ramp %+.3f %%)\n", off, v,
                     100 * (v - want) / want, 100 * (r - want) / want);
         EXPECT_NEAR(v, want, 0.005 * want);
