@@ -990,7 +990,9 @@ int main(int argc, char** argv)
                 f.open(false);
                 std::string name = impGrid;
                 if (name.empty()) {
-                    for (const auto& g : *f.readAllGridMetadata()) {
+                    // Held: a range-for over *f.readAllGridMetadata() would read a freed vector.
+                    const openvdb::GridPtrVecPtr grids = f.readAllGridMetadata();
+                    for (const auto& g : *grids) {
                         if (g->getGridClass() == openvdb::GRID_LEVEL_SET && g->isType<openvdb::FloatGrid>()) {
                             name = g->getName();
                             break;

@@ -18,6 +18,10 @@ yspan=$(awk '$1 == "v" { if (min == "" || $3 < min) min = $3; if (max == "" || $
 "$bin" import z.vdb --grid surface --up z -o back.vdb --mass 1000 > import.log
 "$bin" info back.vdb | grep -q 'voxel size: 0.25' || fail "import: voxel size not the level set's"
 grep -q 'wrote back.vdb: 512 voxels' import.log || fail "import: $(cat import.log), expected 512 voxels"
+# Without --grid: the first level set, at its own voxel size (this path once read a freed vector).
+"$bin" import z.vdb --up z -o back2.vdb --mass 1000 > import2.log || fail "import without --grid: exit $?"
+grep -q 'wrote back2.vdb: 512 voxels' import2.log || fail "import without --grid: $(cat import2.log)"
+"$bin" info back2.vdb | grep -q 'voxel size: 0.25' || fail "import without --grid: voxel size not the level set's"
 if "$bin" run tall.json --quiet --up x -o x.vdb 2> err.txt; then fail "--up x accepted"; fi
 grep -q -- '--up' err.txt || fail "--up x: $(cat err.txt)"
 if "$bin" import tall.json --grid a -o g.vdb --mass 1 2> err.txt; then fail "--grid on a mesh accepted"; fi
