@@ -1,7 +1,10 @@
-// The surface level set's fast sweeping by leaves (lib/src/SurfaceSweep.cc) against OpenVDB's own
-// fogToSdf: bit-identical values and topology on clay of several shapes, on 1, 2, 3 and 8 threads.
+// The stages of a run outside the automaton, made parallel: the surface level set's fast sweeping by
+// leaves (lib/src/SurfaceSweep.cc) against OpenVDB's own fogToSdf, and measureClay against a serial
+// reference (the previous implementation): bit-identical results on 1, 2, 3 and 8 threads.
 #include "Surface.h"
 #include "TestRng.h"
+
+#include "vdbclay/Metrics.h"
 
 #include <gtest/gtest.h>
 
@@ -14,6 +17,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 
 using namespace vdbclay;
 using openvdb::Coord;
@@ -137,4 +141,100 @@ TEST_F(SurfaceSweepTest, FogWithTilesGoesToOpenVdb)
     auto expected = openvdb::tools::fogToSdf(*fog, 0.5f);
     auto got = io_internal::fogToSdfByLeaves(*fog, 0.5f);
     EXPECT_GT(expectSameBits(*expected, *got), 0u);
+}
+
+namespace {
+
+/// measureClay as it was before it ran over leaves in parallel: one pass in tree order, the same
+/// sums, the spread of the interior cells about their mean summed in the same order.
+ClayMetrics serialMeasure(const openvdb::Int32Grid& mass, int32_t tc, const openvdb::MaskGrid* obstacles,
+                          int dims)
+{
+    const Coord faces[6] = {Coord(1, 0, 0),  Coord(-1, 0, 0), Coord(0, 1, 0),
+                            Coord(0, -1, 0), Coord(0, 0, 1),  Coord(0, 0, -1)};
+    const int nf = dims == 3 ? 6 : 4;
+    auto acc = mass.getConstAccessor();
+    std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
+    if (obstacles) oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+    auto interior = [&](const Coord& c) {
+        if (dims == 2 && c.z() != 0) return false;
+        if (oacc && oacc->isValueOn(c)) return false;
+        for (int f = 0; f < nf; ++f)
+            if (acc.getValue(c + faces[f]) == 0) return false;
+        return true;
+    };
+    ClayMetrics r;
+    int64_t interiorSum = 0;
+    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
+        const int32_t m = *it;
+        if (m == 0) continue;
+        const Coord c = it.getCoord();
+        r.mass += m;
+        r.maxCell = std::max(r.maxCell, m);
+        ++r.clayVoxels;
+        if (2 * int64_t(m) >= tc) ++r.occupiedVoxels;
+        if (!(oacc && oacc->isValueOn(c)) && m > tc) r.residualOverload += int64_t(m) - tc;
+        if (interior(c)) {
+            ++r.interiorCells;
+            interiorSum += m;
+        }
+    }
+    if (r.mass > 0) r.compaction = double(r.clayVoxels) / double((r.mass + tc - 1) / tc);
+    if (r.interiorCells == 0) return r;
+    const double mean = double(interiorSum) / double(r.interiorCells);
+    double squares = 0;
+    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
+        if (*it == 0 || !interior(it.getCoord())) continue;
+        const double d = double(*it) - mean;
+        squares += d * d;
+    }
+    r.interiorMeanDensity = mean / double(tc);
+    r.heterogeneityCV = std::sqrt(squares / double(r.interiorCells)) / mean;
+    return r;
+}
+
+void expectSameMetrics(const ClayMetrics& a, const ClayMetrics& b, const std::string& what)
+{
+    EXPECT_EQ(a.mass, b.mass) << what;
+    EXPECT_EQ(a.residualOverload, b.residualOverload) << what;
+    EXPECT_EQ(a.maxCell, b.maxCell) << what;
+    EXPECT_EQ(a.clayVoxels, b.clayVoxels) << what;
+    EXPECT_EQ(a.occupiedVoxels, b.occupiedVoxels) << what;
+    EXPECT_EQ(a.interiorCells, b.interiorCells) << what;
+    EXPECT_EQ(a.interiorMeanDensity, b.interiorMeanDensity) << what; // exact: the same bits
+    EXPECT_EQ(a.heterogeneityCV, b.heterogeneityCV) << what;
+    EXPECT_EQ(a.compaction, b.compaction) << what;
+}
+
+} // namespace
+
+TEST_F(SurfaceSweepTest, MeasureClayOverLeavesIsTheSerialSumOnAnyThreadCount)
+{
+    for (int dims : {2, 3}) {
+        vdbclay_test::Rng rng{uint64_t(dims)};
+        auto g = openvdb::Int32Grid::create(0);
+        // A dense block of uneven cells (many interior cells, spread across leaves) and scattered ones.
+        for (int x = -20; x < 20; ++x)
+            for (int y = -9; y < 30; ++y)
+                for (int z = (dims == 3 ? -11 : 0); z < (dims == 3 ? 13 : 1); ++z)
+                    g->tree().setValue(Coord(x, y, z), rng.range(1, 1700));
+        for (int i = 0; i < 500; ++i)
+            g->tree().setValue(
+                Coord(rng.range(-200, 200), rng.range(-200, 200), dims == 3 ? rng.range(-200, 200) : 0),
+                rng.range(1, 3000));
+        auto obstacles = openvdb::MaskGrid::create(false);
+        obstacles->tree().fill(openvdb::CoordBBox(Coord(-3, -3, -3), Coord(4, 40, 4)), true, true);
+        const ClayMetrics expected = serialMeasure(*g, 1000, obstacles.get(), dims);
+        EXPECT_GT(expected.interiorCells, 1000u);
+        EXPECT_GT(expected.residualOverload, 0);
+        for (int threads : {1, 2, 3, 8}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+            expectSameMetrics(measureClay(*g, 1000, obstacles.get(), dims, threads), expected,
+                              std::to_string(dims) + "D, " + std::to_string(threads) + " threads");
+            expectSameMetrics(measureClay(*g, 1000, obstacles.get(), dims, 0), expected, "threads 0");
+        }
+    }
+    auto tiled = openvdb::Int32Grid::create(0);
+    tiled->tree().addTile(1, Coord(0, 0, 0), 5, true);
+    EXPECT_THROW(measureClay(*tiled, 1000, nullptr, 3, 2), Error);
 }
