@@ -1,10 +1,14 @@
 // The stages of a run outside the automaton, made parallel: the surface level set's fast sweeping by
 // leaves (lib/src/SurfaceSweep.cc) against OpenVDB's own fogToSdf, and measureClay against a serial
-// reference (the previous implementation): bit-identical results on 1, 2, 3 and 8 threads.
+// reference (the previous implementation): bit-identical results on 1, 2, 3 and 8 threads; clay
+// shapes added into the scene's grid leaf by leaf.
 #include "Surface.h"
 #include "TestRng.h"
 
 #include "vdbclay/Metrics.h"
+#include "vdbclay/Scene.h"
+#include "vdbclay/Sculpt.h"
+#include "vdbclay/Types.h"
 
 #include <gtest/gtest.h>
 
@@ -237,4 +241,38 @@ TEST_F(SurfaceSweepTest, MeasureClayOverLeavesIsTheSerialSumOnAnyThreadCount)
     auto tiled = openvdb::Int32Grid::create(0);
     tiled->tree().addTile(1, Coord(0, 0, 0), 5, true);
     EXPECT_THROW(measureClay(*tiled, 1000, nullptr, 3, 2), Error);
+}
+
+TEST_F(SurfaceSweepTest, OverlappingClayAddsLeafByLeafAndRefusesOverflow)
+{
+    // Two boxes overlapping across leaf boundaries (new leaves, shared leaves): the overlap holds the sum.
+    const Scene scene =
+        parseScene(R"({"clay": [{"shape": "box", "min": [-5,-5,-5], "max": [9,9,9], "mass": 300},
+                                                 {"shape": "box", "min": [3,3,3], "max": [20,20,20], "mass": 500}],
+                                       "frames": 1})",
+                   "s.json", "");
+    Sculptor sculptor(scene, 1);
+    auto acc = sculptor.mass()->getConstAccessor();
+    EXPECT_EQ(acc.getValue(Coord(-5, -5, -5)), 300);
+    EXPECT_EQ(acc.getValue(Coord(3, 3, 3)), 800);
+    EXPECT_EQ(acc.getValue(Coord(9, 9, 9)), 800);
+    EXPECT_EQ(acc.getValue(Coord(10, 9, 9)), 500);
+    EXPECT_EQ(acc.getValue(Coord(20, 20, 20)), 500);
+    EXPECT_TRUE(acc.isValueOn(Coord(20, 20, 20)));
+    EXPECT_EQ(acc.getValue(Coord(21, 20, 20)), 0);
+    EXPECT_EQ(totalMass(*sculptor.mass()), int64_t(15 * 15 * 15) * 300 + int64_t(18 * 18 * 18) * 500);
+
+    const Scene over =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [3,3,3], "mass": 2000000000},
+                                                {"shape": "box", "min": [2,2,2], "max": [5,5,5], "mass": 2000000000}],
+                                      "threshold": 2147483647, "frames": 1})",
+                   "s.json", "");
+    try {
+        Sculptor bad(over, 1);
+        ADD_FAILURE() << "overflow not refused";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("overlapping clay at voxel (2, 2, 2) adds up to 4000000000"),
+                  std::string::npos)
+            << e.what();
+    }
 }
