@@ -15,6 +15,7 @@
 #include <openvdb/openvdb.h>
 
 #include <signal.h>
+#include <tbb/global_control.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -521,6 +522,13 @@ int finishInterrupted(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::
 
 int runScene(const RunArgs& a)
 {
+    // --threads N holds for the whole command, not only the automaton: loading the scene, the memory
+    // estimate and writing the outputs (density, surface, mesh, picture) run on at most N threads too.
+    std::unique_ptr<tbb::global_control> threadLimit;
+    if (a.threads > 0) {
+        threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                            size_t(a.threads));
+    }
     uint64_t cliBudget =
         0; // --memory-budget replaces the scene's; meshes are checked against it as they are read
     if (!a.memoryBudget.empty()) {
@@ -790,7 +798,7 @@ int main(int argc, char** argv)
         ->check(fileName);
     run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")
         ->check(fileName);
-    run->add_option("--threads", ra.threads, "worker threads; 0 = all cores")
+    run->add_option("--threads", ra.threads, "worker threads for the whole command; 0 = all cores")
         ->check(CLI::Range(0, kMaxThreads));
     run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata")
         ->check(nonEmpty("a rule name"));

@@ -3,6 +3,7 @@
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
 
+#include "ParallelFor.h"
 #include "RulesImpl.h"
 
 #include <openvdb/openvdb.h>
@@ -128,51 +129,87 @@ template <typename Fn> void forEachClayVoxel(const MassGrid& mass, const char* w
 
 } // namespace
 
-ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims)
+ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims,
+                        int threads)
 {
     checkArgs("measureClay", threshold, dims);
-    ClayMetrics r;
-    auto acc = mass.getConstAccessor();
-    std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
-    if (obstacles) oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
-    const int faces = faceCount(dims);
-    auto isInterior = [&](const Coord& c) {
-        if (dims == 2 && c.z() != 0) return false;
-        if (oacc && oacc->isValueOn(c)) return false;
-        for (int f = 0; f < faces; ++f) {
-            if (acc.getValue(c + kFaces[f]) == 0) return false;
+    // Tiles first (only the levels above the leaves): a nonzero one is refused, as before any sum.
+    {
+        auto it = mass.tree().cbeginValueAll();
+        it.setMaxDepth(it.getLeafDepth() - 1);
+        for (; it; ++it) {
+            if (*it != 0) throw Error("measureClay: the grid holds a nonzero tile; voxelize it first");
         }
-        return true;
+    }
+    // First pass, leaf by leaf in parallel: each leaf's integer sums (exact, so their total does not
+    // depend on the order) and the mask of its interior cells.
+    using MassLeaf = MassGrid::TreeType::LeafNodeType;
+    std::vector<const MassLeaf*> leaves;
+    leaves.reserve(mass.tree().leafCount());
+    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
+        leaves.push_back(&*it);
+    struct LeafSums {
+        int64_t mass = 0, residualOverload = 0, interiorSum = 0;
+        uint64_t clayVoxels = 0, occupiedVoxels = 0, interiorCells = 0;
+        int32_t maxCell = 0;
+        MassLeaf::NodeMaskType interior;
     };
-
-    // First pass: the sums; the interior mass sum is exact in 64 bits.
-    int64_t interiorSum = 0;
-    forEachClayVoxel(mass, "measureClay", [&](const Coord& c, int32_t m) {
-        r.mass += m;
-        r.maxCell = std::max(r.maxCell, m);
-        ++r.clayVoxels;
-        if (occupied(m, threshold)) ++r.occupiedVoxels;
-        const bool obstacle = oacc && oacc->isValueOn(c);
-        if (!obstacle && m > threshold) r.residualOverload += int64_t(m) - threshold;
-        if (isInterior(c)) {
-            ++r.interiorCells;
-            interiorSum += m;
+    std::vector<LeafSums> sums(leaves.size());
+    const int faces = faceCount(dims);
+    parallel_internal::forEachIndex(leaves.size(), threads, [&](size_t li) {
+        const MassLeaf& leaf = *leaves[li];
+        LeafSums& out = sums[li];
+        auto acc = mass.getConstAccessor();
+        std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
+        if (obstacles) oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+        for (openvdb::Index i = 0; i < MassLeaf::SIZE; ++i) {
+            const int32_t m = leaf.getValue(i);
+            if (m == 0) continue;
+            const Coord c = leaf.offsetToGlobalCoord(i);
+            out.mass += m;
+            out.maxCell = std::max(out.maxCell, m);
+            ++out.clayVoxels;
+            if (occupied(m, threshold)) ++out.occupiedVoxels;
+            const bool obstacle = oacc && oacc->isValueOn(c);
+            if (!obstacle && m > threshold) out.residualOverload += int64_t(m) - threshold;
+            bool interior = !obstacle && !(dims == 2 && c.z() != 0);
+            for (int f = 0; f < faces && interior; ++f)
+                interior = acc.getValue(c + kFaces[f]) != 0;
+            if (interior) {
+                out.interior.setOn(i);
+                ++out.interiorCells;
+                out.interiorSum += m;
+            }
         }
     });
+    ClayMetrics r;
+    int64_t interiorSum = 0;
+    for (const LeafSums& l : sums) {
+        r.mass += l.mass;
+        r.maxCell = std::max(r.maxCell, l.maxCell);
+        r.clayVoxels += l.clayVoxels;
+        r.occupiedVoxels += l.occupiedVoxels;
+        r.residualOverload += l.residualOverload;
+        r.interiorCells += l.interiorCells;
+        interiorSum += l.interiorSum;
+    }
     if (r.mass > 0) {
         const int64_t cellsAtRest = (r.mass + threshold - 1) / threshold;
         r.compaction = double(r.clayVoxels) / double(cellsAtRest);
     }
     if (r.interiorCells == 0) return r;
 
-    // Second pass: the spread about the mean (two passes: no cancellation in a sum of squares).
+    // Second pass: the spread about the mean (two passes: no cancellation in a sum of squares), one
+    // sum in the tree's voxel order (leaves in order, voxels in offset order): the same bits on any
+    // thread count.
     const double mean = double(interiorSum) / double(r.interiorCells);
     double squares = 0;
-    forEachClayVoxel(mass, "measureClay", [&](const Coord& c, int32_t m) {
-        if (!isInterior(c)) return;
-        const double d = double(m) - mean;
-        squares += d * d;
-    });
+    for (size_t li = 0; li < leaves.size(); ++li) {
+        for (auto it = sums[li].interior.beginOn(); it; ++it) {
+            const double d = double(leaves[li]->getValue(it.pos())) - mean;
+            squares += d * d;
+        }
+    }
     r.interiorMeanDensity = mean / double(threshold);
     r.heterogeneityCV = std::sqrt(squares / double(r.interiorCells)) / mean;
     return r;

@@ -46,21 +46,40 @@ namespace vdbclay {
 
 namespace {
 
-/// Adds every voxel of @a src into @a dst, refusing sums that overflow a cell.
+/// Adds every active voxel of @a src into @a dst, refusing sums that overflow a cell. Leaf by leaf
+/// (no accessor per voxel): a leaf slot that @a dst lacks gets a new leaf holding @a src's active
+/// values; one it has gets them added, the first overflow in tree order refused as before.
 void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::string& field)
 {
-    auto acc = dst.getAccessor();
-    for (auto it = src.tree().cbeginValueOn(); it; ++it) {
-        if (!it.isVoxelValue()) {
-            throw Error(field + ": clay tiles are not supported; voxelize the grid");
+    auto tile = src.tree().cbeginValueOn();
+    tile.setMaxDepth(tile.getLeafDepth() - 1);
+    if (tile) throw Error(field + ": clay tiles are not supported; voxelize the grid");
+    using Leaf = openvdb::Int32Tree::LeafNodeType;
+    for (auto it = src.tree().cbeginLeaf(); it; ++it) {
+        const Leaf& in = *it;
+        if (in.isEmpty()) continue;
+        Leaf* out = dst.tree().probeLeaf(in.origin());
+        if (!out) {
+            // An absent leaf reads as the background (0) or a tile: fall back on one voxel at a time.
+            if (dst.tree().getValue(in.origin()) != 0 || dst.tree().isValueOn(in.origin())) {
+                out = dst.tree().touchLeaf(in.origin());
+            } else {
+                auto fresh = std::make_unique<Leaf>(in.origin(), 0, false);
+                for (auto v = in.cbeginValueOn(); v; ++v)
+                    fresh->setValueOn(v.pos(), *v);
+                dst.tree().addLeaf(fresh.release());
+                continue;
+            }
         }
-        const int64_t sum = int64_t(acc.getValue(it.getCoord())) + int64_t(*it);
-        if (sum > INT32_MAX) {
-            throw Error(field + ": overlapping clay at voxel " + coordStr(it.getCoord()) + " adds up to " +
-                        std::to_string(sum) + ", more than a voxel holds (" + std::to_string(INT32_MAX) +
-                        ")");
+        for (auto v = in.cbeginValueOn(); v; ++v) {
+            const int64_t sum = int64_t(out->getValue(v.pos())) + int64_t(*v);
+            if (sum > INT32_MAX) {
+                throw Error(field + ": overlapping clay at voxel " + coordStr(v.getCoord()) + " adds up to " +
+                            std::to_string(sum) + ", more than a voxel holds (" + std::to_string(INT32_MAX) +
+                            ")");
+            }
+            out->setValueOn(v.pos(), int32_t(sum));
         }
-        acc.setValue(it.getCoord(), int32_t(sum));
     }
 }
 
@@ -1170,7 +1189,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     s.massFinal = totalMass(*im.mass);
     s.massDrift = s.massFinal - s.massInitial;
     s.metrics =
-        measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions);
+        measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions,
+                    im.automaton->options().threads);
     s.residualOverload = im.automaton->residualOverload();
     s.settled = im.automaton->settled();
     return s;

@@ -3,7 +3,6 @@
 #include "vdbclay/Types.h"
 
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
@@ -89,7 +88,7 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         openvdb::FloatGrid::Ptr fog = density.deepCopy();
         openvdb::tools::dilateActiveValues(fog->tree(), kHalfWidth + 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                            openvdb::tools::IGNORE_TILES);
-        surface = openvdb::tools::fogToSdf(*fog, float(isovalue));
+        surface = fogToSdfByLeaves(*fog, float(isovalue));
         // A narrow band: values beyond the half width become inactive, signed background values.
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(surface->tree());
         leaves.foreach ([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {

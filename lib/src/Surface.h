@@ -26,9 +26,14 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
 /// The surface of @a density at @a isovalue as a narrow-band level set (GRID_LEVEL_SET, named
 /// "surface", same transform): negative inside (density > isovalue), positive outside, half band
 /// width 3 voxels each side. Built directly from the density by the fast sweeping method
-/// (openvdb::tools::fogToSdf) over the density's voxels grown by the band, in parallel; its cost
+/// (fogToSdfByLeaves) over the density's voxels grown by the band, in parallel; its cost
 /// follows the clay's voxels. Empty (no active voxels) if no cell exceeds the isovalue.
 openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue);
+
+/// openvdb::tools::fogToSdf(fog, isoValue) (one iteration), bit for bit, computed leaf by leaf with a
+/// flat neighbour table and in parallel over each sweep's leaf diagonals (SurfaceSweep.cc); the same
+/// result on any thread count. A fog holding tiles goes to OpenVDB's fogToSdf itself.
+openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue);
 
 /// The surface of @a density at @a isovalue as polygons in index space (the density's voxel
 /// centres at integer points), oriented outwards.

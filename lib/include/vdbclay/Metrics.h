@@ -63,8 +63,11 @@ struct ClayMetrics {
 /// for neighbours, as the automaton's 2D clay lives there). Obstacle cells (@a obstacles may be
 /// null) are never interior and carry no residual overload; their clay still counts in mass,
 /// clayVoxels and occupiedVoxels.
+/// Runs over the leaves on @a threads threads (1: the calling thread only; 0: every core); the
+/// result is the same on any thread count.
 /// @throw Error if threshold <= 0, dims is not 2 or 3, or the grid holds a nonzero tile.
-ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims);
+ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims,
+                        int threads = 0);
 
 /// How far a clay shape is from a reference shape, both as occupied voxel sets.
 struct ShapeError {
