@@ -6,6 +6,8 @@
 // large Tc (Tc > 2^27 turns the SIMD branch off, so both paths must agree there trivially too).
 #include "Kernel.h"
 
+#include <vdbclay/Automaton.h>
+#include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
 #include <openvdb/openvdb.h>
@@ -232,6 +234,42 @@ TEST_F(KernelTest, LeafTableIndexesEveryAnchorThatReachesALeaf)
     t.build(none, nullptr, true);
     EXPECT_TRUE(t.valid());
     EXPECT_EQ(t.size(), 0u);
+}
+
+/// The Automaton must drop its table when an edit adds a leaf: a stale table would hand the anchors
+/// next to the new leaf "missing" (zeros) for it. Each edit below puts overloaded clay into a new
+/// leaf beside clay whose table is built; the run must match a fresh Automaton started
+/// on a copy of the edited grid (the automaton is exact: which blocks it examines never changes the
+/// result), on 1 and 3 threads.
+TEST_F(KernelTest, EditsThatAddLeavesDropTheLeafTable)
+{
+    for (const int threads : {1, 3}) {
+        auto grid = MassGrid::create(0);
+        grid->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(15, 15, 15)), 3000, true);
+        AutomatonOptions opts;
+        opts.rule.threshold = 1000;
+        opts.threads = threads;
+        Automaton a(grid, opts);
+        a.run(41); // the table is built after a few steps
+        for (int e = 0; e < 3; ++e) {
+            // The leaf just past the clay along +x: missing, but its -x neighbour holds clay, so the
+            // table indexes the anchor there (with that slot missing).
+            int x = 0;
+            while (grid->tree().probeConstLeaf(Coord(x, 8, 8)))
+                x += 8;
+            ASSERT_NE(grid->tree().probeConstLeaf(Coord(x - 8, 8, 8)), nullptr);
+            a.edit(Box{{{x, 8, 8}}, {{x + 1, 9, 9}}}, [&](MassGrid& g) {
+                g.tree().setValueOn(Coord(x, 8, 8), 9000);
+                g.tree().setValueOn(Coord(x + 1, 9, 9), 7000);
+            });
+            auto copy = grid->deepCopy();
+            Automaton b(copy, opts);
+            b.setStepCount(a.stepCount());
+            a.run(30);
+            b.run(30);
+            EXPECT_EQ(contentHash(*grid), contentHash(*copy)) << "edit " << e << ", threads " << threads;
+        }
+    }
 }
 
 /// One block at a time, so that the totals of each block (the largest value written and the
