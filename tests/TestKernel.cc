@@ -6,6 +6,8 @@
 // large Tc (Tc > 2^27 turns the SIMD branch off, so both paths must agree there trivially too).
 #include "Kernel.h"
 
+#include <vdbclay/Automaton.h>
+#include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
 #include <openvdb/openvdb.h>
@@ -91,10 +93,13 @@ struct Result {
     PassTotals tot;
 };
 
-Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint64_t step, bool portable)
+Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint64_t step, bool portable,
+               bool useTable = false)
 {
     Result r;
     r.mass = std::make_shared<openvdb::Int32Tree>(*s.mass); // deep copy
+    LeafTable table;
+    if (useTable) table.build(*r.mass, s.obstacles.get(), is3D);
     std::vector<WorkItem> work = allBlocks(is3D);
     RuleParams p;
     p.rule = rule;
@@ -109,6 +114,7 @@ Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint
     in.step = step;
     in.seed = 7;
     in.portable = portable;
+    in.table = useTable ? &table : nullptr;
     // Two ranges, as two tasks would get them, joined in order.
     const size_t half = work.size() / 2;
     PassTotals second;
@@ -173,6 +179,97 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                     }
                     expectSame(simd, portable, what);
                 }
+}
+
+/// The flat leaf table (PassInput::table) only replaces the accessor probes: the same passes with and
+/// without it, on the SIMD and the portable path, must agree bit for bit. The work list holds anchors
+/// the table indexes (every leaf, and the upper neighbours reaching into one) and anchors it does not
+/// (an anchor all of whose leaves are missing), which fall back to the accessors.
+TEST_F(KernelTest, LeafTableGivesIdenticalPasses)
+{
+    const Rule rules[] = {Rule::Arata, Rule::Sorted, Rule::Prorata};
+    uint64_t seed = 1000;
+    for (int d3 = 0; d3 < 2; ++d3)
+        for (const int32_t tc : {7, 1000})
+            for (const Rule rule : rules)
+                for (int phase = 0; phase < 2; ++phase)
+                    for (int portable = 0; portable < 2; ++portable) {
+                        const bool is3D = d3 == 1;
+                        const Scene s = makeScene(seed++, is3D, tc);
+                        const uint64_t step = 40 + uint64_t(phase) + 2 * seed;
+                        const Result plain = runPass(s, rule, tc, is3D, phase, step, portable == 1, false);
+                        const Result table = runPass(s, rule, tc, is3D, phase, step, portable == 1, true);
+                        const std::string what = std::string(is3D ? "3D" : "2D") + " tc " + std::to_string(tc) +
+                                                 " rule " + std::to_string(int(rule)) + " phase " +
+                                                 std::to_string(phase) + (portable ? " portable" : " simd");
+                        EXPECT_GT(plain.tot.updated, is3D ? 1000u : 40u) << what;
+                        if (phase == 1) {
+                            EXPECT_GT(plain.tot.deferred.size(), 0u) << what;
+                        }
+                        expectSame(plain, table, what);
+                    }
+}
+
+TEST_F(KernelTest, LeafTableIndexesEveryAnchorThatReachesALeaf)
+{
+    // Two leaves far apart (one at negative coordinates) and an obstacle tile: every leaf's origin and
+    // its upper neighbours' are indexed (8 each in 3D, 4 in 2D, none shared), nothing else.
+    openvdb::Int32Tree mass(0);
+    mass.touchLeaf(Coord(0, 0, 0));
+    mass.touchLeaf(Coord(-800, 8000, -16));
+    openvdb::MaskTree obs(false);
+    obs.addTile(1, Coord(8, 8, 8), true, true);
+    LeafTable t;
+    EXPECT_FALSE(t.valid());
+    EXPECT_EQ(t.size(), 0u);
+    t.build(mass, &obs, true);
+    EXPECT_TRUE(t.valid());
+    EXPECT_EQ(t.size(), 16u);
+    t.build(mass, nullptr, false);
+    EXPECT_EQ(t.size(), 8u);
+    t.clear();
+    EXPECT_FALSE(t.valid());
+    EXPECT_EQ(t.size(), 0u);
+    openvdb::Int32Tree none(0);
+    t.build(none, nullptr, true);
+    EXPECT_TRUE(t.valid());
+    EXPECT_EQ(t.size(), 0u);
+}
+
+/// The Automaton must drop its table when an edit adds a leaf: a stale table would hand the anchors
+/// next to the new leaf "missing" (zeros) for it. Each edit below puts overloaded clay into a new
+/// leaf beside clay whose table is built; the run must match a fresh Automaton started
+/// on a copy of the edited grid (the automaton is exact: which blocks it examines never changes the
+/// result), on 1 and 3 threads.
+TEST_F(KernelTest, EditsThatAddLeavesDropTheLeafTable)
+{
+    for (const int threads : {1, 3}) {
+        auto grid = MassGrid::create(0);
+        grid->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(15, 15, 15)), 3000, true);
+        AutomatonOptions opts;
+        opts.rule.threshold = 1000;
+        opts.threads = threads;
+        Automaton a(grid, opts);
+        a.run(41); // the table is built after a few steps
+        for (int e = 0; e < 3; ++e) {
+            // The leaf just past the clay along +x: missing, but its -x neighbour holds clay, so the
+            // table indexes the anchor there (with that slot missing).
+            int x = 0;
+            while (grid->tree().probeConstLeaf(Coord(x, 8, 8)))
+                x += 8;
+            ASSERT_NE(grid->tree().probeConstLeaf(Coord(x - 8, 8, 8)), nullptr);
+            a.edit(Box{{{x, 8, 8}}, {{x + 1, 9, 9}}}, [&](MassGrid& g) {
+                g.tree().setValueOn(Coord(x, 8, 8), 9000);
+                g.tree().setValueOn(Coord(x + 1, 9, 9), 7000);
+            });
+            auto copy = grid->deepCopy();
+            Automaton b(copy, opts);
+            b.setStepCount(a.stepCount());
+            a.run(30);
+            b.run(30);
+            EXPECT_EQ(contentHash(*grid), contentHash(*copy)) << "edit " << e << ", threads " << threads;
+        }
+    }
 }
 
 /// One block at a time, so that the totals of each block (the largest value written and the

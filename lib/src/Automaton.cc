@@ -5,7 +5,9 @@
 // The automaton is split along its concepts, one file each:
 //   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
 //   Candidates.*   which blocks a step examines: the last two steps' changes, merged in layer order
-//   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule
+//   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule; and
+//                  the flat leaf table (LeafTable), which hands the pass an anchor's leaves by one
+//                  hash lookup; cleared on every edit, resync and grown leaf, rebuilt lazily
 //   this file      the state (mass, overload, bounds), the stages of a step, validation and scans,
 //                  edits, settle() and the no-room flood
 //
@@ -92,6 +94,8 @@ struct Automaton::Impl {
     int64_t maxBound = 0; // upper bound of the largest cell value
     int quietSteps = 0;   // consecutive steps that changed nothing
     Candidates candidates;
+    LeafTable leafTable; // cleared whenever a leaf may appear or vanish, or the obstacles change
+    uint64_t workWithoutTable = 0; // anchors passed through the accessors since the last build
 
     // scratch, reused between steps
     std::vector<WorkItem> work;
@@ -253,6 +257,7 @@ struct Automaton::Impl {
         maxBound = s.maxValue;
         quietSteps = 0;
         candidates.reset(std::move(hot));
+        leafTable.clear();
     }
 
     PassInput passInput(int phase, bool dryRun)
@@ -267,6 +272,7 @@ struct Automaton::Impl {
         in.seed = opts.seed;
         in.mayOverflow = maxBound > INT32_MAX / 8;
         in.dryRun = dryRun;
+        in.table = leafTable.valid() ? &leafTable : nullptr;
         return in;
     }
 
@@ -322,6 +328,17 @@ struct Automaton::Impl {
         rep.seconds.gather = secondsSince(t0);
 
         t0 = Clock::now();
+        if (!leafTable.valid()) {
+            // Rebuilt only once the passes since the last build have fetched at least 4 anchors per
+            // leaf through the accessors: a build costs about what fetching a few anchors per leaf
+            // saves, so frequent edits of a large grid cost at most a constant factor more than
+            // without a table, and settling runs use it for nearly every step.
+            workWithoutTable += work.size();
+            if (workWithoutTable >= 4 * tree().leafCount()) {
+                leafTable.build(tree(), obsTree(), is3D());
+                workWithoutTable = 0;
+            }
+        }
         if (maxBound > INT32_MAX / 8) {
             const PassTotals check = runPass(phase, /*dryRun=*/true);
             if (check.overflow) throwOverflow(check, phase);
@@ -379,6 +396,7 @@ struct Automaton::Impl {
             const Coord o(lo.x(), lo.y(), lo.z());
             if (!tree().probeLeaf(o)) {
                 tree().touchLeaf(o);
+                leafTable.clear(); // the pass below must see the new leaf
                 ++created;
             }
         }
@@ -566,6 +584,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
+    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
     const Impl::Scan before = im.scanLeaves(&region, "edit");
     fn(*im.massGrid);
     im.tree().voxelizeActiveTiles();
@@ -592,6 +611,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
+    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");
@@ -608,6 +628,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
 {
     Impl& im = *mImpl;
+    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");

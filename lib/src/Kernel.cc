@@ -1,8 +1,9 @@
 // The automaton's per-block kernel (see Kernel.h for the contract and its thread-safety).
 //
-// Per anchor: its leaves are fetched once through value accessors (even steps: the anchor's leaf
-// alone, whose 64 blocks it holds whole; odd steps: also the lower neighbours that the straddling
-// blocks reach, only those the mask's blocks touch). Then for each candidate block: load its cells
+// Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
+// holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
+// flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
+// otherwise through value accessors (only the leaves the mask's blocks touch). Then for each candidate block: load its cells
 // (even: at constant offsets from the block's first cell; odd: through the addressing tables),
 // skip it unless a cell is over Tc, apply the rule (inlined, instantiated for this rule and cell
 // count), and write back only the cells that changed. The overload changes only where a cell
@@ -49,6 +50,132 @@ using ObsAcc = openvdb::tree::ValueAccessor<const ObsTree, false>;
 
 /// What a missing leaf reads as: background 0.
 alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
+
+} // namespace
+
+// ---- The leaf table ------------------------------------------------------------------------------
+
+struct LeafTable::Impl {
+    /// One anchor's leaves, as fetchLeaves hands them to the pass (slot w: leafOrigin(anchor, w)).
+    struct Entry {
+        MassLeaf* leaf[8];
+        int32_t* data[8];
+        const int32_t* read[8]; // data, or kZeroLeaf for a missing leaf
+        const ObsLeaf* obs[8];
+        uint8_t missing; // slots whose mass leaf is missing
+        uint8_t obsAny;  // slots holding obstacles: an obstacle leaf, or an active obstacle tile
+        uint8_t obsTile; // slots inside an active obstacle tile
+    };
+    struct Slot {
+        int32_t x, y, z;
+        uint32_t index; // into entries; kEmpty: a free slot
+    };
+    static constexpr uint32_t kEmpty = UINT32_MAX;
+    std::vector<Entry> entries;
+    std::vector<Origin> keys; // entries[i]'s anchor
+    std::vector<Slot> slots;  // open addressing, linear probing, at most half full
+    int shift = 64;
+
+    size_t slotOf(int32_t x, int32_t y, int32_t z) const
+    {
+        uint64_t k = uint64_t(uint32_t(x) >> 3) * 0x9E3779B97F4A7C15ull;
+        k += uint64_t(uint32_t(y) >> 3) * 0xC2B2AE3D27D4EB4Full + uint64_t(uint32_t(z) >> 3) * 0x165667B19E3779F9ull;
+        k ^= k >> 29;
+        k *= 0xBF58476D1CE4E5B9ull;
+        return size_t(k >> shift);
+    }
+    const Entry* find(const Origin& o) const
+    {
+        const size_t mask = slots.size() - 1;
+        for (size_t i = slotOf(o.x(), o.y(), o.z());; i = (i + 1) & mask) {
+            const Slot& s = slots[i];
+            if (s.index == kEmpty) return nullptr;
+            if (s.x == o.x() && s.y == o.y() && s.z == o.z()) return &entries[s.index];
+        }
+    }
+    void resize(size_t count) // count: a power of two, at least twice the keys
+    {
+        shift = 64;
+        for (size_t c = count; c > 1; c >>= 1)
+            --shift;
+        slots.assign(count, Slot{0, 0, 0, kEmpty});
+        const size_t mask = count - 1;
+        for (uint32_t k = 0; k < keys.size(); ++k) {
+            const Origin& o = keys[k];
+            size_t i = slotOf(o.x(), o.y(), o.z());
+            while (slots[i].index != kEmpty)
+                i = (i + 1) & mask;
+            slots[i] = Slot{o.x(), o.y(), o.z(), k};
+        }
+    }
+    void insert(const Origin& o)
+    {
+        if (2 * (keys.size() + 1) > slots.size()) resize(std::max<size_t>(64, 2 * slots.size()));
+        const size_t mask = slots.size() - 1;
+        size_t i = slotOf(o.x(), o.y(), o.z());
+        for (;; i = (i + 1) & mask) {
+            const Slot& s = slots[i];
+            if (s.index == kEmpty) break;
+            if (s.x == o.x() && s.y == o.y() && s.z == o.z()) return;
+        }
+        slots[i] = Slot{o.x(), o.y(), o.z(), uint32_t(keys.size())};
+        keys.push_back(o);
+    }
+};
+
+LeafTable::LeafTable() = default;
+LeafTable::~LeafTable() = default;
+
+size_t LeafTable::size() const
+{
+    return mValid ? mImpl->keys.size() : 0;
+}
+
+void LeafTable::clear()
+{
+    mValid = false;
+}
+
+void LeafTable::build(MassTree& tree, const ObsTree* obstacles, bool is3D)
+{
+    if (!mImpl) mImpl = std::make_unique<Impl>();
+    Impl& t = *mImpl;
+    t.keys.clear();
+    t.slots.clear();
+    t.shift = 64;
+    // The anchors whose blocks can read a leaf: its origin and, on odd steps, the origins of the
+    // upper neighbours whose straddling blocks reach down into it.
+    const int nd = is3D ? 8 : 4;
+    for (auto it = tree.cbeginLeaf(); it; ++it) {
+        const Coord o = it->origin();
+        for (int d = 0; d < nd; ++d)
+            t.insert(Origin(o.x() + ((d & 1) ? 8 : 0), o.y() + ((d & 2) ? 8 : 0), o.z() + ((d & 4) ? 8 : 0)));
+    }
+    if (t.slots.empty()) t.resize(64); // find() needs a free slot
+    t.entries.resize(t.keys.size());
+    openvdb::tree::ValueAccessor<MassTree, false> acc(tree);
+    std::optional<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
+    if (obstacles) oacc.emplace(*obstacles);
+    for (size_t k = 0; k < t.keys.size(); ++k) {
+        Impl::Entry& e = t.entries[k];
+        e.missing = e.obsAny = e.obsTile = 0;
+        for (int w = 0; w < 8; ++w) {
+            const Origin lo = leafOrigin(t.keys[k], w);
+            const Coord c(lo.x(), lo.y(), lo.z());
+            e.leaf[w] = acc.probeLeaf(c);
+            e.data[w] = e.leaf[w] ? e.leaf[w]->buffer().data() : nullptr;
+            e.read[w] = e.leaf[w] ? e.data[w] : kZeroLeaf;
+            if (!e.leaf[w]) e.missing |= uint8_t(1u << w);
+            e.obs[w] = oacc ? oacc->probeConstLeaf(c) : nullptr;
+            const bool tile = oacc && !e.obs[w] && oacc->isValueOn(c);
+            if (tile) e.obsTile |= uint8_t(1u << w);
+            if (e.obs[w] || tile) e.obsAny |= uint8_t(1u << w);
+        }
+    }
+    mValid = true;
+}
+
+namespace {
 
 /// Offsets of a block's corners c = dx + 2 dy + 4 dz from its first cell, in one leaf.
 constexpr int kCornerOffset[8] = {0, 64, 8, 72, 1, 65, 9, 73};
@@ -311,13 +438,31 @@ struct LeafSet {
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
 __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint64_t mask, MassAcc& acc,
-                                           ObsAcc* oacc, bool reuse)
+                                           ObsAcc* oacc, bool reuse, const LeafTable::Impl* table)
 {
     const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
     uint32_t need = 1;
     for (int w = 1; w < kCount; ++w)
         if (mask & t.needLeaf[D3][w]) need |= 1u << w;
+    if (table) {
+        if (const LeafTable::Impl::Entry* e = table->find(anchor)) {
+            // Every slot is copied (those no block of the mask reads are harmless); the flags cover
+            // only the slots it reads, as below.
+            for (int w = 0; w < kCount; ++w) {
+                ls.leaf[w] = e->leaf[w];
+                ls.data[w] = e->data[w];
+                ls.read[w] = e->read[w];
+                ls.obs[w] = e->obs[w];
+                ls.obsTile[w] = (e->obsTile >> w) & 1u;
+            }
+            ls.anyMissing = (e->missing & need) != 0;
+            ls.anyObs = (e->obsAny & need) != 0;
+            ls.anchor = anchor;
+            ls.fetched = (1u << kCount) - 1;
+            return;
+        }
+    }
     // The work list runs along x (layer order): when the previous anchor is this one's -x
     // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
     uint32_t reused = 0;
@@ -393,6 +538,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const bool simd = false;
 #endif
     MassAcc acc(*in.tree);
+    const LeafTable::Impl* table = in.table && in.table->valid() ? in.table->impl() : nullptr;
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
     LeafSet ls;
@@ -404,7 +550,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
-        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable);
+        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;

@@ -20,6 +20,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace vdbclay {
@@ -27,6 +28,35 @@ namespace automaton_internal {
 
 using MassTree = Tree543<int32_t>;
 using ObsTree = Tree543<openvdb::ValueMask>;
+
+/// The flat leaf table: for every anchor that can reach a mass leaf (a leaf's origin, or one of its
+/// upper neighbours' origins), the 8 leaves leafOrigin(anchor, w) its blocks read (null when
+/// missing) and their obstacle leaves or tiles, found by one hash lookup instead of up to 16
+/// accessor probes per anchor. It describes the topology of both trees when build() ran: the
+/// Automaton clears it whenever a leaf may have been created or removed, or the obstacles changed
+/// (edits, resync, grown leaves), and rebuilds it before a later pass. An anchor the table does not
+/// hold (all its mass leaves missing) is fetched through accessors, as without a table.
+class LeafTable {
+public:
+    LeafTable();
+    ~LeafTable();
+    LeafTable(const LeafTable&) = delete;
+    LeafTable& operator=(const LeafTable&) = delete;
+
+    /// Indexes every leaf of @a tree (and the obstacles of @a obstacles, which may be null).
+    void build(MassTree& tree, const ObsTree* obstacles, bool is3D);
+    /// Forgets the table: no pass uses it until the next build().
+    void clear();
+    bool valid() const { return mValid; }
+    size_t size() const; // anchors indexed
+
+    struct Impl;
+    const Impl* impl() const { return mImpl.get(); }
+
+private:
+    std::unique_ptr<Impl> mImpl;
+    bool mValid = false;
+};
 
 /// What a pass needs to know about the step.
 struct PassInput {
@@ -39,6 +69,7 @@ struct PassInput {
     bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
     bool dryRun = false;      // check for overflow only, write nothing
     bool portable = false;    // no SIMD: the plain C++ path (tests compare both on the same grids)
+    const LeafTable* table = nullptr; // valid leaf table of both trees, or null: accessors
 };
 
 /// What one range of the pass accumulates.
