@@ -16,8 +16,9 @@
 //    whole body); otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
 // 3. Active set. Solve L p = m - Tc on D (L: for each non-wall face, p_i - p_j; p_j = 0 on B) by
 //    preconditioned conjugate gradients, warm-started from the previous round: MIC(0) for small
-//    solves, an aggregation multigrid V-cycle (class Multigrid) from multigridMin unknowns, whose
-//    iterations stay nearly flat as N grows. A B cell whose inflow (the sum of p over its D faces)
+//    solves, an aggregation multigrid V-cycle (class Multigrid) from multigridMin unknowns (whose
+//    iterations stay nearly flat as N grows; its hierarchy is built in the first round and rebound
+//    to the later rounds' matrices, which change only at the rim). A B cell whose inflow (the sum of p over its D faces)
 //    exceeds its room joins D (its right-hand side is then negative: it absorbs its room), and what
 //    it cannot hold cascades to its neighbours with room, which join too if it overflows them; a
 //    joined cell with p < 0 leaves again. Repeat until nothing changes (or maxRounds): the cells
@@ -30,9 +31,9 @@
 //    automaton's cleanup.
 // 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
 //
-// Determinism. The flood, the cell numbering and the routing are serial and ordered. The solver's
-// vector operations run over fixed chunks of rows; dot products add per-chunk partial sums in chunk
-// order. Every floating-point operation is therefore the same on any thread count, and so is the
+// Determinism. The flood, the cell numbering and the routing are serial and ordered (the routing's
+// sort is parallel, on a strict total order: one result). The solver's set-up and vector operations
+// run over fixed chunks of rows; dot products add per-chunk partial sums in chunk order. Every floating-point operation is therefore the same on any thread count, and so is the
 // potential, the routing and the result.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
@@ -46,6 +47,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -133,22 +135,41 @@ public:
     {
         mLevels.emplace_back();
         Level& f = mLevels.back();
-        f.n = n;
-        f.start.resize(n + 1);
-        f.col.reserve(n * 6);
-        for (size_t k = 0; k < n; ++k) {
-            f.start[k] = uint32_t(f.col.size());
-            for (int d = 0; d < 6; ++d)
-                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
-        }
-        f.start[n] = uint32_t(f.col.size());
-        f.diag = diag;
+        setMatrix(f, n, nb, diag);
         f.block = std::move(coord);
-        finish(f);
         while (mLevels.back().n > kDense && mLevels.size() < 24 && coarsen()) {
         }
         Level& c = mLevels.back();
         if (c.n <= kDense) factor(c);
+        f.block.clear();
+    }
+
+    /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
+    /// leave at the rim, < 2 % of them) without coarsening again: row k keeps the aggregate of the
+    /// old row @a oldRow[k]; a new row (-1) gets none (only the smoother corrects it). The coarse
+    /// levels keep their matrices (the old rows' couplings are unchanged: a joined neighbour adds
+    /// an off-diagonal, a leaving one removes a row, no diagonal changes); the V-cycle stays a
+    /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
+    /// still in fixed chunks and row order. Needs levels() >= 2.
+    void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                const std::vector<int32_t>& oldRow)
+    {
+        Level& f = mLevels.front();
+        Level& c = mLevels[1];
+        std::vector<int32_t> agg(n, -1);
+        for (size_t k = 0; k < n; ++k)
+            if (oldRow[k] >= 0) agg[k] = f.agg[size_t(oldRow[k])];
+        setMatrix(f, n, nb, diag);
+        f.agg.swap(agg);
+        c.memberStart.assign(c.n + 1, 0);
+        for (size_t k = 0; k < n; ++k)
+            if (f.agg[k] >= 0) ++c.memberStart[size_t(f.agg[k]) + 1];
+        for (size_t i = 0; i < c.n; ++i)
+            c.memberStart[i + 1] += c.memberStart[i];
+        c.members.resize(c.memberStart[c.n]);
+        std::vector<uint32_t> fill(c.memberStart.begin(), c.memberStart.end() - 1);
+        for (size_t k = 0; k < n; ++k)
+            if (f.agg[k] >= 0) c.members[fill[size_t(f.agg[k])]++] = int32_t(k);
     }
 
     /// out = M^-1 in (one V-cycle).
@@ -177,6 +198,23 @@ private:
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
         bool dense = false;
     };
+
+    /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
+    static void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    {
+        f.n = n;
+        f.start.resize(n + 1);
+        f.col.clear();
+        f.col.reserve(n * 6);
+        for (size_t k = 0; k < n; ++k) {
+            f.start[k] = uint32_t(f.col.size());
+            for (int d = 0; d < 6; ++d)
+                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
+        }
+        f.start[n] = uint32_t(f.col.size());
+        f.diag = diag;
+        finish(f);
+    }
 
     static void finish(Level& l)
     {
@@ -376,7 +414,7 @@ private:
         cycle(li + 1);
         forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k)
-                l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
+                if (l.agg[k] >= 0) l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
         });
         for (int s = 0; s < kNu; ++s)
             sweep(l);
@@ -638,28 +676,49 @@ private:
         if (n == 0) return;
         std::vector<int32_t> nb(n * 6, -1);
         std::vector<double> diag(n, 0), b(n), x(n), r(n), z(n), p(n), q(n);
-        for (size_t k = 0; k < n; ++k) {
-            const size_t i = size_t(mRowCell[k]);
-            for (int d = 0; d < mDirs; ++d) {
-                const int32_t j = mNb[i * 6 + size_t(d)];
-                if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
-                diag[k] += 1;
-                if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                const size_t i = size_t(mRowCell[k]);
+                for (int d = 0; d < mDirs; ++d) {
+                    const int32_t j = mNb[i * 6 + size_t(d)];
+                    if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
+                    diag[k] += 1;
+                    if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+                }
+                b[k] = double(mM0[i] - mTc);
+                x[k] = mP[i];
             }
-            b[k] = double(mM0[i] - mTc);
-            x[k] = mP[i];
-        }
+        });
         // Modified incomplete Cholesky, MIC(0) (Bridson's tuning 0.97, safety 0.25): A ~ (D + L)
         // D^-1 (D + L)^T with L the strictly lower part of A (all -1) and D = the pivots below.
         // Eliminating row j leaves fill-in 1/d_j between each pair of its later neighbours; MIC
         // adds the dropped fill-in of row k to its pivot. Serial (triangular solves): the same on
         // any thread count.
-        std::unique_ptr<Multigrid> mg;
+        Multigrid* mg = nullptr;
         if (multigrid) {
-            std::vector<Coord> coord(n);
-            for (size_t k = 0; k < n; ++k)
-                coord[k] = mCells[size_t(mRowCell[k])];
-            mg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
+            // The hierarchy of the frame's first round serves the later rounds (rebind) while they
+            // keep most of its rows; rows are in cell order, and cells are only ever appended.
+            size_t kept = 0;
+            std::vector<int32_t> oldRow(n, -1);
+            if (mMg && mMg->levels() >= 2)
+                for (size_t k = 0; k < n; ++k) {
+                    const size_t i = size_t(mRowCell[k]);
+                    if (i < mMgRow.size() && mMgRow[i] >= 0) {
+                        oldRow[k] = mMgRow[i];
+                        ++kept;
+                    }
+                }
+            if (kept >= n - n / 20 && kept > 0) {
+                mMg->rebind(n, nb, diag, oldRow);
+                ++rep.multigridReused;
+            } else {
+                std::vector<Coord> coord(n);
+                for (size_t k = 0; k < n; ++k)
+                    coord[k] = mCells[size_t(mRowCell[k])];
+                mMg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
+            }
+            mMgRow = mRow;
+            mg = mMg.get();
             ++rep.multigridSolves;
         }
         std::vector<double> piv(multigrid ? 0 : n), inv(multigrid ? 0 : n), w(multigrid ? 0 : n);
@@ -783,9 +842,10 @@ private:
     void activeSet(GlobalTransportReport& rep)
     {
         mP.assign(mCells.size(), 0.0);
+        mMg.reset();
+        mMgRow.clear();
         for (int round = 0; round < mOpt.maxRounds; ++round) {
             solve(rep);
-            bool changed = false;
             // Inflow of each Dirichlet cell: sum of p over its unknown faces.
             const size_t cells = mCells.size();
             std::vector<double> inflow(cells, 0.0);
@@ -804,7 +864,6 @@ private:
                     left.push_back(int32_t(i));
             }
             if (joined.empty() && left.empty()) break;
-            changed = true;
             for (int32_t i : joined)
                 mKind[size_t(i)] = kUnknown;
             for (int32_t i : left) {
@@ -840,6 +899,22 @@ private:
             for (size_t i = 0; i < mCells.size(); ++i)
                 if (mKind[i] == kUnknown && !mHasNb[i]) link(int32_t(i));
             mP.resize(mCells.size(), 0.0);
+            // A part can lose its last Dirichlet face only by a neighbour joining: if every joined
+            // cell touches a Dirichlet cell, each part holding one has room, and so has every part
+            // that met one (leaving cells only add room). Else search the whole domain again.
+            bool allRoom = true;
+            for (int32_t i : joined) {
+                bool room = false;
+                for (int d = 0; d < mDirs && !room; ++d) {
+                    const int32_t j = mNb[size_t(i) * 6 + size_t(d)];
+                    room = j >= 0 && mKind[size_t(j)] == kDirichlet;
+                }
+                if (!room) {
+                    allRoom = false;
+                    break;
+                }
+            }
+            if (allRoom) continue;
             bool grow = false;
             freezeSingular(false, grow, rep);
         }
@@ -850,10 +925,15 @@ private:
         std::vector<int32_t> order;
         for (size_t i = 0; i < mCells.size(); ++i)
             if (mKind[i] == kUnknown) order.push_back(int32_t(i));
-        std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+        // A strict total order (ties by coordinate): the parallel sort gives the same sequence.
+        const auto higher = [&](int32_t a, int32_t b) {
             if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
             return mCells[size_t(a)] < mCells[size_t(b)];
-        });
+        };
+        if (mSerial)
+            std::sort(order.begin(), order.end(), higher);
+        else
+            tbb::parallel_sort(order.begin(), order.end(), higher);
         std::vector<int64_t> cur(mM0.begin(), mM0.end());
         struct Out {
             int32_t j;
@@ -949,6 +1029,8 @@ private:
     std::vector<int64_t> mDist;
     std::vector<double> mP;
     std::vector<int32_t> mRow, mRowCell;
+    std::unique_ptr<Multigrid> mMg; ///< the round's multigrid hierarchy, kept for the next rounds
+    std::vector<int32_t> mMgRow;    ///< cell -> its row in mMg's finest level, or -1
 };
 
 } // namespace

@@ -51,6 +51,7 @@ struct GlobalTransportReport {
     uint64_t solves = 0;          ///< Poisson solves (active-set rounds, over every reach tried)
     uint64_t iterations = 0;      ///< conjugate-gradient iterations, all solves
     uint64_t multigridSolves = 0; ///< of the solves, those preconditioned by multigrid
+    uint64_t multigridReused = 0; ///< of those, the ones that reused the previous round's hierarchy
     int64_t reach = 0;            ///< the reach finally used (0: the whole body)
     /// Some over clay is walled in (obstacles, tools) with no room in its connected body: its
     /// Poisson problem is singular. That clay is left where it is (the automaton reports NoRoom).
