@@ -293,8 +293,8 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
 {
     // An overload far larger than the room of the block's first shell of air: the active set grows
     // over several rounds, the later ones rebind the first round's multigrid hierarchy. Mass is
-    // exact, the overload is gone (to the solver's tolerance), and the result is the same on 1, 2, 3 and 8 threads (the parallel
-    // matrix set-up and the routing's parallel sort included), 2D and 3D.
+    // exact, the overload is gone (to the solver's tolerance), and the result is the same on 1, 2, 3 and 8
+    // threads (the parallel matrix set-up and the routing's parallel sort included), 2D and 3D.
     for (int dims : {2, 3}) {
         uint64_t first = 0, solves = 0;
         for (int threads : {1, 2, 3, 8}) {
@@ -302,7 +302,8 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
             MassGridPtr g =
                 dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
             for (int x = 4; x < top - 4; x += 2)
-                g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0), dims == 3 ? 400000 : 60000);
+                g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0),
+                                   dims == 3 ? 400000 : 60000);
             const int64_t m0 = totalMass(*g);
             Automaton a(g, opts(dims, threads));
             GlobalTransportOptions go;
