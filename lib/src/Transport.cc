@@ -148,7 +148,7 @@ public:
         if (c.n <= kDense) factor(c);
         for (Level& l : mLevels)
             colour(l, l.block);
-        f.block.clear();
+        std::vector<Coord>().swap(f.block);
     }
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
@@ -537,6 +537,7 @@ public:
             break;
         }
         activeSet(rep);
+        releaseSolver(); // before the routing's own arrays: a lower peak
         route(rep);
         return rep;
     }
@@ -1014,6 +1015,20 @@ private:
             bool grow = false;
             freezeSingular(false, grow, rep);
         }
+    }
+
+    /// Frees what the solves kept across rounds (hierarchy, matrix, work vectors).
+    void releaseSolver()
+    {
+        mMg.reset();
+        mSolveMg = nullptr;
+        std::vector<int32_t>().swap(mMgRow);
+        std::vector<int32_t>().swap(mSolveNb);
+        std::vector<double>().swap(mSolveDiag);
+        std::vector<double>().swap(mSolveB);
+        std::vector<double>().swap(mInv);
+        for (std::vector<double>& v : mWork)
+            std::vector<double>().swap(v);
     }
 
     void route(GlobalTransportReport& rep)
