@@ -171,6 +171,29 @@ TEST_F(TransportTest, CompressPushIsDeterministicAndExactAndFallsBackToTheSurfac
 
 // ---- the global transport ------------------------------------------------------------------------
 
+TEST_F(TransportTest, BadGlobalTransportOptionsAreRefusedNamingTheOptionAndChangeNothing)
+{
+    MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
+    g->tree().setValue(openvdb::Coord(1, 1, 1), 1500);
+    Automaton a(g, opts());
+    const uint64_t h = contentHash(*g);
+    GlobalTransportOptions bad[4];
+    bad[0].reach = -1;
+    bad[1].maxRounds = 0;
+    bad[2].tolerance = 0;
+    bad[3].roundTolerance = 1.5;
+    const char* names[4] = {"reach", "maxRounds", "tolerance", "roundTolerance"};
+    for (int i = 0; i < 4; ++i) {
+        try {
+            transportGlobally(a, bad[i]);
+            ADD_FAILURE() << names[i];
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(names[i]), std::string::npos) << e.what();
+        }
+        EXPECT_EQ(contentHash(*g), h) << names[i];
+    }
+}
+
 TEST_F(TransportTest, GlobalLayerMovesTheOverloadToRoomExactly)
 {
     // A 10^3 block at Tc with 5000 extra in one centre cell: every solved cell ends at Tc, the
