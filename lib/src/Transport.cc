@@ -15,13 +15,15 @@
 //    singular. If it was cut by the reach, the reach doubles and the domain is rebuilt (up to the
 //    whole body); otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
 // 3. Active set. Solve L p = m - Tc on D (L: for each non-wall face, p_i - p_j; p_j = 0 on B) by
-//    preconditioned conjugate gradients, warm-started from the previous round: MIC(0) for small
-//    solves, an aggregation multigrid V-cycle (class Multigrid) from multigridMin unknowns, whose
-//    iterations stay nearly flat as N grows. A B cell whose inflow (the sum of p over its D faces)
-//    exceeds its room joins D (its right-hand side is then negative: it absorbs its room), and what
-//    it cannot hold cascades to its neighbours with room, which join too if it overflows them; a
-//    joined cell with p < 0 leaves again. Repeat until nothing changes (or maxRounds): the cells
-//    of D end exactly full.
+//    preconditioned conjugate gradients, warm-started from the previous round, to roundTolerance
+//    while the set changes, then to tolerance (the early rounds only locate the rim): MIC(0) for small
+//    solves, an aggregation multigrid V-cycle (class Multigrid) from multigridMin unknowns (whose
+//    iterations stay nearly flat as N grows; its hierarchy is built in the first round and rebound
+//    to the later rounds' matrices, which change only at the rim). A B cell whose inflow (the sum of p over
+//    its D faces) exceeds its room joins D (its right-hand side is then negative: it absorbs its room), and
+//    what it cannot hold cascades to its neighbours with room, which join too if it overflows them; a joined
+//    cell with p < 0 leaves again. Repeat until nothing changes (or maxRounds): the cells of D end exactly
+//    full.
 // 4. Routing, exact. Cells of D in order of decreasing p (ties: coordinate order) send their
 //    current integer excess (their own plus what higher cells sent them) to their lower-p non-wall
 //    face neighbours, pro rata of the drop p_i - p_j, largest remainder first. So every D cell with
@@ -30,10 +32,10 @@
 //    automaton's cleanup.
 // 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
 //
-// Determinism. The flood, the cell numbering and the routing are serial and ordered. The solver's
-// vector operations run over fixed chunks of rows; dot products add per-chunk partial sums in chunk
-// order. Every floating-point operation is therefore the same on any thread count, and so is the
-// potential, the routing and the result.
+// Determinism. The flood, the cell numbering and the routing are serial and ordered (the routing's
+// sort is parallel, on a strict total order: one result). The solver's set-up and vector operations
+// run over fixed chunks of rows; dot products add per-chunk partial sums in chunk order. Every floating-point
+// operation is therefore the same on any thread count, and so is the potential, the routing and the result.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
 // bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
@@ -46,6 +48,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -113,17 +116,21 @@ template <typename Fn> double chunkedSum(size_t n, bool serial, std::vector<doub
 /// graph Laplacian, Dirichlet faces on the diagonal: SPD). Each coarser level aggregates the
 /// face-connected rows of one 2x2x2 block of the level below (2x2 in 2D: z is 0) and takes the
 /// Galerkin product P^T A P for piecewise-constant P (integer weights, exact in float). One
-/// application is a symmetric V-cycle: nu damped-Jacobi sweeps from zero, the coarse correction
-/// (times alpha: piecewise-constant transfers leave the coarse operator too stiff), nu sweeps; the
-/// coarsest level by dense Cholesky (or Jacobi sweeps if coarsening stalls). The smoothers and the
-/// transfers run on fixed chunks and the restriction adds an aggregate's members in row order, so
-/// every floating-point operation is the same on any thread count.
+/// application is a symmetric V-cycle: a red-black Gauss-Seidel sweep from zero (red, black), the
+/// coarse correction (times alpha: piecewise-constant transfers leave the coarse operator too
+/// stiff), a sweep in the adjoint order (black, red); the coarsest level by dense Cholesky (or
+/// damped Jacobi sweeps if coarsening stalls). The colours are the parity of the rows' cell (block)
+/// coordinates: rows of one colour are never coupled, so a half-sweep runs in parallel, in place.
+/// The smoothers and the transfers run on fixed chunks and the restriction adds an aggregate's
+/// members in row order, so every floating-point operation is the same on any thread count.
 class Multigrid {
 public:
     static constexpr size_t kDense = 512;
-    /// Measured on the 64^3 press (MG iterations, 10 frames): nu 1, alpha 1.5: 507; alpha 1.0:
-    /// 583; alpha 1.8: 574; nu 2: 341 but no less time; omega 2/3: 592.
-    static constexpr int kNu = 1, kCoarseSweeps = 8;
+    /// Measured on the 64^3 press (MG iterations, 10 frames, tolerance 1e-4 every round): damped
+    /// Jacobi (omega 0.8) 370, red-black Gauss-Seidel 286 (alpha 1.5; 1.0: 393, 1.3: 286, 1.8:
+    /// 310), and with roundTolerance 1e-2: 192. Round 2 (Jacobi): alpha 1.0: 583, 1.8: 574 against
+    /// 507; nu 2: 341 but no less time; omega 2/3: 592.
+    static constexpr int kCoarseSweeps = 8;
     static constexpr double kOmega = 0.8, kAlpha = 1.5;
 
     /// @a nb: 6 per row, the neighbour row or -1; @a diag: the diagonal; @a coord: the rows' cells.
@@ -133,22 +140,44 @@ public:
     {
         mLevels.emplace_back();
         Level& f = mLevels.back();
-        f.n = n;
-        f.start.resize(n + 1);
-        f.col.reserve(n * 6);
-        for (size_t k = 0; k < n; ++k) {
-            f.start[k] = uint32_t(f.col.size());
-            for (int d = 0; d < 6; ++d)
-                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
-        }
-        f.start[n] = uint32_t(f.col.size());
-        f.diag = diag;
+        setMatrix(f, n, nb, diag);
         f.block = std::move(coord);
-        finish(f);
         while (mLevels.back().n > kDense && mLevels.size() < 24 && coarsen()) {
         }
         Level& c = mLevels.back();
         if (c.n <= kDense) factor(c);
+        for (Level& l : mLevels)
+            colour(l, l.block);
+        std::vector<Coord>().swap(f.block);
+    }
+
+    /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
+    /// leave at the rim, < 2 % of them) without coarsening again: row k keeps the aggregate of the
+    /// old row @a oldRow[k]; a new row (-1) gets none (only the smoother corrects it). The coarse
+    /// levels keep their matrices (the old rows' couplings are unchanged: a joined neighbour adds
+    /// an off-diagonal, a leaving one removes a row, no diagonal changes); the V-cycle stays a
+    /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
+    /// still in fixed chunks and row order. Needs levels() >= 2.
+    void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                const std::vector<Coord>& coord, const std::vector<int32_t>& oldRow)
+    {
+        Level& f = mLevels.front();
+        Level& c = mLevels[1];
+        std::vector<int32_t> agg(n, -1);
+        for (size_t k = 0; k < n; ++k)
+            if (oldRow[k] >= 0) agg[k] = f.agg[size_t(oldRow[k])];
+        setMatrix(f, n, nb, diag);
+        colour(f, coord);
+        f.agg.swap(agg);
+        c.memberStart.assign(c.n + 1, 0);
+        for (size_t k = 0; k < n; ++k)
+            if (f.agg[k] >= 0) ++c.memberStart[size_t(f.agg[k]) + 1];
+        for (size_t i = 0; i < c.n; ++i)
+            c.memberStart[i + 1] += c.memberStart[i];
+        c.members.resize(c.memberStart[c.n]);
+        std::vector<uint32_t> fill(c.memberStart.begin(), c.memberStart.end() - 1);
+        for (size_t k = 0; k < n; ++k)
+            if (f.agg[k] >= 0) c.members[fill[size_t(f.agg[k])]++] = int32_t(k);
     }
 
     /// out = M^-1 in (one V-cycle).
@@ -175,8 +204,37 @@ private:
         std::vector<uint32_t> memberStart; ///< the rows of the level above in each row (CSR)
         std::vector<int32_t> members;      ///<   in row order
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
+        std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
         bool dense = false;
     };
+
+    /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
+    static void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    {
+        f.n = n;
+        f.start.resize(n + 1);
+        f.col.clear();
+        f.col.reserve(n * 6);
+        for (size_t k = 0; k < n; ++k) {
+            f.start[k] = uint32_t(f.col.size());
+            for (int d = 0; d < 6; ++d)
+                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
+        }
+        f.start[n] = uint32_t(f.col.size());
+        f.diag = diag;
+        finish(f);
+    }
+
+    /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
+    /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
+    /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
+    static void colour(Level& l, const std::vector<Coord>& block)
+    {
+        l.colour[0].clear();
+        l.colour[1].clear();
+        for (size_t k = 0; k < l.n; ++k)
+            l.colour[size_t((block[k].x() + block[k].y() + block[k].z()) & 1)].push_back(int32_t(k));
+    }
 
     static void finish(Level& l)
     {
@@ -327,14 +385,27 @@ private:
         l.x.swap(l.t);
     }
 
+    /// x_k = x_k + D^-1 (r - A x)_k for the rows of colour @a c: a Gauss-Seidel half-sweep (rows of
+    /// one colour do not read each other).
+    void halfSweep(Level& l, int c)
+    {
+        const std::vector<int32_t>& rows = l.colour[c];
+        forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(rows[q]);
+                l.x[k] += l.invDiag[k] * residual(l, k);
+            }
+        });
+    }
+
     void cycle(size_t li)
     {
         Level& l = mLevels[li];
-        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
-            for (size_t k = lo; k < hi; ++k)
-                l.x[k] = kOmega * l.invDiag[k] * l.r[k];
-        });
         if (li + 1 == mLevels.size()) {
+            forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k)
+                    l.x[k] = kOmega * l.invDiag[k] * l.r[k];
+            });
             if (l.dense) {
                 const size_t n = l.n;
                 const std::vector<double>& a = l.chol;
@@ -356,15 +427,28 @@ private:
             }
             return;
         }
-        for (int s = 1; s < kNu; ++s)
-            sweep(l);
+        // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
+        // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t.
+        std::fill(l.x.begin(), l.x.end(), 0.0);
+        std::fill(l.t.begin(), l.t.end(), 0.0);
+        {
+            const std::vector<int32_t>& red = l.colour[0];
+            forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+                for (size_t q = lo; q < hi; ++q) {
+                    const size_t k = size_t(red[q]);
+                    l.x[k] = l.invDiag[k] * l.r[k];
+                }
+            });
+            halfSweep(l, 1);
+            forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+                for (size_t q = lo; q < hi; ++q) {
+                    const size_t k = size_t(red[q]);
+                    l.t[k] = residual(l, k);
+                }
+            });
+        }
         Level& c = mLevels[li + 1];
-        // Residual, restricted: c.r[i] = sum over i's members of (r - A x).
-        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
-            for (size_t k = lo; k < hi; ++k) {
-                l.t[k] = residual(l, k);
-            }
-        });
+        // The residual restricted: c.r[i] = sum over i's members of t.
         forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t i = lo; i < hi; ++i) {
                 double s = 0;
@@ -376,10 +460,11 @@ private:
         cycle(li + 1);
         forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k)
-                l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
+                if (l.agg[k] >= 0) l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
         });
-        for (int s = 0; s < kNu; ++s)
-            sweep(l);
+        // Post-smoothing in the adjoint order (black, then red): a symmetric V-cycle.
+        halfSweep(l, 1);
+        halfSweep(l, 0);
     }
 
     bool mSerial;
@@ -452,6 +537,7 @@ public:
             break;
         }
         activeSet(rep);
+        releaseSolver(); // before the routing's own arrays: a lower peak
         route(rep);
         return rep;
     }
@@ -617,7 +703,8 @@ private:
     }
 
     /// Conjugate gradients, MIC(0)-preconditioned, on the unknown cells, warm-started from mP.
-    void solve(GlobalTransportReport& rep)
+    /// The rows (unknown cells), the matrix, the right-hand side and the preconditioner.
+    void setUpSolve(GlobalTransportReport& rep)
     {
         // Rows: the unknown cells in coordinate order (x, y, z), the natural order for the
         // incomplete Cholesky factor.
@@ -633,37 +720,63 @@ private:
         for (size_t k = 0; k < mRowCell.size(); ++k)
             mRow[size_t(mRowCell[k])] = int32_t(k);
         const size_t n = mRowCell.size();
-        rep.unknowns = n;
-        ++rep.solves;
+        mSolveMg = nullptr;
         if (n == 0) return;
-        std::vector<int32_t> nb(n * 6, -1);
-        std::vector<double> diag(n, 0), b(n), x(n), r(n), z(n), p(n), q(n);
-        for (size_t k = 0; k < n; ++k) {
-            const size_t i = size_t(mRowCell[k]);
-            for (int d = 0; d < mDirs; ++d) {
-                const int32_t j = mNb[i * 6 + size_t(d)];
-                if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
-                diag[k] += 1;
-                if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+        std::vector<int32_t>& nb = mSolveNb;
+        std::vector<double>& diag = mSolveDiag;
+        std::vector<double>& b = mSolveB;
+        nb.assign(n * 6, -1);
+        diag.assign(n, 0.0);
+        b.assign(n, 0.0);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                const size_t i = size_t(mRowCell[k]);
+                for (int d = 0; d < mDirs; ++d) {
+                    const int32_t j = mNb[i * 6 + size_t(d)];
+                    if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
+                    diag[k] += 1;
+                    if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+                }
+                b[k] = double(mM0[i] - mTc);
             }
-            b[k] = double(mM0[i] - mTc);
-            x[k] = mP[i];
-        }
+        });
         // Modified incomplete Cholesky, MIC(0) (Bridson's tuning 0.97, safety 0.25): A ~ (D + L)
         // D^-1 (D + L)^T with L the strictly lower part of A (all -1) and D = the pivots below.
         // Eliminating row j leaves fill-in 1/d_j between each pair of its later neighbours; MIC
         // adds the dropped fill-in of row k to its pivot. Serial (triangular solves): the same on
         // any thread count.
-        std::unique_ptr<Multigrid> mg;
         if (multigrid) {
-            std::vector<Coord> coord(n);
-            for (size_t k = 0; k < n; ++k)
-                coord[k] = mCells[size_t(mRowCell[k])];
-            mg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
-            ++rep.multigridSolves;
+            // The hierarchy of the frame's first round serves the later rounds (rebind) while they
+            // keep most of its rows; rows are in cell order, and cells are only ever appended.
+            size_t kept = 0;
+            std::vector<int32_t> oldRow(n, -1);
+            if (mMg && mMg->levels() >= 2)
+                for (size_t k = 0; k < n; ++k) {
+                    const size_t i = size_t(mRowCell[k]);
+                    if (i < mMgRow.size() && mMgRow[i] >= 0) {
+                        oldRow[k] = mMgRow[i];
+                        ++kept;
+                    }
+                }
+            if (kept >= n - n / 20 && kept > 0) {
+                std::vector<Coord> coord(n);
+                for (size_t k = 0; k < n; ++k)
+                    coord[k] = mCells[size_t(mRowCell[k])];
+                mMg->rebind(n, nb, diag, coord, oldRow);
+                ++rep.multigridReused;
+            } else {
+                std::vector<Coord> coord(n);
+                for (size_t k = 0; k < n; ++k)
+                    coord[k] = mCells[size_t(mRowCell[k])];
+                mMg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
+            }
+            mMgRow = mRow;
+            mSolveMg = mMg.get();
         }
-        std::vector<double> piv(multigrid ? 0 : n), inv(multigrid ? 0 : n), w(multigrid ? 0 : n);
         if (!multigrid) {
+            std::vector<double> piv(n);
+            std::vector<double>& inv = mInv;
+            inv.assign(n, 0.0);
             std::vector<uint8_t> upper(n, 0);
             for (size_t k = 0; k < n; ++k)
                 for (int d = 0; d < 6; ++d)
@@ -681,6 +794,39 @@ private:
                 inv[k] = 1.0 / e;
             }
         }
+    }
+
+    /// Conjugate gradients to @a tolerance on the unknown cells, warm-started from mP. @a same: the
+    /// set is that of the last solve (a tighter pass after a loose one): matrix and preconditioner
+    /// are kept.
+    void solve(GlobalTransportReport& rep, double tolerance, bool same)
+    {
+        ++rep.solves;
+        if (!same) setUpSolve(rep);
+        const size_t n = mRowCell.size();
+        rep.unknowns = n;
+        if (n == 0) return;
+        Multigrid* mg = mSolveMg;
+        if (mg) ++rep.multigridSolves;
+        const bool multigrid = mg != nullptr;
+        const std::vector<int32_t>& nb = mSolveNb;
+        const std::vector<double>& diag = mSolveDiag;
+        const std::vector<double>& b = mSolveB;
+        const std::vector<double>& inv = mInv;
+        // Work vectors kept across solves (every entry is written before it is read).
+        std::vector<double>& x = mWork[0];
+        std::vector<double>& r = mWork[1];
+        std::vector<double>& z = mWork[2];
+        std::vector<double>& p = mWork[3];
+        std::vector<double>& q = mWork[4];
+        std::vector<double>& w = mWork[5];
+        for (std::vector<double>* v : {&x, &r, &z, &p, &q})
+            v->resize(n);
+        w.resize(multigrid ? 0 : n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                x[k] = mP[size_t(mRowCell[k])];
+        });
         auto precondition = [&](const std::vector<double>& in, std::vector<double>& out) {
             if (mg) {
                 mg->apply(in, out);
@@ -726,7 +872,7 @@ private:
         p = z;
         const double bnorm =
             std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
-        const double stop = mOpt.tolerance * std::max(bnorm, 1e-300);
+        const double stop = tolerance * std::max(bnorm, 1e-300);
         double rz = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * z[k]; });
         double rr = chunkedSum(n, mSerial, partial, [&](size_t k) { return r[k] * r[k]; });
         // Each pass below also forms its dot product, per chunk, added in chunk order.
@@ -783,9 +929,16 @@ private:
     void activeSet(GlobalTransportReport& rep)
     {
         mP.assign(mCells.size(), 0.0);
+        mMg.reset();
+        mMgRow.clear();
+        // Rounds solve loosely until the set stops changing, then once to the tolerance (and on
+        // if that still changes it): the early rounds only locate the rim.
+        const double loose = mOpt.roundTolerance;
+        bool tight = !(loose > mOpt.tolerance), same = false;
         for (int round = 0; round < mOpt.maxRounds; ++round) {
-            solve(rep);
-            bool changed = false;
+            if (round + 1 == mOpt.maxRounds) tight = true;
+            solve(rep, tight ? mOpt.tolerance : loose, same);
+            same = false;
             // Inflow of each Dirichlet cell: sum of p over its unknown faces.
             const size_t cells = mCells.size();
             std::vector<double> inflow(cells, 0.0);
@@ -803,8 +956,11 @@ private:
                 else if (mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0)
                     left.push_back(int32_t(i));
             }
-            if (joined.empty() && left.empty()) break;
-            changed = true;
+            if (joined.empty() && left.empty()) {
+                if (tight) break;
+                tight = same = true;
+                continue;
+            }
             for (int32_t i : joined)
                 mKind[size_t(i)] = kUnknown;
             for (int32_t i : left) {
@@ -840,9 +996,39 @@ private:
             for (size_t i = 0; i < mCells.size(); ++i)
                 if (mKind[i] == kUnknown && !mHasNb[i]) link(int32_t(i));
             mP.resize(mCells.size(), 0.0);
+            // A part can lose its last Dirichlet face only by a neighbour joining: if every joined
+            // cell touches a Dirichlet cell, each part holding one has room, and so has every part
+            // that met one (leaving cells only add room). Else search the whole domain again.
+            bool allRoom = true;
+            for (int32_t i : joined) {
+                bool room = false;
+                for (int d = 0; d < mDirs && !room; ++d) {
+                    const int32_t j = mNb[size_t(i) * 6 + size_t(d)];
+                    room = j >= 0 && mKind[size_t(j)] == kDirichlet;
+                }
+                if (!room) {
+                    allRoom = false;
+                    break;
+                }
+            }
+            if (allRoom) continue;
             bool grow = false;
             freezeSingular(false, grow, rep);
         }
+    }
+
+    /// Frees what the solves kept across rounds (hierarchy, matrix, work vectors).
+    void releaseSolver()
+    {
+        mMg.reset();
+        mSolveMg = nullptr;
+        std::vector<int32_t>().swap(mMgRow);
+        std::vector<int32_t>().swap(mSolveNb);
+        std::vector<double>().swap(mSolveDiag);
+        std::vector<double>().swap(mSolveB);
+        std::vector<double>().swap(mInv);
+        for (std::vector<double>& v : mWork)
+            std::vector<double>().swap(v);
     }
 
     void route(GlobalTransportReport& rep)
@@ -850,10 +1036,15 @@ private:
         std::vector<int32_t> order;
         for (size_t i = 0; i < mCells.size(); ++i)
             if (mKind[i] == kUnknown) order.push_back(int32_t(i));
-        std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+        // A strict total order (ties by coordinate): the parallel sort gives the same sequence.
+        const auto higher = [&](int32_t a, int32_t b) {
             if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
             return mCells[size_t(a)] < mCells[size_t(b)];
-        });
+        };
+        if (mSerial)
+            std::sort(order.begin(), order.end(), higher);
+        else
+            tbb::parallel_sort(order.begin(), order.end(), higher);
         std::vector<int64_t> cur(mM0.begin(), mM0.end());
         struct Out {
             int32_t j;
@@ -949,6 +1140,12 @@ private:
     std::vector<int64_t> mDist;
     std::vector<double> mP;
     std::vector<int32_t> mRow, mRowCell;
+    std::vector<int32_t> mSolveNb;                 ///< the solve's matrix: 6 neighbour rows per row, -1: none
+    std::vector<double> mSolveDiag, mSolveB, mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
+    std::vector<double> mWork[6];                  ///< the solve's x, r, z, p, q, w
+    Multigrid* mSolveMg = nullptr;                 ///< the solve's multigrid (mMg), or none: MIC(0)
+    std::unique_ptr<Multigrid> mMg; ///< the round's multigrid hierarchy, kept for the next rounds
+    std::vector<int32_t> mMgRow;    ///< cell -> its row in mMg's finest level, or -1
 };
 
 } // namespace
@@ -960,6 +1157,8 @@ GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransp
     if (optionsIn.maxRounds < 1) throw Error("transportGlobally: maxRounds must be >= 1");
     if (!(optionsIn.tolerance > 0 && optionsIn.tolerance < 1))
         throw Error("transportGlobally: tolerance must lie in (0, 1)");
+    if (!(optionsIn.roundTolerance >= 0 && optionsIn.roundTolerance < 1))
+        throw Error("transportGlobally: roundTolerance must lie in [0, 1)");
     const auto t0 = std::chrono::steady_clock::now();
     GlobalTransportReport rep;
     const GlobalTransportOptions& options = optionsIn;
