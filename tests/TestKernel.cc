@@ -199,9 +199,10 @@ TEST_F(KernelTest, LeafTableGivesIdenticalPasses)
                         const uint64_t step = 40 + uint64_t(phase) + 2 * seed;
                         const Result plain = runPass(s, rule, tc, is3D, phase, step, portable == 1, false);
                         const Result table = runPass(s, rule, tc, is3D, phase, step, portable == 1, true);
-                        const std::string what = std::string(is3D ? "3D" : "2D") + " tc " + std::to_string(tc) +
-                                                 " rule " + std::to_string(int(rule)) + " phase " +
-                                                 std::to_string(phase) + (portable ? " portable" : " simd");
+                        const std::string what = std::string(is3D ? "3D" : "2D") + " tc " +
+                                                 std::to_string(tc) + " rule " + std::to_string(int(rule)) +
+                                                 " phase " + std::to_string(phase) +
+                                                 (portable ? " portable" : " simd");
                         EXPECT_GT(plain.tot.updated, is3D ? 1000u : 40u) << what;
                         if (phase == 1) {
                             EXPECT_GT(plain.tot.deferred.size(), 0u) << what;

@@ -94,7 +94,7 @@ struct Automaton::Impl {
     int64_t maxBound = 0; // upper bound of the largest cell value
     int quietSteps = 0;   // consecutive steps that changed nothing
     Candidates candidates;
-    LeafTable leafTable; // cleared whenever a leaf may appear or vanish, or the obstacles change
+    LeafTable leafTable;           // cleared whenever a leaf may appear or vanish, or the obstacles change
     uint64_t workWithoutTable = 0; // anchors passed through the accessors since the last build
 
     // scratch, reused between steps

@@ -3,8 +3,8 @@
 // Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
 // holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
 // flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
-// otherwise through value accessors (only the leaves the mask's blocks touch). Then for each candidate block: load its cells
-// (even: at constant offsets from the block's first cell; odd: through the addressing tables),
+// otherwise through value accessors (only the leaves the mask's blocks touch). Then for each candidate block:
+// load its cells (even: at constant offsets from the block's first cell; odd: through the addressing tables),
 // skip it unless a cell is over Tc, apply the rule (inlined, instantiated for this rule and cell
 // count), and write back only the cells that changed. The overload changes only where a cell
 // changed, so its delta is summed over those cells alone. Checks that can fire only rarely (a result
@@ -79,7 +79,8 @@ struct LeafTable::Impl {
     size_t slotOf(int32_t x, int32_t y, int32_t z) const
     {
         uint64_t k = uint64_t(uint32_t(x) >> 3) * 0x9E3779B97F4A7C15ull;
-        k += uint64_t(uint32_t(y) >> 3) * 0xC2B2AE3D27D4EB4Full + uint64_t(uint32_t(z) >> 3) * 0x165667B19E3779F9ull;
+        k += uint64_t(uint32_t(y) >> 3) * 0xC2B2AE3D27D4EB4Full +
+             uint64_t(uint32_t(z) >> 3) * 0x165667B19E3779F9ull;
         k ^= k >> 29;
         k *= 0xBF58476D1CE4E5B9ull;
         return size_t(k >> shift);

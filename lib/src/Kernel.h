@@ -66,9 +66,9 @@ struct PassInput {
     bool is3D = true;
     int phase = 0;
     uint64_t step = 0, seed = 0;
-    bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
-    bool dryRun = false;      // check for overflow only, write nothing
-    bool portable = false;    // no SIMD: the plain C++ path (tests compare both on the same grids)
+    bool mayOverflow = false;         // a result may exceed INT32_MAX: check every written cell
+    bool dryRun = false;              // check for overflow only, write nothing
+    bool portable = false;            // no SIMD: the plain C++ path (tests compare both on the same grids)
     const LeafTable* table = nullptr; // valid leaf table of both trees, or null: accessors
 };
 

@@ -161,7 +161,8 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
         LeafSums& out = sums[li];
         auto acc = mass.getConstAccessor();
         std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
-        if (obstacles) oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+        if (obstacles)
+            oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
         for (openvdb::Index i = 0; i < MassLeaf::SIZE; ++i) {
             const int32_t m = leaf.getValue(i);
             if (m == 0) continue;

@@ -1188,9 +1188,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     s.massFinal = totalMass(*im.mass);
     s.massDrift = s.massFinal - s.massInitial;
-    s.metrics =
-        measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(), im.scene.dimensions,
-                    im.automaton->options().threads);
+    s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(),
+                            im.scene.dimensions, im.automaton->options().threads);
     s.residualOverload = im.automaton->residualOverload();
     s.settled = im.automaton->settled();
     return s;
