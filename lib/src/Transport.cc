@@ -148,7 +148,8 @@ public:
         if (c.n <= kDense) factor(c);
         for (Level& l : mLevels)
             colour(l, l.block);
-        std::vector<Coord>().swap(f.block);
+        // Not through f: coarsen() grows mLevels, which may move the finest level.
+        std::vector<Coord>().swap(mLevels.front().block);
     }
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
