@@ -790,6 +790,7 @@ int main(int argc, char** argv)
 {
     CLI::App app{"vdbclay: virtual clay in sparse OpenVDB volumes (Druon, Crosnier, Brigandat 2003)"};
     app.require_subcommand(1);
+    app.set_version_flag("--version", std::string("vdbclay ") + VDBCLAY_VERSION);
     const CLI::Validator fileName = nonEmpty("a file name");
 
     RunArgs ra;

@@ -19,6 +19,10 @@ wait $reader
 [ -p pipe.vdb ] || fail "fifo output: pipe.vdb is no longer a FIFO"
 "$bin" info through-fifo.vdb > info.txt 2>&1 && grep -q 'grid "mass"' info.txt || fail "fifo output: the reader got no .vdb: $(head -3 info.txt)"
 run1 -o direct.vdb > /dev/null || fail "direct output"
+# --version needs no subcommand, and names the version the files record.
+ver=$("$bin" --version) || fail "--version: exit $?"
+recorded=$("$bin" info direct.vdb | sed -n 's/.*vdbclay_version (string) = //p' | head -1)
+[ "$ver" = "vdbclay $recorded" ] || fail "--version printed '$ver', the file records '$recorded'"
 [ "$(grep 'content hash' info.txt)" = "$("$bin" info direct.vdb | grep 'content hash')" ] || fail "fifo output: other clay"
 # A full device: the write fails and says so (it used to replace the path and report success).
 if [ -w /dev/full ]; then
