@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "AllocationCounter.h"
+#include "TempDirTest.h"
 
 #include <cstdio>
 #include <fstream>
@@ -21,23 +22,14 @@ using namespace vdbclay;
 
 namespace {
 
-class SceneTest : public ::testing::Test {
+class SceneTest : public vdbclay_test::TempDirTest {
 protected:
-    static void SetUpTestSuite() { openvdb::initialize(); }
-    void SetUp() override
-    {
-        char tmpl[] = "/tmp/vdbclay-scene-XXXXXX";
-        ASSERT_NE(mkdtemp(tmpl), nullptr);
-        dir = tmpl;
-    }
-    void TearDown() override { std::system(("rm -rf '" + dir + "'").c_str()); }
     std::string write(const std::string& name, const std::string& text)
     {
-        const std::string p = dir + "/" + name;
+        const std::string p = file(name);
         std::ofstream(p, std::ios::binary) << text;
         return p;
     }
-    std::string dir;
 };
 
 /// Parses @a json and expects an Error whose message contains every one of @a needles.

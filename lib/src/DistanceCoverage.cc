@@ -38,6 +38,7 @@
 #include "DistanceCoverage.h"
 
 #include "ParallelFor.h"
+#include "ShapeMath.h"
 
 #include <algorithm>
 #include <cmath>
@@ -63,19 +64,11 @@ constexpr int kSlices = 2 * kReach + 1;
 /// A voxel meeting more distinct planes than this is left to the ramp.
 constexpr int kMaxPlanes = 12;
 
-using Point = std::array<double, 3>;
+using Point = Vec3;
 
-inline double dot(const Point& a, const Point& b)
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
 inline Point cross(const Point& a, const Point& b)
 {
     return {{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}};
-}
-inline Point sub(const Point& a, const Point& b)
-{
-    return {{a[0] - b[0], a[1] - b[1], a[2] - b[2]}};
 }
 
 inline double ramp(double d)

@@ -220,6 +220,13 @@ template <int N> __attribute__((always_inline)) inline uint32_t laneMaskGt(__m12
     return m;
 }
 
+/// Stores the block's N corners (lo: 0-3, hi: 4-7) into @a m (16-byte aligned).
+template <int N> __attribute__((always_inline)) inline void storeCorners(__m128i lo, __m128i hi, int32_t* m)
+{
+    _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
+    if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+}
+
 /// Lanes of -1 where bit c of @a mask is set (c = 0-3 in the low register, 4-7 in the high one).
 __attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i laneBits)
 {
@@ -580,8 +587,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 }
                 overCells = laneMaskGt<N>(lo, hi, tcV);
                 if (!overCells) continue;
-                _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
-                if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+                storeCorners<N>(lo, hi, m);
             } else
 #endif
                 if (inside) {
@@ -597,8 +603,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                                             ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
                     overCells = laneMaskGt<N>(lo, hi, tcV);
                     if (!overCells) continue;
-                    _mm_store_si128(reinterpret_cast<__m128i*>(m), lo);
-                    if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
+                    storeCorners<N>(lo, hi, m);
                 } else
 #endif
                 {
@@ -674,8 +679,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                         _mm_storel_epi64(reinterpret_cast<__m128i*>(p3), _mm_unpackhi_epi64(t23, t23));
                     } else {
                         alignas(16) int32_t o32[8];
-                        _mm_store_si128(reinterpret_cast<__m128i*>(o32), sp.lo);
-                        if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(o32 + 4), sp.hi);
+                        storeCorners<N>(sp.lo, sp.hi, o32);
                         uint32_t ch = sp.changed;
                         while (ch) {
                             const int c = __builtin_ctz(ch);

@@ -165,18 +165,9 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                     SweepLeaf& leaf = leaves[order[k].second];
                     if (leaf.sweep.isOff()) continue;
                     float* v = leaf.values.data();
-                    const float* nx0 =
-                        leaf.neighbour[0] >= 0 ? leaves[leaf.neighbour[0]].values.data() : nullptr;
-                    const float* nx1 =
-                        leaf.neighbour[1] >= 0 ? leaves[leaf.neighbour[1]].values.data() : nullptr;
-                    const float* ny0 =
-                        leaf.neighbour[2] >= 0 ? leaves[leaf.neighbour[2]].values.data() : nullptr;
-                    const float* ny1 =
-                        leaf.neighbour[3] >= 0 ? leaves[leaf.neighbour[3]].values.data() : nullptr;
-                    const float* nz0 =
-                        leaf.neighbour[4] >= 0 ? leaves[leaf.neighbour[4]].values.data() : nullptr;
-                    const float* nz1 =
-                        leaf.neighbour[5] >= 0 ? leaves[leaf.neighbour[5]].values.data() : nullptr;
+                    const float* nb[6]; // -x, +x, -y, +y, -z, +z (null: no leaf)
+                    for (int f = 0; f < 6; ++f)
+                        nb[f] = leaf.neighbour[f] >= 0 ? leaves[leaf.neighbour[f]].values.data() : nullptr;
                     auto at = [](const float* b, Index i) { return b ? b[i] : kMax; };
                     for (int a = 0; a < kDim; ++a) {
                         const int x = sx > 0 ? a : kDim - 1 - a;
@@ -187,13 +178,13 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                                 const Index i = offsetOf(x, y, z);
                                 if (!leaf.sweep.isOn(i)) continue;
                                 const float vx0 =
-                                    x > 0 ? v[i - kDim * kDim] : at(nx0, offsetOf(kDim - 1, y, z));
+                                    x > 0 ? v[i - kDim * kDim] : at(nb[0], offsetOf(kDim - 1, y, z));
                                 const float vx1 =
-                                    x < kDim - 1 ? v[i + kDim * kDim] : at(nx1, offsetOf(0, y, z));
-                                const float vy0 = y > 0 ? v[i - kDim] : at(ny0, offsetOf(x, kDim - 1, z));
-                                const float vy1 = y < kDim - 1 ? v[i + kDim] : at(ny1, offsetOf(x, 0, z));
-                                const float vz0 = z > 0 ? v[i - 1] : at(nz0, offsetOf(x, y, kDim - 1));
-                                const float vz1 = z < kDim - 1 ? v[i + 1] : at(nz1, offsetOf(x, y, 0));
+                                    x < kDim - 1 ? v[i + kDim * kDim] : at(nb[1], offsetOf(0, y, z));
+                                const float vy0 = y > 0 ? v[i - kDim] : at(nb[2], offsetOf(x, kDim - 1, z));
+                                const float vy1 = y < kDim - 1 ? v[i + kDim] : at(nb[3], offsetOf(x, 0, z));
+                                const float vz0 = z > 0 ? v[i - 1] : at(nb[4], offsetOf(x, y, kDim - 1));
+                                const float vz1 = z < kDim - 1 ? v[i + 1] : at(nb[5], offsetOf(x, y, 0));
                                 updateVoxel(v[i], vx0, vx1, vy0, vy1, vz0, vz1, h, sqrt2h);
                             }
                         }
