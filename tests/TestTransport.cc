@@ -194,6 +194,48 @@ TEST_F(TransportTest, ACoveringPlateSharesItsClayEvenlyOverColumnsOfUnequalLengt
     }
 }
 
+TEST_F(TransportTest, A2DPlateCoveringATallColumnCompressesItAllTheWayDown)
+{
+    // 2D: a column 3 wide and 30 tall; a plate wider than it enters the top row (3 voxels, contact
+    // size 3): 3000 over the 3 x 29 cells below, 34 each, the remainder 42 as +1 to the 14 rows
+    // nearest the plate (y = 28 ... 15).
+    Automaton a(block(box(0, 0, 0, 2, 29, 0), 1000), opts(2));
+    PushOptions po;
+    po.mode = PushMode::Compress;
+    const PushReport r = push(a, {makeBox({{-4, 29, -1}}, {{6, 31, 1}})}, po);
+    EXPECT_EQ(r.voxelsCompressed, 3u);
+    EXPECT_DOUBLE_EQ(r.contactSize, 3.0);
+    for (int x = 0; x < 3; ++x) {
+        EXPECT_EQ(at(a, x, 29, 0), 0);
+        for (int y = 0; y < 29; ++y)
+            EXPECT_EQ(at(a, x, y, 0), 1034 + (y >= 15 ? 1 : 0)) << x << " " << y;
+    }
+    EXPECT_EQ(totalMass(*a.mass()), int64_t(3 * 30) * 1000);
+}
+
+TEST_F(TransportTest, APooledShareThatWouldOverflowAVoxelIsRefusedAndChangesNothing)
+{
+    // Two columns under one plate: x = 0 has 2e9 on top of 8 cells at Tc, x = 1 has Tc on top of
+    // 8 cells at 2.1e9. Each column alone fits; pooled, every cell gets about 1.25e8, which the
+    // cells at 2.1e9 cannot take (INT32_MAX 2 147 483 647): refused, nothing written.
+    MassGridPtr g = block(box(0, 0, 0, 0, 7, 0), 1000);
+    g->tree().fill(openvdb::CoordBBox(openvdb::Coord(1, 0, 0), openvdb::Coord(1, 7, 0)), 2100000000, true);
+    g->tree().voxelizeActiveTiles();
+    g->tree().setValue(openvdb::Coord(0, 8, 0), 2000000000);
+    g->tree().setValue(openvdb::Coord(1, 8, 0), 1000);
+    Automaton a(g, opts());
+    const uint64_t h = contentHash(*g);
+    PushOptions po;
+    po.mode = PushMode::Compress;
+    try {
+        push(a, {makeBox({{-3, 8, -3}}, {{4, 10, 3}})}, po);
+        ADD_FAILURE() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("INT32_MAX"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(contentHash(*a.mass()), h);
+}
+
 TEST_F(TransportTest, APlateNarrowerThanTheClayCompressesOnlyAsDeepAsItIsWide)
 {
     // A 4 x 4 plate entering the top of a 24 x 40 x 24 block does not cover it (clay beside it):
