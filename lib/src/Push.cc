@@ -352,8 +352,10 @@ private:
 /// Compress, a covering tool: its pooled clay @a mass shared evenly over its zone @a pool (each
 /// cell's value: its place in the nearest chain + 1), mass / cells each, the remainder +1 to the
 /// cells nearest the tool (smallest place, then tree order). On return each value is the cell's
-/// share. @throw Error (before anything is written) if a share does not fit a cell (int32).
-void sharePool(openvdb::Int32Tree& pool, int64_t mass, const Pusher& pusher)
+/// share. @a earlier: the pools already shared (their shares count toward a cell's value too).
+/// @throw Error (before anything is written) if a share does not fit a cell (int32).
+void sharePool(openvdb::Int32Tree& pool, int64_t mass, const Pusher& pusher,
+               const std::vector<const openvdb::Int32Tree*>& earlier)
 {
     const int64_t cells = int64_t(pool.activeVoxelCount());
     const int64_t q = mass / cells;
@@ -377,7 +379,10 @@ void sharePool(openvdb::Int32Tree& pool, int64_t mass, const Pusher& pusher)
             share += 1;
             --atLast;
         }
-        if (pusher.planned(it.getCoord()) + share > INT32_MAX) {
+        int64_t now = pusher.planned(it.getCoord());
+        for (const openvdb::Int32Tree* e : earlier)
+            now += e->getValue(it.getCoord());
+        if (now + share > INT32_MAX) {
             throw Error("push: compressing would put more than INT32_MAX clay in a voxel");
         }
         it.setValue(int32_t(share));
@@ -499,9 +504,11 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     for (const auto& a : pusher.added())
         targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}},
                                      {{a.first.x(), a.first.y(), a.first.z()}}});
+    std::vector<const openvdb::Int32Tree*> shared;
     for (size_t t = 0; t < tools.size(); ++t) {
         if (!pools[t]) continue;
-        sharePool(*pools[t], pooled[t], pusher);
+        sharePool(*pools[t], pooled[t], pusher, shared);
+        shared.push_back(pools[t].get());
         CoordBBox b;
         pools[t]->evalActiveVoxelBoundingBox(b);
         targets = unite(targets, Box{{{b.min().x(), b.min().y(), b.min().z()}},
