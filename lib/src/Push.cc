@@ -23,14 +23,23 @@
 //
 // The compress push (PushMode::Compress) changes step 3 only. When the march's target is clay
 // (m * 10 >= 3 Tc, in the grid before the push: "full" below), the march goes on along the normal,
-// collecting the contiguous full voxels (free, not obstacles, outside every tool) up to the tool's contact
-// depth: round(sqrt(voxels that tool entered this push)) in 3D, their number in 2D, at least 1. The source's
-// clay m is shared over those k voxels: m / k each, the remainder m % k as +1 to the first voxels (nearest
-// the tool). So a plate wider than the clay compresses every column of it uniformly (the study's push T:
-// straight sides), while a small tool poking a large block spreads its clay only as deep as it is wide (a
-// local rim, the far faces untouched). The full test reads the grid as it was before this push, so the plan
-// does not depend on the order of the sources. A source whose target is not full, or was found by the flood,
-// is pushed as by the surface push.
+// collecting the contiguous full voxels (free, not obstacles, outside every tool) up to the tool's
+// depth: the chain. The depth depends on whether the tool covers the clay it entered: no source of it
+// has a full, free face neighbour beside or behind it (relative to the tool's mean normal over its
+// sources). A tool that does not cover (a small tool poking a large block, a plate narrower than the
+// clay) goes as deep as its contact is wide, round(sqrt(voxels it entered this push)) in 3D, their
+// number in 2D, at least 1; the source's clay m is shared over its own chain, m / k each, the
+// remainder +1 to the voxels nearest the tool: a local rim, the far faces untouched. A tool that covers
+// the clay (a plate wider than it) compresses every column under it all the way (up to 1024 voxels:
+// the plastic zone of a flat punch spans the whole body once the contact covers its width), and its
+// sources' clay is pooled and shared evenly over the union of their chains (each cell the same,
+// the remainder +1 to the cells nearest the tool), so a body whose columns differ in length still
+// gets a uniform source: the global layer then moves it out evenly (straight sides, docs/ACCURACY.md
+// section 6); spread per column, short columns would get more per cell and the clay would leave next
+// to the plate. The chains may reach beyond the surface push's region (U grown by maxSearch + 2); the
+// report's region and the edit cover them. The full test reads the grid as it was before this push, so
+// the plan does not depend on the order of the sources. A source whose target is not full, or was found
+// by the flood, is pushed as by the surface push.
 
 #include "vdbclay/Push.h"
 #include "vdbclay/Automaton.h"
@@ -45,6 +54,7 @@
 #include <cmath>
 #include <deque>
 #include <map>
+#include <memory>
 
 namespace vdbclay {
 
@@ -98,7 +108,9 @@ public:
         return u;
     }
 
-    void setRegion(const Box& r) { mRegion = r; }
+    void setRegion(const Box& r) { mRegion = mChainRegion = r; }
+    /// Compress: the region the chains may reach (at least the push's region).
+    void setChainRegion(const Box& r) { mChainRegion = r; }
 
     /// Clay voxels inside a tool, in coordinate order. Only the mass leaves that meet @a u are
     /// visited, each in parallel (@a threads as the automaton's), its sources collected apart and
@@ -138,16 +150,20 @@ public:
         return out;
     }
 
-    /// Where the clay of @a s goes; false if nowhere (trapped).
-    bool target(const Source& s, Coord& out) const
+    /// The unit normal of @a s's tool at its centre (2D: z dropped; up when undefined).
+    Vec3 unitNormal(const Source& s) const
     {
         Vec3 n = mTools[s.tool]->normal(centre(s.c));
         if (mIs2D) n[2] = 0;
         const double l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (!(l > 0) || !std::isfinite(l))
-            n = {{0, 1, 0}};
-        else
-            n = {{n[0] / l, n[1] / l, n[2] / l}};
+        if (!(l > 0) || !std::isfinite(l)) return {{0, 1, 0}};
+        return {{n[0] / l, n[1] / l, n[2] / l}};
+    }
+
+    /// Where the clay of @a s goes; false if nowhere (trapped).
+    bool target(const Source& s, Coord& out) const
+    {
+        const Vec3 n = unitNormal(s);
 
         const Vec3 p = centre(s.c);
         const double start = -s.distance + 0.5;
@@ -214,16 +230,67 @@ public:
             const Coord c = rounded({{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}});
             if (c == chain.back()) continue;
             const int32_t share = s.mass / int32_t(chain.size() + 1) + 1;
-            if (!isFree(c, share) || !isFull(c, threshold)) break;
+            if (!isFree(c, share, mChainRegion) || !isFull(c, threshold)) break;
             chain.push_back(c);
         }
         // The shares must fit every voxel of the chain (isFree checked the first with all of m).
         return chain;
     }
 
+    /// Compress: for each tool, whether it covers the clay it entered, i.e. no source of it has a
+    /// face neighbour beside or behind it (direction d with d . N <= 1/2, N the mean of the tool's
+    /// unit normals over its sources: the way it pushes) that is clay (full), outside every tool and
+    /// not an obstacle. A plate wider than the clay covers it (its plastic zone is the whole body
+    /// under it); a tool in a larger block does not (the clay goes on beside it: a local rim). The
+    /// mean, not each source's own normal: at a plate's edge the normal tilts outward, and the clay
+    /// beside the edge would count as ahead. Reads the grid before the push.
+    std::vector<char> covering(const std::vector<Source>& sources, int32_t threshold) const
+    {
+        static const int kDir[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+        std::vector<Vec3> mean(mTools.size(), Vec3{{0, 0, 0}});
+        for (const Source& s : sources) {
+            const Vec3 n = unitNormal(s);
+            for (int i = 0; i < 3; ++i)
+                mean[s.tool][i] += n[i];
+        }
+        for (Vec3& n : mean) {
+            const double l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            for (int i = 0; i < 3; ++i)
+                n[i] = l > 0 ? n[i] / l : 0.0;
+        }
+        std::vector<char> covers(mTools.size(), 1);
+        for (const Source& s : sources) {
+            if (!covers[s.tool]) continue;
+            const Vec3& n = mean[s.tool];
+            for (int d = 0; d < (mIs2D ? 4 : 6); ++d) {
+                if (kDir[d][0] * n[0] + kDir[d][1] * n[1] + kDir[d][2] * n[2] > 0.5) continue; // ahead
+                const Coord q = s.c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                if (inAnyTool(q) || (mObs && mObs->isValueOn(q)) || !isFull(q, threshold)) continue;
+                covers[s.tool] = 0;
+                break;
+            }
+        }
+        return covers;
+    }
+
+    bool inAnyTool(const Coord& c) const
+    {
+        for (size_t t = 0; t < mTools.size(); ++t) {
+            if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return true;
+        }
+        return false;
+    }
+
     bool isFull(const Coord& c, int32_t threshold) const
     {
         return int64_t(mMass.getValue(c)) * kCompressFullDen >= int64_t(threshold) * kCompressFullNum;
+    }
+
+    /// The value of @a c after the moves planned so far (pooled shares excluded).
+    int64_t planned(const Coord& c) const
+    {
+        const auto it = mAdded.find(c);
+        return int64_t(mMass.getValue(c)) + (it != mAdded.end() ? it->second : 0);
     }
 
     void add(const Coord& c, int32_t m) { mAdded[c] += m; }
@@ -253,9 +320,10 @@ private:
         return true;
     }
 
-    bool isFree(const Coord& c, int32_t m) const
+    bool isFree(const Coord& c, int32_t m) const { return isFree(c, m, mRegion); }
+    bool isFree(const Coord& c, int32_t m, const Box& region) const
     {
-        if (!inside(mRegion, c)) return false;
+        if (!inside(region, c)) return false;
         if (mIs2D && c.z() != 0) return false;
         if (mObs && mObs->isValueOn(c)) return false;
         for (size_t t = 0; t < mTools.size(); ++t) {
@@ -273,13 +341,53 @@ private:
     bool mIs2D;
     const openvdb::Int32Tree& mMass;
     const openvdb::MaskTree* mObs;
-    Box mRegion;
+    Box mRegion, mChainRegion;
     std::map<Coord, int64_t> mAdded;
     // What the last successful target() found: by the march (normal, parameter) or by the flood.
     mutable Vec3 mLastNormal{{0, 1, 0}};
     mutable double mLastT = 0;
     mutable bool mLastByMarch = false;
 };
+
+/// Compress, a covering tool: its pooled clay @a mass shared evenly over its zone @a pool (each
+/// cell's value: its place in the nearest chain + 1), mass / cells each, the remainder +1 to the
+/// cells nearest the tool (smallest place, then tree order). On return each value is the cell's
+/// share. @a earlier: the pools already shared (their shares count toward a cell's value too).
+/// @throw Error (before anything is written) if a share does not fit a cell (int32).
+void sharePool(openvdb::Int32Tree& pool, int64_t mass, const Pusher& pusher,
+               const std::vector<const openvdb::Int32Tree*>& earlier)
+{
+    const int64_t cells = int64_t(pool.activeVoxelCount());
+    const int64_t q = mass / cells;
+    int64_t r = mass % cells;
+    std::vector<int64_t> perPlace(size_t(kMaxSearchLimit) + 2, 0);
+    for (auto it = pool.cbeginValueOn(); it; ++it)
+        ++perPlace[size_t(*it)];
+    // Places below `last` all get +1; at `last`, the first `atLast` cells in tree order.
+    size_t last = 0;
+    while (last < perPlace.size() && r >= perPlace[last]) {
+        r -= perPlace[last];
+        ++last;
+    }
+    int64_t atLast = r;
+    for (auto it = pool.beginValueOn(); it; ++it) {
+        const size_t place = size_t(*it);
+        int64_t share = q;
+        if (place < last)
+            share += 1;
+        else if (place == last && atLast > 0) {
+            share += 1;
+            --atLast;
+        }
+        int64_t now = pusher.planned(it.getCoord());
+        for (const openvdb::Int32Tree* e : earlier)
+            now += e->getValue(it.getCoord());
+        if (now + share > INT32_MAX) {
+            throw Error("push: compressing would put more than INT32_MAX clay in a voxel");
+        }
+        it.setValue(int32_t(share));
+    }
+}
 
 } // namespace
 
@@ -339,12 +447,38 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
         report.contactSize = std::max(report.contactSize, size);
         depth[t] = std::max(1, int(std::lround(std::min(size, double(kMaxSearchLimit)))));
     }
+    // Compress: a tool that covers the clay it entered compresses the whole column ahead and pools
+    // its sources (design comment); the chains may reach beyond the surface push's region.
+    const bool compress = options.mode == PushMode::Compress;
+    std::vector<char> covers(tools.size(), 0);
+    std::vector<std::unique_ptr<openvdb::Int32Tree>> pools(tools.size());
+    std::vector<int64_t> pooled(tools.size(), 0);
+    if (compress) {
+        covers = pusher.covering(sources, threshold);
+        int deepest = 1;
+        for (size_t t = 0; t < tools.size(); ++t) {
+            if (covers[t] && entered[t] > 0) depth[t] = kMaxSearchLimit;
+            if (entered[t] > 0) deepest = std::max(deepest, depth[t]);
+        }
+        pusher.setChainRegion(grow(u, int64_t(std::max(deepest, maxSearch)) + 2, is2D));
+    }
     for (const Source& s : sources) {
         Coord to;
         if (pusher.target(s, to)) {
             std::vector<Coord> chain;
-            if (options.mode == PushMode::Compress) chain = pusher.fullChain(s, to, depth[s.tool], threshold);
-            if (chain.size() > 1) {
+            if (compress) chain = pusher.fullChain(s, to, depth[s.tool], threshold);
+            if (covers[s.tool] && !chain.empty()) {
+                // Pooled: the zone keeps each cell's smallest distance (in chain places) from the tool, + 1.
+                if (!pools[s.tool]) pools[s.tool] = std::make_unique<openvdb::Int32Tree>(0);
+                openvdb::tree::ValueAccessor<openvdb::Int32Tree> zone(*pools[s.tool]);
+                for (size_t i = 0; i < chain.size(); ++i) {
+                    const int32_t v = zone.getValue(chain[i]);
+                    if (v == 0 || v > int32_t(i) + 1) zone.setValueOn(chain[i], int32_t(i) + 1);
+                }
+                pooled[s.tool] += s.mass;
+                moves.push_back(Move{s.c, to, 0}); // the source is emptied below; its clay is pooled
+                ++report.voxelsCompressed;
+            } else if (chain.size() > 1) {
                 const int32_t k = int32_t(chain.size());
                 const int32_t q = s.mass / k, r = s.mass % k;
                 for (int32_t i = 0; i < k; ++i) {
@@ -366,20 +500,39 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     }
     if (moves.empty()) return report;
 
-    report.region = region;
-    // The edit rescans and wakes only the part of the region near clay (ClayLeaves.h): the same
-    // clay blocks as the whole region, at a cost that follows the clay, not the tools' bounds.
     Box targets;
     for (const auto& a : pusher.added())
         targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}},
                                      {{a.first.x(), a.first.y(), a.first.z()}}});
-    const Box editRegion = clay_internal::narrowedEditRegion(automaton.mass()->constTree(), region, targets);
+    std::vector<const openvdb::Int32Tree*> shared;
+    for (size_t t = 0; t < tools.size(); ++t) {
+        if (!pools[t]) continue;
+        sharePool(*pools[t], pooled[t], pusher, shared);
+        shared.push_back(pools[t].get());
+        CoordBBox b;
+        pools[t]->evalActiveVoxelBoundingBox(b);
+        targets = unite(targets, Box{{{b.min().x(), b.min().y(), b.min().z()}},
+                                     {{b.max().x(), b.max().y(), b.max().z()}}});
+    }
+    // Compress chains may end beyond the surface push's region: the report (the global layer's
+    // seeds) and the edit cover them. For the surface push the targets lie inside the region.
+    report.region = unite(region, targets);
+    // The edit rescans and wakes only the part of the region near clay (ClayLeaves.h): the same
+    // clay blocks as the whole region, at a cost that follows the clay, not the tools' bounds.
+    const Box editRegion =
+        clay_internal::narrowedEditRegion(automaton.mass()->constTree(), report.region, targets);
     automaton.edit(editRegion, [&](MassGrid& grid) {
         auto acc = grid.getAccessor();
         for (const Move& m : moves)
             acc.setValueOff(m.from, 0);
         for (const auto& a : pusher.added()) {
             acc.setValueOn(a.first, int32_t(int64_t(acc.getValue(a.first)) + a.second));
+        }
+        for (const auto& pool : pools) {
+            if (!pool) continue;
+            for (auto it = pool->cbeginValueOn(); it; ++it) {
+                if (*it) acc.setValueOn(it.getCoord(), int32_t(int64_t(acc.getValue(it.getCoord())) + *it));
+            }
         }
     });
     return report;

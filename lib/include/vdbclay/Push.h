@@ -22,7 +22,8 @@ struct PushReport {
     Box region;                 ///< voxels the push read or wrote (empty when nothing moved)
     /// The largest tool contact this push saw: sqrt of the voxels one tool entered (3D), or their
     /// number (2D), i.e. about the width of the contact. 0 when no tool entered clay. The compress
-    /// push limits its depth to it; the global transport limits its reach to a multiple of it.
+    /// push limits its depth to it (unless the tool covers the clay); the global transport limits its
+    /// reach to a multiple of it.
     double contactSize = 0;
     uint64_t voxelsCompressed = 0; ///< compress: sources spread over the clay ahead (not surface-pushed)
 };
@@ -32,11 +33,12 @@ enum class PushMode {
     /// The paper's push: into the nearest free voxel just past the tool's surface, along its normal.
     Surface,
     /// A compressing push: spread evenly over the contiguous clay (m >= 0.3 Tc: kCompressFullNum /
-    /// kCompressFullDen) ahead of the tool along its normal, at most the tool's contact size deep (so a small
-    /// tool
-    /// makes a local rim and a plate wider than the clay compresses it uniformly); the remainder of
-    /// the integer division goes +1 to the voxels nearest the tool. With no such voxel just past
-    /// the surface, the surface push.
+    /// kCompressFullDen) ahead of the tool along its normal. A tool with clay beside it (a small tool
+    /// in a large block) goes at most its contact size deep, each entered voxel's clay down its own
+    /// column (a local rim); a tool that covers the clay it entered (a plate wider than the clay)
+    /// compresses every column under it all the way, its clay shared evenly over all of them
+    /// (uniform compression, straight sides). Remainders go +1 to the voxels nearest the tool. With no
+    /// such voxel just past the surface, the surface push.
     Compress
 };
 const char* pushModeName(PushMode mode);
@@ -68,7 +70,8 @@ struct PushOptions {
 /// tools' own voxels as obstacles while clay settles); clay in obstacles outside tools never moves.
 /// Clay never passes through an obstacle: both the march and the search stop at obstacle voxels
 /// that are not part of a tool.
-/// @throw Error if @a maxSearch is outside [0, 1024] or a tool is null; nothing is changed then.
+/// @throw Error if @a maxSearch is outside [0, 1024] or a tool is null, or (compress, a tool covering
+/// the clay) a voxel would exceed INT32_MAX; nothing is changed then.
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, int maxSearch = 16);
 /// The same, with the push mode chosen (PushMode::Surface gives exactly the push above).
 PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const PushOptions& options);
