@@ -632,7 +632,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // The compress push: a tool that covers the clay pools its clay over every column under it, in
     // an Int32 tree per tool (Push.cc) that can reach every leaf of the clay.
     if (scene.push == PushMode::Compress)
-        e.toolBytes += scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
+        e.toolBytes +=
+            scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
     e.automatonBytes = e.clayLeavesGrown * kAutomatonBytesPerLeaf;
     // The global layer (lib/src/Transport.cc) holds, per full clay cell of the body: its coordinate,
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
