@@ -256,8 +256,16 @@ struct Automaton::Impl {
         overload = s.overload;
         maxBound = s.maxValue;
         quietSteps = 0;
+        clearLeafTable();
         candidates.reset(std::move(hot));
+    }
+
+    /// Forgets the leaf table (a leaf may appear or vanish, or the obstacles change); the candidates
+    /// leave its index for the merged lists.
+    void clearLeafTable()
+    {
         leafTable.clear();
+        candidates.detach();
     }
 
     PassInput passInput(int phase, bool dryRun)
@@ -273,6 +281,7 @@ struct Automaton::Impl {
         in.mayOverflow = maxBound > INT32_MAX / 8;
         in.dryRun = dryRun;
         in.table = leafTable.valid() ? &leafTable : nullptr;
+        in.sink = dryRun || !in.table ? nullptr : candidates.sink(opts.threads != 1);
         return in;
     }
 
@@ -324,21 +333,20 @@ struct Automaton::Impl {
         }
 
         auto t0 = Clock::now();
-        candidates.gather(phase, is3D(), work);
-        rep.seconds.gather = secondsSince(t0);
-
-        t0 = Clock::now();
-        if (!leafTable.valid()) {
+        if (!leafTable.valid() && workWithoutTable >= 4 * tree().leafCount()) {
             // Rebuilt only once the passes since the last build have fetched at least 4 anchors per
             // leaf through the accessors: a build costs about what fetching a few anchors per leaf
             // saves, so frequent edits of a large grid cost at most a constant factor more than
             // without a table, and settling runs use it for nearly every step.
-            workWithoutTable += work.size();
-            if (workWithoutTable >= 4 * tree().leafCount()) {
-                leafTable.build(tree(), obsTree(), is3D());
-                workWithoutTable = 0;
-            }
+            leafTable.build(tree(), obsTree(), is3D());
+            workWithoutTable = 0;
         }
+        if (leafTable.valid() && !candidates.attached()) candidates.attach(leafTable.anchorIndex(), phase, is3D());
+        candidates.gather(phase, is3D(), work);
+        if (!leafTable.valid()) workWithoutTable += work.size();
+        rep.seconds.gather = secondsSince(t0);
+
+        t0 = Clock::now();
         if (maxBound > INT32_MAX / 8) {
             const PassTotals check = runPass(phase, /*dryRun=*/true);
             if (check.overflow) throwOverflow(check, phase);
@@ -396,7 +404,7 @@ struct Automaton::Impl {
             const Coord o(lo.x(), lo.y(), lo.z());
             if (!tree().probeLeaf(o)) {
                 tree().touchLeaf(o);
-                leafTable.clear(); // the pass below must see the new leaf
+                clearLeafTable(); // the pass below must see the new leaf
                 ++created;
             }
         }
@@ -584,7 +592,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     const Impl::Scan before = im.scanLeaves(&region, "edit");
     fn(*im.massGrid);
     im.tree().voxelizeActiveTiles();
@@ -611,7 +619,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");
@@ -628,7 +636,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
 {
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");
