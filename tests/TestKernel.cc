@@ -323,10 +323,9 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
 }
 
 // Candidates' dense mode (per-anchor accumulators over the leaf table's anchors, filled by record()
-// or by the pass through DenseSink; changed and recheck masks apart) against the merged lists, over random
-// step sequences with edits, resets, quiet steps and attach/detach at random steps: the same work lists
-// (anchors, masks, layer order), except anchors the index lacks (no leaf within reach: they read zeros and
-// never change).
+// or by the pass through DenseSink) against the merged lists, over random step sequences with edits,
+// resets, quiet steps and attach/detach at random steps: the same work lists (anchors, masks, layer
+// order), except anchors the index lacks (no leaf within reach: they read zeros and never change).
 TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
 {
     for (int is3D = 0; is3D < 2; ++is3D) {
@@ -415,14 +414,12 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                     // Some candidate blocks of anchors that hold a leaf change (the same in both).
                     for (WorkItem& m : wm) {
                         m.changed = index.find(m.anchor) == kNoEntry ? 0 : m.mask & (g.next() & g.next());
-                        m.recheck = m.changed & g.next();
                     }
                     j = 0;
                     for (WorkItem& d : wd) {
                         while (wm[j].anchor != d.anchor)
                             ++j;
                         d.changed = wm[j].changed;
-                        d.recheck = wm[j].recheck;
                     }
                     // Half of the dense steps record through the sink, as the pass does.
                     if (dense.attached() && g.range(0, 1) == 0) {
@@ -431,11 +428,11 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                         for (const WorkItem& d : wd) {
                             if (!d.changed || d.entry == kNoEntry) continue;
                             if (is3D)
-                                phase ? sinkChanges<1, true>(*sink, d.entry, d.changed, d.recheck)
-                                      : sinkChanges<0, true>(*sink, d.entry, d.changed, d.recheck);
+                                phase ? sinkChanges<1, true>(*sink, d.entry, d.changed)
+                                      : sinkChanges<0, true>(*sink, d.entry, d.changed);
                             else
-                                phase ? sinkChanges<1, false>(*sink, d.entry, d.changed, d.recheck)
-                                      : sinkChanges<0, false>(*sink, d.entry, d.changed, d.recheck);
+                                phase ? sinkChanges<1, false>(*sink, d.entry, d.changed)
+                                      : sinkChanges<0, false>(*sink, d.entry, d.changed);
                         }
                         ++sunkSteps;
                     }

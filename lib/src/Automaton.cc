@@ -418,13 +418,12 @@ struct Automaton::Impl {
             }
         }
         // Re-run the block through the same kernel, restricted to this one block.
-        const uint64_t savedMask = w.mask, savedChanged = w.changed, savedRecheck = w.recheck;
+        const uint64_t savedMask = w.mask, savedChanged = w.changed;
         w.mask = uint64_t(1) << d.bit;
         PassTotals one;
         processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
         w.mask = savedMask;
         w.changed = savedChanged | w.changed;
-        w.recheck = savedRecheck | w.recheck;
         if (!one.deferred.empty() || one.overflow) {
             throw Error("internal error: a grown block could not be updated");
         }

@@ -24,8 +24,7 @@ void Candidates::reset(std::vector<Origin> hotLeaves)
     mFullScanSteps = 2;
     mPending.clear();
     mChangedPrev.clear();
-    mRecheckPrev.clear();
-    mRecheckPrev2.clear();
+    mChangedPrev2.clear();
 }
 
 void Candidates::addRegion(const Box& region)
@@ -39,9 +38,8 @@ void Candidates::clearChanges()
         clearSlot(0);
         clearSlot(1);
     }
+    mChangedPrev2.clear();
     mChangedPrev.clear();
-    mRecheckPrev.clear();
-    mRecheckPrev2.clear();
 }
 
 void Candidates::endStep()
@@ -56,20 +54,18 @@ void Candidates::endStep()
 
 void Candidates::record(const std::vector<WorkItem>& work)
 {
-    mRecheckPrev2.swap(mRecheckPrev);
-    mRecheckPrev.clear();
+    mChangedPrev2.swap(mChangedPrev);
     mChangedPrev.clear();
     for (const WorkItem& w : work) {
         if (!w.changed) continue;
         const Anchor a{w.anchor, w.changed};
         mChangedPrev.push_back(a);
-        if (w.recheck) mRecheckPrev.push_back(Anchor{w.anchor, w.recheck});
         if (!mDense || (mSunk && w.entry != kNoEntry)) continue;
         // Items gathered in dense mode carry their index; others (a work list built elsewhere) are
         // looked up. A block that changed holds clay, so its anchor is in the table.
         const uint32_t e = w.entry != kNoEntry ? w.entry : mIndex.find(w.anchor);
         if (e == kNoEntry) continue;
-        addDense(mPhase, e, w.recheck);                   // the step after next, same phase
+        addDense(mPhase, e, w.changed);                   // the step after next, same phase
         addDenseDilated(1 - mPhase, e, a, mPhase, mIs3D); // the next step
     }
     mSunk = false;
@@ -123,19 +119,17 @@ void Candidates::attach(const AnchorIndex& index, int phase, bool is3D)
         mAcc[s].assign(index.size, 0);
         mTouched[s].assign((index.size + 63) / 64, 0);
     }
-    // The next gather (phase) takes recheckPrev2 and changedPrev's dilation; the one after it
-    // recheckPrev. Anchors the table lacks read zeros only: dropped.
-    for (const Anchor& a : mRecheckPrev2) {
+    // The next gather (phase) takes changedPrev2 and changedPrev's dilation; the one after it
+    // changedPrev. Anchors the table lacks read zeros only: dropped.
+    for (const Anchor& a : mChangedPrev2) {
         const uint32_t e = mIndex.find(a.origin);
         if (e != kNoEntry) addDense(phase, e, a.mask);
     }
-    for (const Anchor& a : mRecheckPrev) {
-        const uint32_t e = mIndex.find(a.origin);
-        if (e != kNoEntry) addDense(1 - phase, e, a.mask);
-    }
     for (const Anchor& a : mChangedPrev) {
         const uint32_t e = mIndex.find(a.origin);
-        if (e != kNoEntry) addDenseDilated(phase, e, a, 1 - phase, is3D);
+        if (e == kNoEntry) continue;
+        addDense(1 - phase, e, a.mask);
+        addDenseDilated(phase, e, a, 1 - phase, is3D);
     }
 }
 
@@ -237,10 +231,10 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         for (const Origin& o : mHot)
             addExtra(Anchor{o, full}, 0, phase, is3D);
     } else if (!mDense) {
-        mRuns.push_back(Run{mRecheckPrev2.data(), mRecheckPrev2.data() + mRecheckPrev2.size()});
+        mRuns.push_back(Run{mChangedPrev2.data(), mChangedPrev2.data() + mChangedPrev2.size()});
     }
     if (mDense) {
-        // recheckPrev2 and changedPrev's dilation are in the dense slot: one run, merged below with
+        // changedPrev2 and changedPrev's dilation are in the dense slot: one run, merged below with
         // the hot leaves and the edited regions. (During the full-scan steps after a reset, the slot
         // holds only the last step's dilation, as the lists would.)
         mDenseRun.clear();

@@ -3,12 +3,7 @@
 // A block can change only if one of its cells changed in the previous two steps: otherwise it is
 // exactly as it was two steps ago, when it could not change (or it would have been updated). So the
 // candidates of step t are the blocks changed at t-2 (same phase, same masks) plus the blocks of this
-// phase that overlap a block changed at t-1 (dilateAcrossPhase). Of the blocks changed at t-2 only
-// those left holding a cell over Tc by their own update are kept (WorkItem::recheck): one left with
-// none and not touched at t-1 still holds none at t, and the pass skips a block without an over cell
-// unchanged, so dropping it changes nothing but blocksVisited; one touched at t-1 comes back through
-// the dilation. (The dilated blocks cannot be cut that way: their other cells' state is not known
-// without reading them.) After construction, resync() or an
+// phase that overlap a block changed at t-1 (dilateAcrossPhase). After construction, resync() or an
 // edit, the region concerned is examined whole for two steps: after resync() only the leaves holding
 // an over cell (only blocks with an over cell can change), after an edit every block touching the
 // edited box. The cost of a step follows the blocks that changed recently, not the volume.
@@ -23,13 +18,13 @@
 //   have no leaf within reach: their blocks read zeros, never hold an over cell, never change, and
 //   are dropped (so blocksVisited counts a few blocks fewer than the merged lists would).
 // - Merged (no table: after edits, until the Automaton rebuilds it): the list is built in layer
-//   order (y, z, x; one entry per anchor) by merging already-sorted runs: recheckPrev2 (in layer
+//   order (y, z, x; one entry per anchor) by merging already-sorted runs: changedPrev2 (in layer
 //   order, as every work list), and changedPrev dilated across the phase, which splits into one run
 //   per neighbour shift (each is changedPrev moved by one constant vector, so still in layer order).
 // Either way an edited region gives one run per neighbour shift, generated in layer order, and only
 // the hot leaves after a reset need a sort; in dense mode those steps merge the dense run with them.
-// The changed lists (changedPrev, recheckPrev, recheckPrev2) are kept in both modes, so switching costs only
-// the accumulators' fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
+// The changed lists (changedPrev, changedPrev2) are kept in both modes, so switching costs only the
+// accumulators' fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
 #pragma once
 
 #include "BlockMasks.h"
@@ -52,7 +47,6 @@ struct WorkItem {
     uint64_t mask;             // candidate blocks
     uint64_t changed;          // output: blocks updated
     uint32_t entry = kNoEntry; // the anchor's index in the leaf table (AnchorIndex), when known
-    uint64_t recheck = 0;      // output: the updated blocks left holding a cell over Tc
 };
 
 /// The leaf table's anchors numbered in layer order, with their neighbours (no OpenVDB here).
@@ -79,10 +73,8 @@ struct DenseSink {
 };
 
 /// Records that the blocks @a changed of anchor @a e changed at a step of phase P (see DenseSink):
-/// those of them in @a recheck into slot P for the step after next, all dilated into slot 1 - P for
-/// the next step.
-template <int P, bool D3>
-inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed, uint64_t recheck)
+/// into slot P for the step after next, dilated into slot 1 - P for the next step.
+template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed)
 {
     auto orWord = [&](uint64_t* w, uint64_t m) {
         if (!s.atomic) return std::exchange(*w, *w | m);
@@ -90,10 +82,8 @@ inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed, uint64
         return __atomic_fetch_or(w, m, __ATOMIC_RELAXED);
     };
     // Only this item writes its own entry of slot P during the pass; the bit set's words are shared.
-    if (recheck) {
-        s.acc[P][e] |= recheck;
-        orWord(&s.touched[P][e >> 6], uint64_t(1) << (e & 63));
-    }
+    s.acc[P][e] |= changed;
+    orWord(&s.touched[P][e >> 6], uint64_t(1) << (e & 63));
     uint64_t out[8];
     dilateAll<P, D3>(changed, out);
     const uint32_t* nb = s.nb + 8 * size_t(e);
@@ -148,8 +138,7 @@ private:
     std::vector<Origin> mHot;          // leaves holding an over cell at the last reset()
     std::vector<Pending> mPending;     // edited regions to examine whole
     std::vector<Anchor> mChangedPrev;  // blocks changed at t-1 (phase of t-1)
-    std::vector<Anchor> mRecheckPrev;  // those of them left over Tc
-    std::vector<Anchor> mRecheckPrev2; // blocks changed at t-2 (phase of t) and left over Tc
+    std::vector<Anchor> mChangedPrev2; // blocks changed at t-2 (phase of t)
     // dense mode: per-anchor candidates of the next step of each phase, and which are nonzero
     bool mDense = false;
     AnchorIndex mIndex;

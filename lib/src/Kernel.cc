@@ -583,9 +583,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
         w.changed = 0;
-        w.recheck = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
-        uint64_t itemRecheck = 0; // and w.recheck: updated blocks left with a cell over Tc
         examined += popcount64(w.mask);
         fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
@@ -739,7 +737,6 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     maxWritten = std::max(maxWritten, sp.maxOut);
                     ++updated;
                     itemChanged |= uint64_t(1) << b;
-                    if (laneMaskGt<N>(sp.lo, sp.hi, tcV)) itemRecheck |= uint64_t(1) << b;
                     continue;
                 }
             }
@@ -790,15 +787,9 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             }
             ++updated;
             itemChanged |= uint64_t(1) << b;
-            bool overAfter = false; // the block's cells after the write (obstacles too), as the filter reads them
-            for (int c = 0; c < N; ++c)
-                overAfter |= (((changed >> c) & 1u) ? out[c] : int64_t(m[c])) > tc32;
-            if (overAfter) itemRecheck |= uint64_t(1) << b;
         }
         w.changed = itemChanged;
-        w.recheck = itemRecheck;
-        if (itemChanged && sink && w.entry != kNoEntry)
-            sinkChanges<P, D3>(*sink, w.entry, itemChanged, itemRecheck);
+        if (itemChanged && sink && w.entry != kNoEntry) sinkChanges<P, D3>(*sink, w.entry, itemChanged);
     }
     tot.examined += examined;
     tot.overTc += overTc;
