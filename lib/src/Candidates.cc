@@ -25,6 +25,7 @@ void Candidates::reset(std::vector<Origin> hotLeaves)
     mPending.clear();
     mChangedPrev.clear();
     mChangedPrev2.clear();
+    mLazy = 0;
 }
 
 void Candidates::addRegion(const Box& region)
@@ -40,6 +41,7 @@ void Candidates::clearChanges()
     }
     mChangedPrev2.clear();
     mChangedPrev.clear();
+    mLazy = 0;
 }
 
 void Candidates::endStep()
@@ -52,7 +54,32 @@ void Candidates::endStep()
         mPending.end());
 }
 
-void Candidates::record(const std::vector<WorkItem>& work)
+void Candidates::record(std::vector<WorkItem>& work)
+{
+    bool indexed = mDense && mSunk;
+    for (size_t i = 0; indexed && i < work.size(); ++i) // (always, for lists gathered in dense mode)
+        indexed = work[i].entry != kNoEntry;
+    if (indexed) {
+        // The pass recorded every item already: keep the list itself (by swap) for a later
+        // detach(), which turns the last two into changed lists. Nothing per item here.
+        mPrevWork[1].swap(mPrevWork[0]);
+        mPrevWork[0].swap(work);
+        mLazy = std::min(mLazy + 1, 2);
+        mSunk = false;
+        return;
+    }
+    materialize();
+    recordLists(work);
+}
+
+void Candidates::materialize()
+{
+    if (mLazy == 2) recordLists(mPrevWork[1], /*listsOnly=*/true);
+    if (mLazy >= 1) recordLists(mPrevWork[0], /*listsOnly=*/true);
+    mLazy = 0;
+}
+
+void Candidates::recordLists(const std::vector<WorkItem>& work, bool listsOnly)
 {
     mChangedPrev2.swap(mChangedPrev);
     mChangedPrev.clear();
@@ -60,7 +87,7 @@ void Candidates::record(const std::vector<WorkItem>& work)
         if (!w.changed) continue;
         const Anchor a{w.anchor, w.changed};
         mChangedPrev.push_back(a);
-        if (!mDense || (mSunk && w.entry != kNoEntry)) continue;
+        if (listsOnly || !mDense || (mSunk && w.entry != kNoEntry)) continue;
         // Items gathered in dense mode carry their index; others (a work list built elsewhere) are
         // looked up. A block that changed holds clay, so its anchor is in the table.
         const uint32_t e = w.entry != kNoEntry ? w.entry : mIndex.find(w.anchor);
@@ -68,7 +95,7 @@ void Candidates::record(const std::vector<WorkItem>& work)
         addDense(mPhase, e, w.changed);                   // the step after next, same phase
         addDenseDilated(1 - mPhase, e, a, mPhase, mIs3D); // the next step
     }
-    mSunk = false;
+    if (!listsOnly) mSunk = false;
 }
 
 void Candidates::addDense(int slot, uint32_t e, uint64_t mask)
@@ -150,6 +177,7 @@ void Candidates::detach()
 {
     mSunk = false;
     if (!mDense) return;
+    materialize();
     mDense = false;
     mIndex = AnchorIndex();
     for (int s = 0; s < 2; ++s) {

@@ -23,8 +23,9 @@
 //   per neighbour shift (each is changedPrev moved by one constant vector, so still in layer order).
 // Either way an edited region gives one run per neighbour shift, generated in layer order, and only
 // the hot leaves after a reset need a sort; in dense mode those steps merge the dense run with them.
-// The changed lists (changedPrev, changedPrev2) are kept in both modes, so switching costs only the
-// accumulators' fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
+// The changed lists (changedPrev, changedPrev2) hold in both modes (in dense mode, the last two
+// work lists are kept and turned into them on detach), so switching costs only the accumulators'
+// fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
 #pragma once
 
 #include "BlockMasks.h"
@@ -103,8 +104,10 @@ public:
     void addRegion(const Box& region);
     /// Fills @a work with the candidates of a step of phase @a phase, in layer order.
     void gather(int phase, bool is3D, std::vector<WorkItem>& work);
-    /// After a step's pass: its updated blocks (work[i].changed) become the next steps' input.
-    void record(const std::vector<WorkItem>& work);
+    /// After a step's pass: its updated blocks (work[i].changed) become the next steps' input. In
+    /// dense mode, when the pass recorded every item (sink()), @a work is swapped with an older list
+    /// (the caller's next gather clears it) instead of being read.
+    void record(std::vector<WorkItem>& work);
     /// After a step in which nothing could change (no over cell): no change to follow.
     void clearChanges();
     /// Counts a step down for the whole-region scans.
@@ -133,6 +136,8 @@ private:
     void addDense(int slot, uint32_t e, uint64_t mask);
     void addDenseDilated(int slot, uint32_t e, const Anchor& a, int fromPhase, bool is3D);
     void clearSlot(int slot);
+    void materialize();
+    void recordLists(const std::vector<WorkItem>& work, bool listsOnly = false);
 
     int mFullScanSteps = 0;            // upcoming steps that must examine every hot leaf
     std::vector<Origin> mHot;          // leaves holding an over cell at the last reset()
@@ -148,6 +153,10 @@ private:
     DenseSink mSink;
     bool mSunk = false; // the pass got mSink: items with an index are recorded already
     bool mIs3D = true;
+    // The last steps' work lists, kept instead of changed lists while the pass records (mLazy of
+    // them, newest first): detach() turns them into mChangedPrev/mChangedPrev2.
+    std::vector<WorkItem> mPrevWork[2];
+    int mLazy = 0;
     // scratch
     std::vector<Anchor> mDenseRun;
     std::vector<Anchor> mStreams[8];
