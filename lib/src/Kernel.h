@@ -10,7 +10,9 @@
 // disjoint, so tasks write disjoint voxels. Values are written only into leaves that exist (a block
 // whose result would flow into a missing leaf is deferred, see PassTotals::deferred); missing leaves
 // read as 0. The only shared words are leaf value masks (active bits), set with an atomic OR when a
-// cell goes from 0 to positive. Nothing in the pass changes the tree's topology.
+// cell goes from 0 to positive, and, in dense mode, the candidates' accumulators and bit sets
+// (PassInput::sink: atomic ORs, except the item's own same-phase entry, which no other item
+// writes). Nothing in the pass changes the tree's topology.
 #pragma once
 
 #include "Candidates.h"
