@@ -350,7 +350,8 @@ struct Automaton::Impl {
             buildSeconds = secondsSince(t0);
             t0 = Clock::now();
         }
-        if (leafTable.valid() && !candidates.attached()) candidates.attach(leafTable.anchorIndex(), phase, is3D());
+        if (leafTable.valid() && !candidates.attached())
+            candidates.attach(leafTable.anchorIndex(), phase, is3D());
         candidates.gather(phase, is3D(), work);
         if (!leafTable.valid()) workWithoutTable += work.size();
         rep.seconds.gather = secondsSince(t0);

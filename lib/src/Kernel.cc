@@ -72,9 +72,9 @@ struct LeafTable::Impl {
     };
     static constexpr uint32_t kEmpty = UINT32_MAX;
     std::vector<Entry> entries;
-    std::vector<Origin> keys;            // entries[i]'s anchor, in layer order
-    std::vector<uint32_t> up, down;      // AnchorIndex's neighbours, 8 per entry
-    std::vector<Slot> slots;  // open addressing, linear probing, at most half full
+    std::vector<Origin> keys;       // entries[i]'s anchor, in layer order
+    std::vector<uint32_t> up, down; // AnchorIndex's neighbours, 8 per entry
+    std::vector<Slot> slots;        // open addressing, linear probing, at most half full
     int shift = 64;
 
     size_t slotOf(int32_t x, int32_t y, int32_t z) const
@@ -472,7 +472,8 @@ struct LeafSet {
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
 __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint32_t entry, uint64_t mask,
-                                           MassAcc& acc, ObsAcc* oacc, bool reuse, const LeafTable::Impl* table)
+                                           MassAcc& acc, ObsAcc* oacc, bool reuse,
+                                           const LeafTable::Impl* table)
 {
     const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
@@ -480,7 +481,8 @@ __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, ui
     for (int w = 1; w < kCount; ++w)
         if (mask & t.needLeaf[D3][w]) need |= 1u << w;
     if (table) {
-        if (const LeafTable::Impl::Entry* e = entry != kNoEntry ? &table->entries[entry] : table->find(anchor)) {
+        if (const LeafTable::Impl::Entry* e =
+                entry != kNoEntry ? &table->entries[entry] : table->find(anchor)) {
             // Every slot is copied (those no block of the mask reads are harmless); the flags cover
             // only the slots it reads, as below.
             for (int w = 0; w < kCount; ++w) {
