@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -319,6 +320,164 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
         if (HasFailure()) break;
     }
     EXPECT_GT(updated, 2000); // most random blocks hold an over cell and an under one
+}
+
+// Candidates' dense mode (per-anchor accumulators over the leaf table's anchors, filled by record()
+// or by the pass through DenseSink) against the merged lists, over random step sequences with edits,
+// resets, quiet steps and attach/detach at random steps: the same work lists (anchors, masks, layer
+// order), except anchors the index lacks (no leaf within reach: they read zeros and never change).
+TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
+{
+    for (int is3D = 0; is3D < 2; ++is3D) {
+        for (uint64_t seed = 1; seed <= 12; ++seed) {
+            vdbclay_test::Rng g(seed * 31 + uint64_t(is3D));
+            // Leaves in a 6^3 (2D: 6^2) box of leaves, some missing; the index is what LeafTable
+            // holds: every leaf's origin and its upper neighbours', in layer order.
+            std::vector<Origin> keys;
+            const int nz = is3D ? 6 : 1;
+            for (int x = 0; x < 6; ++x)
+                for (int y = 0; y < 6; ++y)
+                    for (int z = 0; z < nz; ++z) {
+                        if (g.range(0, 2) == 0) continue;
+                        for (int d = 0; d < (is3D ? 8 : 4); ++d)
+                            keys.push_back(Origin(8 * x + ((d & 1) ? 8 : 0), 8 * y + ((d & 2) ? 8 : 0),
+                                                  8 * z + ((d & 4) ? 8 : 0)));
+                    }
+            auto less = [](const Origin& a, const Origin& b) { return layerLess(a, b); };
+            std::sort(keys.begin(), keys.end(), less);
+            keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+            std::vector<uint32_t> up(8 * keys.size(), kNoEntry), down(8 * keys.size(), kNoEntry);
+            AnchorIndex index;
+            index.keys = keys.data();
+            index.size = keys.size();
+            for (size_t k = 0; k < keys.size(); ++k)
+                for (int sh = 0; sh < (is3D ? 8 : 4); ++sh) {
+                    const int dx = (sh & 1) ? 8 : 0, dy = (sh & 2) ? 8 : 0, dz = (sh & 4) ? 8 : 0;
+                    const Origin& a = keys[k];
+                    up[8 * k + sh] = index.find(Origin(a.x() + dx, a.y() + dy, a.z() + dz));
+                    down[8 * k + sh] = index.find(Origin(a.x() - dx, a.y() - dy, a.z() - dz));
+                }
+            index.up = up.data();
+            index.down = down.data();
+            ASSERT_EQ(index.find(Origin(-8, 0, 0)), kNoEntry);
+
+            Candidates merged, dense;
+            std::vector<Origin> hot;
+            for (int i = 0; i < 4; ++i)
+                hot.push_back(keys[size_t(g.range(0, int(keys.size()) - 1))]);
+            std::sort(hot.begin(), hot.end(), less);
+            hot.erase(std::unique(hot.begin(), hot.end()), hot.end());
+            merged.reset(hot);
+            dense.reset(hot);
+            uint64_t denseSteps = 0, sunkSteps = 0, droppedBlocks = 0;
+            for (int t = 0; t < 60; ++t) {
+                const int phase = t & 1;
+                const int event = g.range(0, 19);
+                if (event == 0) { // an edit
+                    const int x0 = g.range(-4, 40), y0 = g.range(-4, 40), z0 = is3D ? g.range(-4, 40) : 0;
+                    const Box b{{x0, y0, z0},
+                                {x0 + g.range(0, 9), y0 + g.range(0, 9), is3D ? z0 + g.range(0, 9) : 0}};
+                    merged.addRegion(b);
+                    dense.addRegion(b);
+                } else if (event == 1) {
+                    merged.reset(hot);
+                    dense.reset(hot);
+                } else if (event == 2) {
+                    dense.detach();
+                }
+                if (!dense.attached() && g.range(0, 2) == 0) dense.attach(index, phase, is3D);
+                std::vector<WorkItem> wm, wd;
+                merged.gather(phase, is3D, wm);
+                dense.gather(phase, is3D, wd);
+                // The dense list is the merged one less the anchors outside the index.
+                size_t j = 0;
+                for (const WorkItem& m : wm) {
+                    const uint32_t e = index.find(m.anchor);
+                    if (dense.attached() && e == kNoEntry) {
+                        droppedBlocks += uint64_t(__builtin_popcountll(m.mask));
+                        continue;
+                    }
+                    ASSERT_LT(j, wd.size()) << "seed " << seed << " step " << t;
+                    ASSERT_EQ(wd[j].anchor, m.anchor) << "seed " << seed << " step " << t;
+                    ASSERT_EQ(wd[j].mask, m.mask) << "seed " << seed << " step " << t;
+                    if (wd[j].entry != kNoEntry) {
+                        EXPECT_EQ(wd[j].entry, e);
+                    }
+                    ++j;
+                }
+                ASSERT_EQ(j, wd.size()) << "seed " << seed << " step " << t;
+                denseSteps += dense.attached();
+                if (event == 3) { // a step with no over cell
+                    merged.clearChanges();
+                    dense.clearChanges();
+                } else {
+                    // Some candidate blocks of anchors that hold a leaf change (the same in both).
+                    for (WorkItem& m : wm) {
+                        m.changed = index.find(m.anchor) == kNoEntry ? 0 : m.mask & (g.next() & g.next());
+                    }
+                    j = 0;
+                    for (WorkItem& d : wd) {
+                        while (wm[j].anchor != d.anchor)
+                            ++j;
+                        d.changed = wm[j].changed;
+                    }
+                    // Half of the dense steps record through the sink, as the pass does.
+                    if (dense.attached() && g.range(0, 1) == 0) {
+                        const DenseSink* sink = dense.sink(g.range(0, 1) == 0);
+                        ASSERT_NE(sink, nullptr);
+                        for (const WorkItem& d : wd) {
+                            if (!d.changed || d.entry == kNoEntry) continue;
+                            if (is3D)
+                                phase ? sinkChanges<1, true>(*sink, d.entry, d.changed)
+                                      : sinkChanges<0, true>(*sink, d.entry, d.changed);
+                            else
+                                phase ? sinkChanges<1, false>(*sink, d.entry, d.changed)
+                                      : sinkChanges<0, false>(*sink, d.entry, d.changed);
+                        }
+                        ++sunkSteps;
+                    }
+                    merged.record(wm);
+                    dense.record(wd);
+                }
+                merged.endStep();
+                dense.endStep();
+            }
+            EXPECT_GT(denseSteps, 10u) << "seed " << seed;
+            EXPECT_GT(sunkSteps, 3u) << "seed " << seed;
+            if (seed == 1) {
+                EXPECT_GT(droppedBlocks, 0u) << "the test reaches anchors outside the index";
+            }
+        }
+    }
+}
+
+// dilateAll (the dense mode's dilation) against dilateAcrossPhase on random masks.
+TEST_F(KernelTest, DilateAllMatchesDilateAcrossPhase)
+{
+    vdbclay_test::Rng g(5);
+    for (int i = 0; i < 20000; ++i) {
+        const bool is3D = (i & 1) != 0;
+        const int from = (i >> 1) & 1;
+        uint64_t m = g.next() & g.next() & (i % 5 == 0 ? g.next() : ~0ull);
+        if (!is3D) m &= 0xFFFFull;
+        uint64_t out[8] = {};
+        if (is3D)
+            from ? dilateAll<1, true>(m, out) : dilateAll<0, true>(m, out);
+        else
+            from ? dilateAll<1, false>(m, out) : dilateAll<0, false>(m, out);
+        uint64_t expect[8] = {};
+        Anchor buf[8];
+        int shift[8];
+        const int n = dilateAcrossPhase(Anchor{Origin(8, 16, 24), m}, from, is3D, buf, shift);
+        for (int k = 0; k < n; ++k) {
+            expect[shift[k]] = buf[k].mask;
+            const int sgn = from == 0 ? 8 : -8;
+            EXPECT_EQ(buf[k].origin, Origin(8 + ((shift[k] & 1) ? sgn : 0), 16 + ((shift[k] & 2) ? sgn : 0),
+                                            24 + ((shift[k] & 4) ? sgn : 0)));
+        }
+        for (int k = 0; k < 8; ++k)
+            ASSERT_EQ(out[k], expect[k]) << "mask " << m << " shift " << k << " from phase " << from;
+    }
 }
 
 } // namespace

@@ -4,7 +4,9 @@
 // ======
 // The automaton is split along its concepts, one file each:
 //   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
-//   Candidates.*   which blocks a step examines: the last two steps' changes, merged in layer order
+//   Candidates.*   which blocks a step examines: the last two steps' changes, in layer order; while
+//                  the leaf table is valid, accumulated per table anchor (dense mode, filled by the
+//                  pass itself), otherwise merged from sorted lists
 //   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule; and
 //                  the flat leaf table (LeafTable), which hands the pass an anchor's leaves by one
 //                  hash lookup; cleared on every edit, resync and grown leaf, rebuilt lazily
@@ -13,13 +15,17 @@
 //
 // Stages of step(), each timed into StageSeconds:
 //   gather       Candidates::gather: one entry per anchor, in order of anchor (y, z, x): a sequence
-//                of horizontal layers, y up, as in the paper's p layers.
+//                of horizontal layers, y up, as in the paper's p layers. (Dense mode: a scan of the
+//                anchors marked by the last passes.)
 //   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks), each
-//                range through processRange (Kernel.h: what a task may write and why it is safe).
+//                range through processRange (Kernel.h: what a task may write and why it is safe);
+//                in dense mode each task also ORs its items' changes into the candidates of the
+//                next two steps (DenseSink: atomic ORs, order-free). Includes leaf table builds.
 //   grow         a block that must write into a missing leaf is not written in the pass but queued;
 //                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
 //                Since blocks of a phase are disjoint, doing it later gives the identical result.
-//   bookkeeping  the changed masks become the next steps' candidates; counters are reduced.
+//   bookkeeping  the changed masks become the next steps' candidates (dense mode: only kept as
+//                lists, for a return to merged mode); counters are reduced.
 // The automaton never empties a cell (over cells keep at least Tc, or m - floor(alpha m) > 0 for
 // arata, and under cells only gain), and a leaf is only created to receive clay, so no pruning is
 // needed after a step; edit() prunes leaves a tool emptied.
@@ -256,8 +262,16 @@ struct Automaton::Impl {
         overload = s.overload;
         maxBound = s.maxValue;
         quietSteps = 0;
+        clearLeafTable();
         candidates.reset(std::move(hot));
+    }
+
+    /// Forgets the leaf table (a leaf may appear or vanish, or the obstacles change); the candidates
+    /// leave its index for the merged lists.
+    void clearLeafTable()
+    {
         leafTable.clear();
+        candidates.detach();
     }
 
     PassInput passInput(int phase, bool dryRun)
@@ -273,6 +287,7 @@ struct Automaton::Impl {
         in.mayOverflow = maxBound > INT32_MAX / 8;
         in.dryRun = dryRun;
         in.table = leafTable.valid() ? &leafTable : nullptr;
+        in.sink = dryRun || !in.table ? nullptr : candidates.sink(opts.threads != 1);
         return in;
     }
 
@@ -324,27 +339,30 @@ struct Automaton::Impl {
         }
 
         auto t0 = Clock::now();
-        candidates.gather(phase, is3D(), work);
-        rep.seconds.gather = secondsSince(t0);
-
-        t0 = Clock::now();
-        if (!leafTable.valid()) {
+        double buildSeconds = 0; // counted in the repartition, as the accessor fetches it replaces
+        if (!leafTable.valid() && workWithoutTable >= 4 * tree().leafCount()) {
             // Rebuilt only once the passes since the last build have fetched at least 4 anchors per
             // leaf through the accessors: a build costs about what fetching a few anchors per leaf
             // saves, so frequent edits of a large grid cost at most a constant factor more than
             // without a table, and settling runs use it for nearly every step.
-            workWithoutTable += work.size();
-            if (workWithoutTable >= 4 * tree().leafCount()) {
-                leafTable.build(tree(), obsTree(), is3D());
-                workWithoutTable = 0;
-            }
+            leafTable.build(tree(), obsTree(), is3D());
+            workWithoutTable = 0;
+            buildSeconds = secondsSince(t0);
+            t0 = Clock::now();
         }
+        if (leafTable.valid() && !candidates.attached())
+            candidates.attach(leafTable.anchorIndex(), phase, is3D());
+        candidates.gather(phase, is3D(), work);
+        if (!leafTable.valid()) workWithoutTable += work.size();
+        rep.seconds.gather = secondsSince(t0);
+
+        t0 = Clock::now();
         if (maxBound > INT32_MAX / 8) {
             const PassTotals check = runPass(phase, /*dryRun=*/true);
             if (check.overflow) throwOverflow(check, phase);
         }
         PassTotals tot = runPass(phase, /*dryRun=*/false);
-        rep.seconds.repartition = secondsSince(t0);
+        rep.seconds.repartition = buildSeconds + secondsSince(t0);
         if (tot.overflow) throwOverflow(tot, phase); // unreachable while maxBound holds
 
         t0 = Clock::now();
@@ -396,7 +414,7 @@ struct Automaton::Impl {
             const Coord o(lo.x(), lo.y(), lo.z());
             if (!tree().probeLeaf(o)) {
                 tree().touchLeaf(o);
-                leafTable.clear(); // the pass below must see the new leaf
+                clearLeafTable(); // the pass below must see the new leaf
                 ++created;
             }
         }
@@ -584,7 +602,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     const Impl::Scan before = im.scanLeaves(&region, "edit");
     fn(*im.massGrid);
     im.tree().voxelizeActiveTiles();
@@ -611,7 +629,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 {
     if (region.empty()) return;
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");
@@ -628,7 +646,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
 void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
 {
     Impl& im = *mImpl;
-    im.leafTable.clear(); // leaves or obstacles may change (even if fn or a check throws)
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     if (!im.obsGrid) {
         im.obsGrid = openvdb::MaskGrid::create(false);
         im.obsGrid->setName("obstacles");

@@ -103,6 +103,29 @@ inline int dilateAcrossPhase(const Anchor& a, int fromPhase, bool is3D, Anchor b
     return n;
 }
 
+/// dilateAcrossPhase without branches or loops: @a out[s] is the mask of the neighbour anchor with
+/// shift s (bit 0 = x, 1 = y, 2 = z; 0 = a's own leaf), zero where nothing spills there. 2D fills
+/// out[0..3] only. (The axes act on separate bit fields, so the order of the folds is free.)
+template <int FromPhase, bool D3> inline void dilateAll(uint64_t m, uint64_t out[8])
+{
+    constexpr uint64_t lo[3] = {kX0, kY0, kZ0}, hi[3] = {kX3, kY3, kZ3};
+    constexpr int unit[3] = {1, 4, 16};
+    out[0] = m;
+    int n = 1;
+    for (int ax = 0; ax < (D3 ? 3 : 2); ++ax, n *= 2) { // unrolled by the compiler: constant bounds
+        for (int i = 0; i < n; ++i) {
+            const uint64_t v = out[i];
+            if (FromPhase == 0) {
+                out[i] = v | ((v & ~hi[ax]) << unit[ax]);
+                out[i + n] = (v & hi[ax]) >> (3 * unit[ax]);
+            } else {
+                out[i] = v | ((v & ~lo[ax]) >> unit[ax]);
+                out[i + n] = (v & lo[ax]) << (3 * unit[ax]);
+            }
+        }
+    }
+}
+
 /// Appends to @a out the merge of two runs sorted by layerLess with distinct origins; anchors with
 /// the same origin in both become one, their masks ORed. The result has distinct origins too.
 inline void mergeOr(const Anchor* a, const Anchor* ae, const Anchor* b, const Anchor* be,

@@ -6,13 +6,26 @@
 namespace vdbclay {
 namespace automaton_internal {
 
+uint32_t AnchorIndex::find(const Origin& o) const
+{
+    const Origin* e = keys + size;
+    const Origin* it =
+        std::lower_bound(keys, e, o, [](const Origin& a, const Origin& b) { return layerLess(a, b); });
+    return (it != e && *it == o) ? uint32_t(it - keys) : kNoEntry;
+}
+
 void Candidates::reset(std::vector<Origin> hotLeaves)
 {
+    if (mDense) {
+        clearSlot(0);
+        clearSlot(1);
+    }
     mHot = std::move(hotLeaves);
     mFullScanSteps = 2;
     mPending.clear();
     mChangedPrev.clear();
     mChangedPrev2.clear();
+    mLazy = 0;
 }
 
 void Candidates::addRegion(const Box& region)
@@ -22,8 +35,13 @@ void Candidates::addRegion(const Box& region)
 
 void Candidates::clearChanges()
 {
+    if (mDense) {
+        clearSlot(0);
+        clearSlot(1);
+    }
     mChangedPrev2.clear();
     mChangedPrev.clear();
+    mLazy = 0;
 }
 
 void Candidates::endStep()
@@ -36,12 +54,135 @@ void Candidates::endStep()
         mPending.end());
 }
 
-void Candidates::record(const std::vector<WorkItem>& work)
+void Candidates::record(std::vector<WorkItem>& work)
+{
+    bool indexed = mDense && mSunk;
+    for (size_t i = 0; indexed && i < work.size(); ++i) // (always, for lists gathered in dense mode)
+        indexed = work[i].entry != kNoEntry;
+    if (indexed) {
+        // The pass recorded every item already: keep the list itself (by swap) for a later
+        // detach(), which turns the last two into changed lists. Nothing per item here.
+        mPrevWork[1].swap(mPrevWork[0]);
+        mPrevWork[0].swap(work);
+        mLazy = std::min(mLazy + 1, 2);
+        mSunk = false;
+        return;
+    }
+    materialize();
+    recordLists(work);
+}
+
+void Candidates::materialize()
+{
+    if (mLazy == 2) recordLists(mPrevWork[1], /*listsOnly=*/true);
+    if (mLazy >= 1) recordLists(mPrevWork[0], /*listsOnly=*/true);
+    mLazy = 0;
+}
+
+void Candidates::recordLists(const std::vector<WorkItem>& work, bool listsOnly)
 {
     mChangedPrev2.swap(mChangedPrev);
     mChangedPrev.clear();
     for (const WorkItem& w : work) {
-        if (w.changed) mChangedPrev.push_back(Anchor{w.anchor, w.changed});
+        if (!w.changed) continue;
+        const Anchor a{w.anchor, w.changed};
+        mChangedPrev.push_back(a);
+        if (listsOnly || !mDense || (mSunk && w.entry != kNoEntry)) continue;
+        // Items gathered in dense mode carry their index; others (a work list built elsewhere) are
+        // looked up. A block that changed holds clay, so its anchor is in the table.
+        const uint32_t e = w.entry != kNoEntry ? w.entry : mIndex.find(w.anchor);
+        if (e == kNoEntry) continue;
+        addDense(mPhase, e, w.changed);                   // the step after next, same phase
+        addDenseDilated(1 - mPhase, e, a, mPhase, mIs3D); // the next step
+    }
+    if (!listsOnly) mSunk = false;
+}
+
+void Candidates::addDense(int slot, uint32_t e, uint64_t mask)
+{
+    if (!mask) return;
+    mAcc[slot][e] |= mask;
+    mTouched[slot][e >> 6] |= uint64_t(1) << (e & 63);
+}
+
+void Candidates::addDenseDilated(int slot, uint32_t e, const Anchor& a, int fromPhase, bool is3D)
+{
+    uint64_t out[8];
+    if (is3D) {
+        if (fromPhase == 0)
+            dilateAll<0, true>(a.mask, out);
+        else
+            dilateAll<1, true>(a.mask, out);
+    } else {
+        if (fromPhase == 0)
+            dilateAll<0, false>(a.mask, out);
+        else
+            dilateAll<1, false>(a.mask, out);
+    }
+    const uint32_t* nb = (fromPhase == 0 ? mIndex.up : mIndex.down) + 8 * size_t(e);
+    for (int s = 0; s < (is3D ? 8 : 4); ++s) {
+        const uint32_t t = nb[s];
+        if (out[s] && t != kNoEntry)
+            addDense(slot, t, out[s]); // no entry: no leaf within reach, cannot change
+    }
+}
+
+void Candidates::clearSlot(int slot)
+{
+    std::vector<uint64_t>& bits = mTouched[slot];
+    for (size_t k = 0; k < bits.size(); ++k) {
+        for (uint64_t b = bits[k]; b; b &= b - 1)
+            mAcc[slot][64 * k + size_t(__builtin_ctzll(b))] = 0;
+        bits[k] = 0;
+    }
+}
+
+void Candidates::attach(const AnchorIndex& index, int phase, bool is3D)
+{
+    detach();
+    mIndex = index;
+    mDense = true;
+    for (int s = 0; s < 2; ++s) {
+        mAcc[s].assign(index.size, 0);
+        mTouched[s].assign((index.size + 63) / 64, 0);
+    }
+    // The next gather (phase) takes changedPrev2 and changedPrev's dilation; the one after it
+    // changedPrev. Anchors the table lacks read zeros only: dropped.
+    for (const Anchor& a : mChangedPrev2) {
+        const uint32_t e = mIndex.find(a.origin);
+        if (e != kNoEntry) addDense(phase, e, a.mask);
+    }
+    for (const Anchor& a : mChangedPrev) {
+        const uint32_t e = mIndex.find(a.origin);
+        if (e == kNoEntry) continue;
+        addDense(1 - phase, e, a.mask);
+        addDenseDilated(phase, e, a, 1 - phase, is3D);
+    }
+}
+
+const DenseSink* Candidates::sink(bool atomic)
+{
+    if (!mDense) return nullptr;
+    mSink.acc[0] = mAcc[0].data();
+    mSink.acc[1] = mAcc[1].data();
+    mSink.touched[0] = mTouched[0].data();
+    mSink.touched[1] = mTouched[1].data();
+    mSink.nb = mPhase == 0 ? mIndex.up : mIndex.down;
+    mSink.atomic = atomic;
+    mSunk = true;
+    return &mSink;
+}
+
+void Candidates::detach()
+{
+    mSunk = false;
+    if (!mDense) return;
+    materialize();
+    mDense = false;
+    mIndex = AnchorIndex();
+    for (int s = 0; s < 2; ++s) {
+        mAcc[s].clear();
+        mTouched[s].clear();
     }
 }
 
@@ -87,6 +228,24 @@ void Candidates::addPending(const Pending& p, int phase, bool is3D)
 
 void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
 {
+    mPhase = phase;
+    mIs3D = is3D;
+    if (mDense && mFullScanSteps == 0 && mPending.empty()) {
+        // The accumulated candidates, in index order (= layer order); the slot is left empty for
+        // the record() of the step after next.
+        work.clear();
+        std::vector<uint64_t>& bits = mTouched[phase];
+        std::vector<uint64_t>& acc = mAcc[phase];
+        for (size_t k = 0; k < bits.size(); ++k) {
+            for (uint64_t b = bits[k]; b; b &= b - 1) {
+                const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
+                work.push_back(WorkItem{mIndex.keys[e], acc[e], 0, e});
+                acc[e] = 0;
+            }
+            bits[k] = 0;
+        }
+        return;
+    }
     mRuns.clear();
     for (auto& st : mStreams)
         st.clear();
@@ -99,20 +258,40 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // leaves (an over cell that moved at the first step is followed by mChangedPrev).
         for (const Origin& o : mHot)
             addExtra(Anchor{o, full}, 0, phase, is3D);
-    } else {
+    } else if (!mDense) {
         mRuns.push_back(Run{mChangedPrev2.data(), mChangedPrev2.data() + mChangedPrev2.size()});
+    }
+    if (mDense) {
+        // changedPrev2 and changedPrev's dilation are in the dense slot: one run, merged below with
+        // the hot leaves and the edited regions. (During the full-scan steps after a reset, the slot
+        // holds only the last step's dilation, as the lists would.)
+        mDenseRun.clear();
+        std::vector<uint64_t>& bits = mTouched[phase];
+        std::vector<uint64_t>& acc = mAcc[phase];
+        for (size_t k = 0; k < bits.size(); ++k) {
+            for (uint64_t b = bits[k]; b; b &= b - 1) {
+                const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
+                mDenseRun.push_back(Anchor{mIndex.keys[e], acc[e]});
+                acc[e] = 0;
+            }
+            bits[k] = 0;
+        }
     }
     for (const Pending& p : mPending)
         addPending(p, phase, is3D);
     Anchor buf[8];
     int shift[8];
-    for (const Anchor& a : mChangedPrev) {
-        const int n = dilateAcrossPhase(a, 1 - phase, is3D, buf, shift);
-        for (int i = 0; i < n; ++i)
-            mStreams[shift[i]].push_back(buf[i]);
+    if (mDense) {
+        mRuns.push_back(Run{mDenseRun.data(), mDenseRun.data() + mDenseRun.size()});
+    } else {
+        for (const Anchor& a : mChangedPrev) {
+            const int n = dilateAcrossPhase(a, 1 - phase, is3D, buf, shift);
+            for (int i = 0; i < n; ++i)
+                mStreams[shift[i]].push_back(buf[i]);
+        }
+        for (const auto& st : mStreams)
+            mRuns.push_back(Run{st.data(), st.data() + st.size()});
     }
-    for (const auto& st : mStreams)
-        mRuns.push_back(Run{st.data(), st.data() + st.size()});
     for (const auto& sp : mPendingSpans) // mPendingAnchors is complete: its data no longer moves
         mRuns.push_back(Run{mPendingAnchors.data() + sp.first, mPendingAnchors.data() + sp.second});
     if (!mExtras.empty()) {
@@ -155,8 +334,16 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
     work.clear();
     if (!mRuns.empty()) {
         work.reserve(size_t(mRuns[0].e - mRuns[0].b));
-        for (const Anchor* a = mRuns[0].b; a != mRuns[0].e; ++a)
-            work.push_back(WorkItem{a->origin, a->mask, 0});
+        for (const Anchor* a = mRuns[0].b; a != mRuns[0].e; ++a) {
+            if (!mDense) {
+                work.push_back(WorkItem{a->origin, a->mask, 0});
+                continue;
+            }
+            // Dense mode (the steps after an edit or a reset): every item gets its index, and
+            // anchors outside the index (zeros only) are dropped, as in the dense gather.
+            const uint32_t e = mIndex.find(a->origin);
+            if (e != kNoEntry) work.push_back(WorkItem{a->origin, a->mask, 0, e});
+        }
     }
 }
 

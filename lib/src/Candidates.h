@@ -8,12 +8,24 @@
 // an over cell (only blocks with an over cell can change), after an edit every block touching the
 // edited box. The cost of a step follows the blocks that changed recently, not the volume.
 //
-// The list is built in layer order (y, z, x; one entry per anchor) by merging already-sorted runs:
-// changedPrev2 (in layer order, as every work list), and changedPrev dilated across the phase, which
-// splits into one run per neighbour shift (each is changedPrev moved by one constant vector, so
-// still in layer order). An edited region gives one run per neighbour shift, generated in layer
-// order; only the hot leaves after a reset need a sort. All scratch
-// is kept in members, so a step allocates nothing once the buffers have grown.
+// Two ways to build the list, same blocks:
+// - Dense (while the Automaton holds a valid leaf table, nearly every step of a settling run): the
+//   table's anchors, sorted in layer order, are numbered 0..n-1 (AnchorIndex, with each anchor's
+//   upper and lower neighbours). record() ORs each changed mask into a per-anchor accumulator of the
+//   step two steps on (same phase), and its dilation into the next step's, marking the anchors in a
+//   bit set; gather() scans that bit set in index order, which is layer order. No merge, no sort:
+//   the cost follows the changed anchors (plus n / 64 words of bit set). Anchors outside the table
+//   have no leaf within reach: their blocks read zeros, never hold an over cell, never change, and
+//   are dropped (so blocksVisited counts a few blocks fewer than the merged lists would).
+// - Merged (no table: after edits, until the Automaton rebuilds it): the list is built in layer
+//   order (y, z, x; one entry per anchor) by merging already-sorted runs: changedPrev2 (in layer
+//   order, as every work list), and changedPrev dilated across the phase, which splits into one run
+//   per neighbour shift (each is changedPrev moved by one constant vector, so still in layer order).
+// Either way an edited region gives one run per neighbour shift, generated in layer order, and only
+// the hot leaves after a reset need a sort; in dense mode those steps merge the dense run with them.
+// The changed lists (changedPrev, changedPrev2) hold in both modes (in dense mode, the last two
+// work lists are kept and turned into them on detach), so switching costs only the accumulators'
+// fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
 #pragma once
 
 #include "BlockMasks.h"
@@ -27,12 +39,61 @@
 namespace vdbclay {
 namespace automaton_internal {
 
+/// No index: an anchor the leaf table does not hold (or no table).
+constexpr uint32_t kNoEntry = UINT32_MAX;
+
 /// One anchor of a step's work list: its candidate blocks, and (output of the pass) those updated.
 struct WorkItem {
     Origin anchor;
-    uint64_t mask;    // candidate blocks
-    uint64_t changed; // output: blocks updated
+    uint64_t mask;             // candidate blocks
+    uint64_t changed;          // output: blocks updated
+    uint32_t entry = kNoEntry; // the anchor's index in the leaf table (AnchorIndex), when known
 };
+
+/// The leaf table's anchors numbered in layer order, with their neighbours (no OpenVDB here).
+/// up[8 e + s] is the index of keys[e] moved by +8 along each axis in bit set s (bit 0 = x, 1 = y,
+/// 2 = z), down[8 e + s] moved by -8; kNoEntry when the table lacks that anchor; slot 0 is e itself.
+struct AnchorIndex {
+    const Origin* keys = nullptr;
+    const uint32_t* up = nullptr;
+    const uint32_t* down = nullptr;
+    size_t size = 0;
+    /// The index of @a o (binary search in layer order), or kNoEntry.
+    uint32_t find(const Origin& o) const;
+};
+
+/// Dense mode's accumulators as a pass sees them (Candidates::sink()): the pass ORs each item's
+/// changed blocks in as soon as the item is done, in its own task, instead of record() doing it
+/// serially after the pass. OR is commutative and idempotent, so the result does not depend on the
+/// order or the partition; with several tasks the shared words take atomic ORs.
+struct DenseSink {
+    uint64_t* acc[2] = {nullptr, nullptr};
+    uint64_t* touched[2] = {nullptr, nullptr};
+    const uint32_t* nb = nullptr; // AnchorIndex::up for a step of phase 0, down for phase 1
+    bool atomic = false;
+};
+
+/// Records that the blocks @a changed of anchor @a e changed at a step of phase P (see DenseSink):
+/// into slot P for the step after next, dilated into slot 1 - P for the next step.
+template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed)
+{
+    auto orWord = [&](uint64_t* w, uint64_t m) {
+        if (!s.atomic) return std::exchange(*w, *w | m);
+        if ((__atomic_load_n(w, __ATOMIC_RELAXED) & m) == m) return m; // nothing new
+        return __atomic_fetch_or(w, m, __ATOMIC_RELAXED);
+    };
+    // Only this item writes its own entry of slot P during the pass; the bit set's words are shared.
+    s.acc[P][e] |= changed;
+    orWord(&s.touched[P][e >> 6], uint64_t(1) << (e & 63));
+    uint64_t out[8];
+    dilateAll<P, D3>(changed, out);
+    const uint32_t* nb = s.nb + 8 * size_t(e);
+    for (int k = 0; k < (D3 ? 8 : 4); ++k) {
+        const uint32_t t = nb[k];
+        if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
+        if (orWord(&s.acc[1 - P][t], out[k]) == 0) orWord(&s.touched[1 - P][t >> 6], uint64_t(1) << (t & 63));
+    }
+}
 
 class Candidates {
 public:
@@ -43,12 +104,24 @@ public:
     void addRegion(const Box& region);
     /// Fills @a work with the candidates of a step of phase @a phase, in layer order.
     void gather(int phase, bool is3D, std::vector<WorkItem>& work);
-    /// After a step's pass: its updated blocks (work[i].changed) become the next steps' input.
-    void record(const std::vector<WorkItem>& work);
+    /// After a step's pass: its updated blocks (work[i].changed) become the next steps' input. In
+    /// dense mode, when the pass recorded every item (sink()), @a work is swapped with an older list
+    /// (the caller's next gather clears it) instead of being read.
+    void record(std::vector<WorkItem>& work);
     /// After a step in which nothing could change (no over cell): no change to follow.
     void clearChanges();
     /// Counts a step down for the whole-region scans.
     void endStep();
+    /// Switches to the dense accumulators of @a index (which must outlive the attachment) before the
+    /// gather of a step of phase @a phase; the changes recorded so far carry over.
+    void attach(const AnchorIndex& index, int phase, bool is3D);
+    /// Back to merged lists (the index is about to change); nothing recorded is lost.
+    void detach();
+    bool attached() const { return mDense; }
+    /// In dense mode, the accumulators for the pass of the step just gathered (null otherwise):
+    /// the pass records its items' changes there (sinkChanges), record() then only the items that
+    /// carry no index. @a atomic: the pass runs in several tasks.
+    const DenseSink* sink(bool atomic);
 
 private:
     struct Pending {
@@ -60,13 +133,32 @@ private:
     };
     void addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D);
     void addPending(const Pending& p, int phase, bool is3D);
+    void addDense(int slot, uint32_t e, uint64_t mask);
+    void addDenseDilated(int slot, uint32_t e, const Anchor& a, int fromPhase, bool is3D);
+    void clearSlot(int slot);
+    void materialize();
+    void recordLists(const std::vector<WorkItem>& work, bool listsOnly = false);
 
     int mFullScanSteps = 0;            // upcoming steps that must examine every hot leaf
     std::vector<Origin> mHot;          // leaves holding an over cell at the last reset()
     std::vector<Pending> mPending;     // edited regions to examine whole
     std::vector<Anchor> mChangedPrev;  // blocks changed at t-1 (phase of t-1)
     std::vector<Anchor> mChangedPrev2; // blocks changed at t-2 (phase of t)
+    // dense mode: per-anchor candidates of the next step of each phase, and which are nonzero
+    bool mDense = false;
+    AnchorIndex mIndex;
+    std::vector<uint64_t> mAcc[2];
+    std::vector<uint64_t> mTouched[2]; // bit set over mIndex's anchors
+    int mPhase = 0;                    // the phase of the last gather (record's step)
+    DenseSink mSink;
+    bool mSunk = false; // the pass got mSink: items with an index are recorded already
+    bool mIs3D = true;
+    // The last steps' work lists, kept instead of changed lists while the pass records (mLazy of
+    // them, newest first): detach() turns them into mChangedPrev/mChangedPrev2.
+    std::vector<WorkItem> mPrevWork[2];
+    int mLazy = 0;
     // scratch
+    std::vector<Anchor> mDenseRun;
     std::vector<Anchor> mStreams[8];
     std::vector<Anchor> mExtras;                          // hot leaves (sorted)
     std::vector<Anchor> mPendingAnchors;                  // edited regions: runs in layer order

@@ -72,8 +72,9 @@ struct LeafTable::Impl {
     };
     static constexpr uint32_t kEmpty = UINT32_MAX;
     std::vector<Entry> entries;
-    std::vector<Origin> keys; // entries[i]'s anchor
-    std::vector<Slot> slots;  // open addressing, linear probing, at most half full
+    std::vector<Origin> keys;       // entries[i]'s anchor, in layer order
+    std::vector<uint32_t> up, down; // AnchorIndex's neighbours, 8 per entry
+    std::vector<Slot> slots;        // open addressing, linear probing, at most half full
     int shift = 64;
 
     size_t slotOf(int32_t x, int32_t y, int32_t z) const
@@ -132,6 +133,17 @@ size_t LeafTable::size() const
     return mValid ? mImpl->keys.size() : 0;
 }
 
+AnchorIndex LeafTable::anchorIndex() const
+{
+    AnchorIndex ix;
+    if (!mValid) return ix;
+    ix.keys = mImpl->keys.data();
+    ix.up = mImpl->up.data();
+    ix.down = mImpl->down.data();
+    ix.size = mImpl->keys.size();
+    return ix;
+}
+
 void LeafTable::clear()
 {
     mValid = false;
@@ -152,8 +164,22 @@ void LeafTable::build(MassTree& tree, const ObsTree* obstacles, bool is3D)
         for (int d = 0; d < nd; ++d)
             t.insert(Origin(o.x() + ((d & 1) ? 8 : 0), o.y() + ((d & 2) ? 8 : 0), o.z() + ((d & 4) ? 8 : 0)));
     }
-    if (t.slots.empty()) t.resize(64); // find() needs a free slot
+    // Entries in layer order (Candidates' dense mode relies on it), then the hash re-filled.
+    std::sort(t.keys.begin(), t.keys.end(), [](const Origin& a, const Origin& b) { return layerLess(a, b); });
+    t.resize(std::max<size_t>(64, t.slots.size())); // find() needs a free slot
     t.entries.resize(t.keys.size());
+    t.up.assign(8 * t.keys.size(), kNoEntry);
+    t.down.assign(8 * t.keys.size(), kNoEntry);
+    for (size_t k = 0; k < t.keys.size(); ++k) {
+        const Origin& a = t.keys[k];
+        for (int s = 0; s < nd; ++s) {
+            const int dx = (s & 1) ? 8 : 0, dy = (s & 2) ? 8 : 0, dz = (s & 4) ? 8 : 0;
+            const Impl::Entry* u = t.find(Origin(a.x() + dx, a.y() + dy, a.z() + dz));
+            const Impl::Entry* d = t.find(Origin(a.x() - dx, a.y() - dy, a.z() - dz));
+            if (u) t.up[8 * k + s] = uint32_t(u - t.entries.data());
+            if (d) t.down[8 * k + s] = uint32_t(d - t.entries.data());
+        }
+    }
     openvdb::tree::ValueAccessor<MassTree, false> acc(tree);
     std::optional<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
     if (obstacles) oacc.emplace(*obstacles);
@@ -445,8 +471,9 @@ struct LeafSet {
 // Out of line on purpose: inlined into the block loop it costs more than the call (register
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
-__attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint64_t mask, MassAcc& acc,
-                                           ObsAcc* oacc, bool reuse, const LeafTable::Impl* table)
+__attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint32_t entry, uint64_t mask,
+                                           MassAcc& acc, ObsAcc* oacc, bool reuse,
+                                           const LeafTable::Impl* table)
 {
     const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
@@ -454,7 +481,8 @@ __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, ui
     for (int w = 1; w < kCount; ++w)
         if (mask & t.needLeaf[D3][w]) need |= 1u << w;
     if (table) {
-        if (const LeafTable::Impl::Entry* e = table->find(anchor)) {
+        if (const LeafTable::Impl::Entry* e =
+                entry != kNoEntry ? &table->entries[entry] : table->find(anchor)) {
             // Every slot is copied (those no block of the mask reads are harmless); the flags cover
             // only the slots it reads, as below.
             for (int w = 0; w < kCount; ++w) {
@@ -550,6 +578,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
     LeafSet ls;
+    const DenseSink* sink = dryRun ? nullptr : in.sink;
     // Totals in locals (registers), added to tot once at the end.
     uint64_t examined = 0, overTc = 0, updated = 0;
     int64_t overloadDelta = 0, maxWritten = 0;
@@ -558,7 +587,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
-        fetchLeaves<D3, P>(ls, w.anchor, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
+        fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;
@@ -762,6 +791,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             itemChanged |= uint64_t(1) << b;
         }
         w.changed = itemChanged;
+        if (itemChanged && sink && w.entry != kNoEntry) sinkChanges<P, D3>(*sink, w.entry, itemChanged);
     }
     tot.examined += examined;
     tot.overTc += overTc;

@@ -10,7 +10,9 @@
 // disjoint, so tasks write disjoint voxels. Values are written only into leaves that exist (a block
 // whose result would flow into a missing leaf is deferred, see PassTotals::deferred); missing leaves
 // read as 0. The only shared words are leaf value masks (active bits), set with an atomic OR when a
-// cell goes from 0 to positive. Nothing in the pass changes the tree's topology.
+// cell goes from 0 to positive, and, in dense mode, the candidates' accumulators and bit sets
+// (PassInput::sink: atomic ORs, except the item's own same-phase entry, which no other item
+// writes). Nothing in the pass changes the tree's topology.
 #pragma once
 
 #include "Candidates.h"
@@ -32,10 +34,12 @@ using ObsTree = Tree543<openvdb::ValueMask>;
 /// The flat leaf table: for every anchor that can reach a mass leaf (a leaf's origin, or one of its
 /// upper neighbours' origins), the 8 leaves leafOrigin(anchor, w) its blocks read (null when
 /// missing) and their obstacle leaves or tiles, found by one hash lookup instead of up to 16
-/// accessor probes per anchor. It describes the topology of both trees when build() ran: the
-/// Automaton clears it whenever a leaf may have been created or removed, or the obstacles changed
-/// (edits, resync, grown leaves), and rebuilds it before a later pass. An anchor the table does not
-/// hold (all its mass leaves missing) is fetched through accessors, as without a table.
+/// accessor probes per anchor (none when the work item carries its index). Entries are numbered in
+/// layer order (Candidates' dense mode scans them in that order). It describes the topology of both
+/// trees when build() ran: the Automaton clears it whenever a leaf may have been created or removed,
+/// or the obstacles changed (edits, resync, grown leaves), and rebuilds it before a later pass. An
+/// anchor the table does not hold (all its mass leaves missing) is fetched through accessors, as
+/// without a table.
 class LeafTable {
 public:
     LeafTable();
@@ -49,6 +53,8 @@ public:
     void clear();
     bool valid() const { return mValid; }
     size_t size() const; // anchors indexed
+    /// The anchors in layer order with their neighbours; WorkItem::entry indexes them (valid tables).
+    AnchorIndex anchorIndex() const;
 
     struct Impl;
     const Impl* impl() const { return mImpl.get(); }
@@ -70,6 +76,7 @@ struct PassInput {
     bool dryRun = false;              // check for overflow only, write nothing
     bool portable = false;            // no SIMD: the plain C++ path (tests compare both on the same grids)
     const LeafTable* table = nullptr; // valid leaf table of both trees, or null: accessors
+    const DenseSink* sink = nullptr;  // dense candidates: record each item's changes here (not in dry runs)
 };
 
 /// What one range of the pass accumulates.

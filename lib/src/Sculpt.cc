@@ -137,10 +137,11 @@ template <typename TreeT> constexpr uint64_t upperNodeBytes()
 /// Per clay leaf, the automaton's lists (lib/src/Automaton.cc): the leaf in hotLeaves (a Coord, 12
 /// bytes), its changed-block masks of the last two steps (two Anchors of 24 bytes), up to 10
 /// candidate contributions (the leaf's own, 8 from dilating the other phase, an edited region) and
-/// one WorkItem (32 bytes); doubled for vector growth. Plus the kernel's leaf table (Kernel.h):
-/// an entry of 264 bytes and up to 64 bytes of hash slots per anchor that reaches a leaf, at most 8
-/// anchors per leaf (isolated leaves; compact clay has ~1.3).
-constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 32) + 8 * (264 + 64);
+/// one WorkItem (40 bytes); doubled for vector growth. Plus the kernel's leaf table (Kernel.h):
+/// an entry of 264 bytes, up to 64 bytes of hash slots, 64 bytes of neighbour indices and the
+/// candidates' two 8-byte accumulators (Candidates.h, dense mode) per anchor that reaches a leaf, at
+/// most 8 anchors per leaf (isolated leaves; compact clay has ~1.3).
+constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 40) + 8 * (264 + 64 + 64 + 16);
 /// Per tool voxel: its cell in Sculptor's toolCells (12 bytes, doubled for growth) and, for clay
 /// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
