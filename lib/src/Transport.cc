@@ -112,6 +112,29 @@ template <typename Fn> double chunkedSum(size_t n, bool serial, std::vector<doub
     return s;
 }
 
+/// @a out = the indices i in [0, n) with keep(i), ascending: counted and written per fixed chunk (parallel
+/// unless serial), the same list on any thread count. @a counts is scratch.
+template <typename Pred>
+void selectIndices(size_t n, bool serial, std::vector<size_t>& counts, std::vector<int32_t>& out, const Pred& keep)
+{
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    counts.assign(chunks + 1, 0);
+    forChunks(n, serial, [&](size_t lo, size_t hi) {
+        size_t c = 0;
+        for (size_t i = lo; i < hi; ++i)
+            c += keep(i) ? 1 : 0;
+        counts[lo / kChunk + 1] = c;
+    });
+    for (size_t c = 0; c < chunks; ++c)
+        counts[c + 1] += counts[c];
+    out.resize(counts[chunks]);
+    forChunks(n, serial, [&](size_t lo, size_t hi) {
+        size_t o = counts[lo / kChunk];
+        for (size_t i = lo; i < hi; ++i)
+            if (keep(i)) out[o++] = int32_t(i);
+    });
+}
+
 /// Aggregation multigrid, the preconditioner of the large solves. Level 0 is the solve's matrix (a
 /// graph Laplacian, Dirichlet faces on the diagonal: SPD). Each coarser level aggregates the
 /// face-connected rows of one 2x2x2 block of the level below (2x2 in 2D: z is 0) and takes the
@@ -164,9 +187,12 @@ public:
     {
         Level& f = mLevels.front();
         Level& c = mLevels[1];
-        std::vector<int32_t> agg(n, -1);
-        for (size_t k = 0; k < n; ++k)
-            if (oldRow[k] >= 0) agg[k] = f.agg[size_t(oldRow[k])];
+        std::vector<int32_t>& agg = mScratch;
+        agg.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
+        });
         setMatrix(f, n, nb, diag);
         colour(f, coord);
         f.agg.swap(agg);
@@ -185,7 +211,7 @@ public:
     void apply(const std::vector<double>& in, std::vector<double>& out)
     {
         Level& f = mLevels.front();
-        f.r = in;
+        forChunks(f.n, mSerial, [&](size_t lo, size_t hi) { std::copy(&in[lo], &in[0] + hi, &f.r[lo]); });
         cycle(0);
         out.swap(f.x);
         f.x.resize(f.n);
@@ -210,38 +236,54 @@ private:
     };
 
     /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
-    static void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
     {
         f.n = n;
         f.start.resize(n + 1);
-        f.col.clear();
-        f.col.reserve(n * 6);
-        for (size_t k = 0; k < n; ++k) {
-            f.start[k] = uint32_t(f.col.size());
-            for (int d = 0; d < 6; ++d)
-                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
-        }
-        f.start[n] = uint32_t(f.col.size());
-        f.diag = diag;
+        // Row lengths per fixed chunk, their offsets in chunk order, then the columns: in parallel.
+        const size_t chunks = (n + kChunk - 1) / kChunk;
+        mCounts.assign(chunks + 1, 0);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t c = 0;
+            for (size_t k = lo; k < hi; ++k)
+                for (int d = 0; d < 6; ++d)
+                    c += nb[k * 6 + size_t(d)] >= 0 ? 1 : 0;
+            mCounts[lo / kChunk + 1] = c;
+        });
+        for (size_t c = 0; c < chunks; ++c)
+            mCounts[c + 1] += mCounts[c];
+        f.col.resize(mCounts[chunks]);
+        f.diag.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t e = mCounts[lo / kChunk];
+            for (size_t k = lo; k < hi; ++k) {
+                f.start[k] = uint32_t(e);
+                for (int d = 0; d < 6; ++d)
+                    if (nb[k * 6 + size_t(d)] >= 0) f.col[e++] = nb[k * 6 + size_t(d)];
+                f.diag[k] = diag[k];
+            }
+        });
+        f.start[n] = uint32_t(mCounts[chunks]);
         finish(f);
     }
 
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
     /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
-    static void colour(Level& l, const std::vector<Coord>& block)
+    void colour(Level& l, const std::vector<Coord>& block)
     {
-        l.colour[0].clear();
-        l.colour[1].clear();
-        for (size_t k = 0; k < l.n; ++k)
-            l.colour[size_t((block[k].x() + block[k].y() + block[k].z()) & 1)].push_back(int32_t(k));
+        for (int c = 0; c < 2; ++c)
+            selectIndices(l.n, mSerial, mCounts, l.colour[c],
+                          [&](size_t k) { return ((block[k].x() + block[k].y() + block[k].z()) & 1) == c; });
     }
 
-    static void finish(Level& l)
+    void finish(Level& l)
     {
         l.invDiag.resize(l.n);
-        for (size_t k = 0; k < l.n; ++k)
-            l.invDiag[k] = 1.0 / l.diag[k];
+        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                l.invDiag[k] = 1.0 / l.diag[k];
+        });
         l.x.assign(l.n, 0.0);
         l.r.assign(l.n, 0.0);
         l.t.assign(l.n, 0.0);
@@ -430,8 +472,10 @@ private:
         }
         // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
         // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t.
-        std::fill(l.x.begin(), l.x.end(), 0.0);
-        std::fill(l.t.begin(), l.t.end(), 0.0);
+        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+            std::fill(&l.x[lo], &l.x[0] + hi, 0.0);
+            std::fill(&l.t[lo], &l.t[0] + hi, 0.0);
+        });
         {
             const std::vector<int32_t>& red = l.colour[0];
             forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
@@ -470,6 +514,8 @@ private:
 
     bool mSerial;
     std::vector<Level> mLevels;
+    std::vector<size_t> mCounts; ///< scratch: per-chunk counts
+    std::vector<int32_t> mScratch;
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
@@ -479,8 +525,9 @@ public:
     Solver(Automaton& a, const GlobalTransportOptions& o)
         : mA(a), mOpt(o), mTc(a.options().rule.threshold), mDirs(a.options().dimensions == 2 ? 4 : 6),
           mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr),
-          mSerial(o.threads == 1)
+          mSerial(o.threads == 1), mMassAcc(mMass)
     {
+        if (mObs) mObsAcc = std::make_unique<openvdb::tree::ValueAccessor<const openvdb::MaskTree>>(*mObs);
     }
 
     GlobalTransportReport run()
@@ -544,7 +591,8 @@ public:
     }
 
 private:
-    bool isObstacle(const Coord& c) const { return mObs && mObs->isValueOn(c); }
+    bool isObstacle(const Coord& c) const { return mObsAcc && mObsAcc->isValueOn(c); }
+    int32_t massAt(const Coord& c) const { return mMassAcc.getValue(c); }
 
     /// The overload fits where it is: every over cell has room within two face steps, and the
     /// distinct cells with room within two steps of the over cells hold all of it (compressible
@@ -590,7 +638,7 @@ private:
     {
         const int32_t i = int32_t(mCells.size());
         mCells.push_back(c);
-        mM0.push_back(mMass.getValue(c));
+        mM0.push_back(massAt(c));
         mKind.push_back(kind);
         mNb.insert(mNb.end(), 6, -1);
         mHasNb.push_back(0);
@@ -609,7 +657,7 @@ private:
             int32_t j = indexOf(q);
             if (j < 0) {
                 if (isObstacle(q)) continue;
-                if (mMass.getValue(q) >= mTc) {
+                if (massAt(q) >= mTc) {
                     cut = true; // beyond the reach: a wall for this solve
                     continue;
                 }
@@ -645,7 +693,7 @@ private:
             const int64_t di = mDist[size_t(i)];
             for (int d = 0; d < mDirs; ++d) {
                 const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                if (indexOf(q) >= 0 || isObstacle(q) || mMass.getValue(q) < mTc) continue;
+                if (indexOf(q) >= 0 || isObstacle(q) || massAt(q) < mTc) continue;
                 if (reach > 0 && di >= reach) continue; // linking below marks the cut
                 const int32_t j = addCell(q, kUnknown);
                 mDist.resize(mCells.size(), 0);
@@ -710,16 +758,17 @@ private:
         // Rows: the unknown cells in coordinate order (x, y, z), the natural order for the
         // incomplete Cholesky factor.
         // (The multigrid needs no particular order: its rows stay in cell order, the flood's.)
-        mRow.assign(mCells.size(), -1);
-        mRowCell.clear();
-        for (size_t i = 0; i < mCells.size(); ++i)
-            if (mKind[i] == kUnknown) mRowCell.push_back(int32_t(i));
+        mRow.resize(mCells.size());
+        forChunks(mCells.size(), mSerial, [&](size_t lo, size_t hi) { std::fill(&mRow[lo], &mRow[0] + hi, -1); });
+        selectIndices(mCells.size(), mSerial, mCounts, mRowCell, [&](size_t i) { return mKind[i] == kUnknown; });
         const bool multigrid = mRowCell.size() >= mOpt.multigridMin;
         if (!multigrid)
             std::sort(mRowCell.begin(), mRowCell.end(),
                       [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; });
-        for (size_t k = 0; k < mRowCell.size(); ++k)
-            mRow[size_t(mRowCell[k])] = int32_t(k);
+        forChunks(mRowCell.size(), mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                mRow[size_t(mRowCell[k])] = int32_t(k);
+        });
         const size_t n = mRowCell.size();
         mSolveMg = nullptr;
         if (n == 0) return;
@@ -749,29 +798,25 @@ private:
         if (multigrid) {
             // The hierarchy of the frame's first round serves the later rounds (rebind) while they
             // keep most of its rows; rows are in cell order, and cells are only ever appended.
-            size_t kept = 0;
-            std::vector<int32_t> oldRow(n, -1);
-            if (mMg && mMg->levels() >= 2)
-                for (size_t k = 0; k < n; ++k) {
-                    const size_t i = size_t(mRowCell[k]);
-                    if (i < mMgRow.size() && mMgRow[i] >= 0) {
-                        oldRow[k] = mMgRow[i];
-                        ++kept;
-                    }
-                }
-            if (kept >= n - n / 20 && kept > 0) {
-                std::vector<Coord> coord(n);
-                for (size_t k = 0; k < n; ++k)
-                    coord[k] = mCells[size_t(mRowCell[k])];
+            std::vector<int32_t>& oldRow = mOldRow;
+            std::vector<Coord>& coord = mCoord;
+            oldRow.resize(n);
+            coord.resize(n);
+            const bool reusable = mMg && mMg->levels() >= 2;
+            std::vector<double> partial;
+            const double kept = chunkedSum(n, mSerial, partial, [&](size_t k) {
+                const size_t i = size_t(mRowCell[k]);
+                coord[k] = mCells[i];
+                oldRow[k] = reusable && i < mMgRow.size() ? mMgRow[i] : -1;
+                return oldRow[k] >= 0 ? 1.0 : 0.0;
+            });
+            if (reusable && kept >= double(n - n / 20) && kept > 0) {
                 mMg->rebind(n, nb, diag, coord, oldRow);
                 ++rep.multigridReused;
             } else {
-                std::vector<Coord> coord(n);
-                for (size_t k = 0; k < n; ++k)
-                    coord[k] = mCells[size_t(mRowCell[k])];
-                mMg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
+                mMg = std::make_unique<Multigrid>(n, nb, diag, coord, mSerial);
             }
-            mMgRow = mRow;
+            mMgRow.swap(mRow); // mRow is rebuilt by the next set-up
             mSolveMg = mMg.get();
         }
         if (!multigrid) {
@@ -923,8 +968,10 @@ private:
             });
             ++rep.iterations;
         }
-        for (size_t k = 0; k < n; ++k)
-            mP[size_t(mRowCell[k])] = x[k];
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                mP[size_t(mRowCell[k])] = x[k];
+        });
     }
 
     void activeSet(GlobalTransportReport& rep)
@@ -942,7 +989,8 @@ private:
             same = false;
             // Inflow of each Dirichlet cell: sum of p over its unknown faces.
             const size_t cells = mCells.size();
-            std::vector<double> inflow(cells, 0.0);
+            std::vector<double>& inflow = mInflow;
+            inflow.assign(cells, 0.0);
             for (size_t i = 0; i < cells; ++i) {
                 if (mKind[i] != kUnknown) continue;
                 for (int d = 0; d < mDirs; ++d) {
@@ -950,13 +998,13 @@ private:
                     if (j >= 0 && mKind[size_t(j)] == kDirichlet) inflow[size_t(j)] += mP[i];
                 }
             }
-            std::vector<int32_t> joined, left;
-            for (size_t i = 0; i < cells; ++i) {
-                if (mKind[i] == kDirichlet && inflow[i] > double(mTc - mM0[i]) + 0.5)
-                    joined.push_back(int32_t(i));
-                else if (mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0)
-                    left.push_back(int32_t(i));
-            }
+            std::vector<int32_t>& joined = mJoined;
+            std::vector<int32_t>& left = mLeft;
+            selectIndices(cells, mSerial, mCounts, joined, [&](size_t i) {
+                return mKind[i] == kDirichlet && inflow[i] > double(mTc - mM0[i]) + 0.5;
+            });
+            selectIndices(cells, mSerial, mCounts, left,
+                          [&](size_t i) { return mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0; });
             if (joined.empty() && left.empty()) {
                 if (tight) break;
                 tight = same = true;
@@ -1131,6 +1179,9 @@ private:
     const openvdb::Int32Tree& mMass;
     const openvdb::MaskTree* mObs;
     bool mSerial;
+    /// Cached lookups for the serial flood and linking (the tree's own getValue starts at the root).
+    mutable openvdb::tree::ValueAccessor<const openvdb::Int32Tree> mMassAcc;
+    std::unique_ptr<openvdb::tree::ValueAccessor<const openvdb::MaskTree>> mObsAcc;
 
     std::unique_ptr<openvdb::Int32Tree> mIndex;
     std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> mIndexAcc;
@@ -1141,6 +1192,10 @@ private:
     std::vector<int64_t> mDist;
     std::vector<double> mP;
     std::vector<int32_t> mRow, mRowCell;
+    std::vector<int32_t> mOldRow, mJoined, mLeft; ///< per-round scratch, kept (no fresh pages each round)
+    std::vector<Coord> mCoord;
+    std::vector<double> mInflow;
+    std::vector<size_t> mCounts;
     std::vector<int32_t> mSolveNb;                 ///< the solve's matrix: 6 neighbour rows per row, -1: none
     std::vector<double> mSolveDiag, mSolveB, mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
     std::vector<double> mWork[6];                  ///< the solve's x, r, z, p, q, w
