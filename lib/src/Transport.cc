@@ -156,23 +156,26 @@ public:
     static constexpr int kCoarseSweeps = 8;
     static constexpr double kOmega = 0.8, kAlpha = 1.5;
 
-    /// @a nb: 6 per row, the neighbour row or -1; @a diag: the diagonal; @a coord: the rows' cells.
-    Multigrid(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-              std::vector<Coord> coord, bool serial)
-        : mSerial(serial)
+    /// Builds the hierarchy of a matrix. @a nb: 6 per row, the neighbour row or -1; @a diag: the
+    /// diagonal; @a coord: the rows' cells. The levels' arrays of an earlier build are reused (their
+    /// capacity kept: no fresh pages each frame); nothing of the earlier build is read.
+    void build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+               const std::vector<Coord>& coord, bool serial)
     {
-        mLevels.emplace_back();
-        Level& f = mLevels.back();
+        mSerial = serial;
+        mUsed = 1;
+        if (mLevels.empty()) mLevels.emplace_back();
+        Level& f = mLevels.front();
         setMatrix(f, n, nb, diag);
-        f.block = std::move(coord);
-        while (mLevels.back().n > kDense && mLevels.size() < 24 && coarsen()) {
+        f.block.assign(coord.begin(), coord.end());
+        while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
         }
-        Level& c = mLevels.back();
+        Level& c = mLevels[mUsed - 1];
+        c.agg.clear();
+        c.dense = false;
         if (c.n <= kDense) factor(c);
-        for (Level& l : mLevels)
-            colour(l, l.block);
-        // Not through f: coarsen() grows mLevels, which may move the finest level.
-        std::vector<Coord>().swap(mLevels.front().block);
+        for (size_t li = 0; li < mUsed; ++li)
+            colour(mLevels[li], mLevels[li].block);
     }
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
@@ -183,8 +186,9 @@ public:
     /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
     /// still in fixed chunks and row order. Needs levels() >= 2.
     void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                const std::vector<Coord>& coord, const std::vector<int32_t>& oldRow)
+                const std::vector<Coord>& coord, const std::vector<int32_t>& oldRow, bool serial)
     {
+        mSerial = serial;
         Level& f = mLevels.front();
         Level& c = mLevels[1];
         std::vector<int32_t>& agg = mScratch;
@@ -217,7 +221,7 @@ public:
         f.x.resize(f.n);
     }
 
-    size_t levels() const { return mLevels.size(); }
+    size_t levels() const { return mUsed; }
 
 private:
     struct Level {
@@ -301,9 +305,11 @@ private:
     /// Builds the next level; false if it would not shrink the problem enough.
     bool coarsen()
     {
-        Level& f = mLevels.back();
+        if (mUsed == mLevels.size()) mLevels.emplace_back(); // before taking references into mLevels
+        Level& f = mLevels[mUsed - 1];
         const size_t n = f.n;
-        std::vector<int32_t> parent(n);
+        std::vector<int32_t>& parent = mScratch;
+        parent.resize(n);
         std::iota(parent.begin(), parent.end(), 0);
         auto half = [](const Coord& c) { return Coord(c.x() >> 1, c.y() >> 1, c.z() >> 1); };
         for (size_t k = 0; k < n; ++k) {
@@ -325,8 +331,10 @@ private:
             f.agg.clear();
             return false;
         }
-        Level c;
+        Level& c = mLevels[mUsed];
         c.n = size_t(nc);
+        c.col.clear();
+        c.w.clear();
         c.memberStart.assign(c.n + 1, 0);
         for (size_t k = 0; k < n; ++k)
             ++c.memberStart[size_t(f.agg[k]) + 1];
@@ -373,7 +381,7 @@ private:
         }
         c.start[c.n] = uint32_t(c.col.size());
         finish(c);
-        mLevels.push_back(std::move(c));
+        ++mUsed;
         return true;
     }
 
@@ -444,7 +452,7 @@ private:
     void cycle(size_t li)
     {
         Level& l = mLevels[li];
-        if (li + 1 == mLevels.size()) {
+        if (li + 1 == mUsed) {
             forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
                 for (size_t k = lo; k < hi; ++k)
                     l.x[k] = kOmega * l.invDiag[k] * l.r[k];
@@ -512,20 +520,38 @@ private:
         halfSweep(l, 0);
     }
 
-    bool mSerial;
-    std::vector<Level> mLevels;
+    bool mSerial = true;
+    std::vector<Level> mLevels; ///< the first mUsed are this build's; the rest keep their arrays for reuse
+    size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
     std::vector<int32_t> mScratch;
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
 
+/// The layer's arrays, kept from one call to the next by a GlobalTransportWorkspace (cleared, never
+/// read before written: a call's result does not depend on them).
+struct Buffers {
+    std::vector<Coord> cells, coord;
+    std::vector<int64_t> m0, dist, cur;
+    std::vector<uint8_t> kind, hasNb, seen;
+    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part;
+    std::vector<double> p, inflow, solveDiag, solveB, inv;
+    std::vector<double> work[6];
+    std::vector<size_t> counts, changed;
+    std::unique_ptr<Multigrid> mg;
+};
+
 class Solver {
 public:
-    Solver(Automaton& a, const GlobalTransportOptions& o)
+    Solver(Automaton& a, const GlobalTransportOptions& o, Buffers& b, bool keep)
         : mA(a), mOpt(o), mTc(a.options().rule.threshold), mDirs(a.options().dimensions == 2 ? 4 : 6),
           mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr),
-          mSerial(o.threads == 1), mMassAcc(mMass)
+          mSerial(o.threads == 1), mMassAcc(mMass), mB(b), mKeep(keep), mCells(b.cells), mM0(b.m0),
+          mKind(b.kind), mHasNb(b.hasNb), mNb(b.nb), mDist(b.dist), mP(b.p), mRow(b.row), mRowCell(b.rowCell),
+          mOldRow(b.oldRow), mJoined(b.joined), mLeft(b.left), mCoord(b.coord), mInflow(b.inflow),
+          mCounts(b.counts), mSolveNb(b.solveNb), mSolveDiag(b.solveDiag), mSolveB(b.solveB), mInv(b.inv),
+          mWork(b.work), mMgRow(b.mgRow)
     {
         if (mObs) mObsAcc = std::make_unique<openvdb::tree::ValueAccessor<const openvdb::MaskTree>>(*mObs);
     }
@@ -712,8 +738,9 @@ private:
     void freezeSingular(bool cut, bool& grow, GlobalTransportReport& rep)
     {
         grow = false;
-        std::vector<uint8_t> seen(mCells.size(), 0);
-        std::vector<int32_t> part;
+        std::vector<uint8_t>& seen = mB.seen;
+        seen.assign(mCells.size(), 0);
+        std::vector<int32_t>& part = mB.part;
         for (size_t s = 0; s < mCells.size(); ++s) {
             if (mKind[s] != kUnknown || seen[s]) continue;
             part.clear();
@@ -802,7 +829,9 @@ private:
             std::vector<Coord>& coord = mCoord;
             oldRow.resize(n);
             coord.resize(n);
-            const bool reusable = mMg && mMg->levels() >= 2;
+            if (!mB.mg) mB.mg = std::make_unique<Multigrid>();
+            Multigrid& mg = *mB.mg;
+            const bool reusable = mMgBuilt && mg.levels() >= 2;
             std::vector<double> partial;
             const double kept = chunkedSum(n, mSerial, partial, [&](size_t k) {
                 const size_t i = size_t(mRowCell[k]);
@@ -811,13 +840,14 @@ private:
                 return oldRow[k] >= 0 ? 1.0 : 0.0;
             });
             if (reusable && kept >= double(n - n / 20) && kept > 0) {
-                mMg->rebind(n, nb, diag, coord, oldRow);
+                mg.rebind(n, nb, diag, coord, oldRow, mSerial);
                 ++rep.multigridReused;
             } else {
-                mMg = std::make_unique<Multigrid>(n, nb, diag, coord, mSerial);
+                mg.build(n, nb, diag, coord, mSerial);
+                mMgBuilt = true;
             }
             mMgRow.swap(mRow); // mRow is rebuilt by the next set-up
-            mSolveMg = mMg.get();
+            mSolveMg = &mg;
         }
         if (!multigrid) {
             std::vector<double> piv(n);
@@ -977,7 +1007,7 @@ private:
     void activeSet(GlobalTransportReport& rep)
     {
         mP.assign(mCells.size(), 0.0);
-        mMg.reset();
+        mMgBuilt = false;
         mMgRow.clear();
         // Rounds solve loosely until the set stops changing, then once to the tolerance (and on
         // if that still changes it): the early rounds only locate the rim.
@@ -1069,8 +1099,10 @@ private:
     /// Frees what the solves kept across rounds (hierarchy, matrix, work vectors).
     void releaseSolver()
     {
-        mMg.reset();
+        mMgBuilt = false;
         mSolveMg = nullptr;
+        if (mKeep) return;
+        mB.mg.reset();
         std::vector<int32_t>().swap(mMgRow);
         std::vector<int32_t>().swap(mSolveNb);
         std::vector<double>().swap(mSolveDiag);
@@ -1082,9 +1114,8 @@ private:
 
     void route(GlobalTransportReport& rep)
     {
-        std::vector<int32_t> order;
-        for (size_t i = 0; i < mCells.size(); ++i)
-            if (mKind[i] == kUnknown) order.push_back(int32_t(i));
+        std::vector<int32_t>& order = mB.order;
+        selectIndices(mCells.size(), mSerial, mCounts, order, [&](size_t i) { return mKind[i] == kUnknown; });
         // A strict total order (ties by coordinate): the parallel sort gives the same sequence.
         const auto higher = [&](int32_t a, int32_t b) {
             if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
@@ -1094,7 +1125,8 @@ private:
             std::sort(order.begin(), order.end(), higher);
         else
             tbb::parallel_sort(order.begin(), order.end(), higher);
-        std::vector<int64_t> cur(mM0.begin(), mM0.end());
+        std::vector<int64_t>& cur = mB.cur;
+        cur.assign(mM0.begin(), mM0.end());
         struct Out {
             int32_t j;
             double w;
@@ -1150,7 +1182,8 @@ private:
         }
         // Write the changed cells.
         Box region;
-        std::vector<size_t> changed;
+        std::vector<size_t>& changed = mB.changed;
+        changed.clear();
         for (size_t i = 0; i < mCells.size(); ++i) {
             if (cur[i] == mM0[i]) continue;
             if (cur[i] > INT32_MAX) return; // cannot happen for Tc-sized inflows; refuse to write
@@ -1183,30 +1216,45 @@ private:
     mutable openvdb::tree::ValueAccessor<const openvdb::Int32Tree> mMassAcc;
     std::unique_ptr<openvdb::tree::ValueAccessor<const openvdb::MaskTree>> mObsAcc;
 
+    Buffers& mB;
+    bool mKeep; ///< the buffers outlive the call (a workspace): not freed before the routing
     std::unique_ptr<openvdb::Int32Tree> mIndex;
     std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> mIndexAcc;
-    std::vector<Coord> mCells;
-    std::vector<int64_t> mM0;
-    std::vector<uint8_t> mKind, mHasNb;
-    std::vector<int32_t> mNb; ///< 6 per cell: neighbour cell, or -1 (wall)
-    std::vector<int64_t> mDist;
-    std::vector<double> mP;
-    std::vector<int32_t> mRow, mRowCell;
-    std::vector<int32_t> mOldRow, mJoined, mLeft; ///< per-round scratch, kept (no fresh pages each round)
-    std::vector<Coord> mCoord;
-    std::vector<double> mInflow;
-    std::vector<size_t> mCounts;
-    std::vector<int32_t> mSolveNb;                 ///< the solve's matrix: 6 neighbour rows per row, -1: none
-    std::vector<double> mSolveDiag, mSolveB, mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
-    std::vector<double> mWork[6];                  ///< the solve's x, r, z, p, q, w
-    Multigrid* mSolveMg = nullptr;                 ///< the solve's multigrid (mMg), or none: MIC(0)
-    std::unique_ptr<Multigrid> mMg; ///< the round's multigrid hierarchy, kept for the next rounds
-    std::vector<int32_t> mMgRow;    ///< cell -> its row in mMg's finest level, or -1
+    std::vector<Coord>& mCells;
+    std::vector<int64_t>& mM0;
+    std::vector<uint8_t>&mKind, &mHasNb;
+    std::vector<int32_t>& mNb; ///< 6 per cell: neighbour cell, or -1 (wall)
+    std::vector<int64_t>& mDist;
+    std::vector<double>& mP;
+    std::vector<int32_t>&mRow, &mRowCell;
+    std::vector<int32_t>&mOldRow, &mJoined, &mLeft; ///< per-round scratch, kept (no fresh pages each round)
+    std::vector<Coord>& mCoord;
+    std::vector<double>& mInflow;
+    std::vector<size_t>& mCounts;
+    std::vector<int32_t>& mSolveNb;                   ///< the solve's matrix: 6 neighbour rows per row, -1: none
+    std::vector<double>&mSolveDiag, &mSolveB, &mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
+    std::vector<double> (&mWork)[6];                  ///< the solve's x, r, z, p, q, w
+    Multigrid* mSolveMg = nullptr; ///< the solve's multigrid (mB.mg), or none: MIC(0)
+    bool mMgBuilt = false;         ///< mB.mg holds this call's hierarchy (of an earlier round)
+    std::vector<int32_t>& mMgRow;  ///< cell -> its row in mB.mg's finest level, or -1
 };
 
 } // namespace
 
-GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& optionsIn)
+struct GlobalTransportWorkspace::Impl {
+    Buffers buffers;
+};
+
+GlobalTransportWorkspace::GlobalTransportWorkspace() = default;
+GlobalTransportWorkspace::~GlobalTransportWorkspace() = default;
+
+void GlobalTransportWorkspace::release()
+{
+    mImpl.reset();
+}
+
+GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& optionsIn,
+                                        GlobalTransportWorkspace* workspace)
 {
     if (optionsIn.reach < 0)
         throw Error("transportGlobally: reach must be >= 0, got " + std::to_string(optionsIn.reach));
@@ -1218,8 +1266,17 @@ GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransp
     const auto t0 = std::chrono::steady_clock::now();
     GlobalTransportReport rep;
     const GlobalTransportOptions& options = optionsIn;
+    std::unique_ptr<GlobalTransportWorkspace::Impl> local;
+    GlobalTransportWorkspace::Impl* impl = nullptr;
+    if (workspace) {
+        if (!workspace->mImpl) workspace->mImpl = std::make_unique<GlobalTransportWorkspace::Impl>();
+        impl = workspace->mImpl.get();
+    } else {
+        local = std::make_unique<GlobalTransportWorkspace::Impl>();
+        impl = local.get();
+    }
     auto body = [&] {
-        Solver s(automaton, options);
+        Solver s(automaton, options, impl->buffers, workspace != nullptr);
         rep = s.run();
     };
     if (options.threads > 1) {
