@@ -534,8 +534,8 @@ enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
 struct Buffers {
     std::vector<Coord> cells, coord;
     std::vector<int64_t> m0, dist, cur;
-    std::vector<uint8_t> kind, hasNb, seen;
-    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part;
+    std::vector<uint8_t> kind, hasNb, seen, compRoom;
+    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part, comp, compParent;
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
     std::vector<size_t> counts, changed;
@@ -600,10 +600,10 @@ public:
         int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;
         for (;;) {
             bool cut = false;
-            build(seeds, reach, cut);
+            const bool allRoom = build(seeds, reach, cut);
             rep.reach = reach;
             bool grow = false;
-            freezeSingular(cut, grow, rep);
+            if (!allRoom) freezeSingular(cut, grow, rep);
             if (grow) {
                 reach = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
                 continue;
@@ -695,8 +695,23 @@ private:
         return cut;
     }
 
-    void build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
+    /// Builds the domain. Returns false if some connected part of it may have no room (then
+    /// freezeSingular() must look); true if every part has a Dirichlet face. The parts are found
+    /// during the flood (each seed starts one; two meet when a cell finds a face neighbour already
+    /// in the domain: union-find), so the common case needs no second pass over the domain.
+    bool build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
     {
+        std::vector<int32_t>& comp = mB.comp;
+        std::vector<int32_t>& parent = mB.compParent;
+        comp.clear();
+        parent.clear();
+        auto find = [&](int32_t a) {
+            while (parent[size_t(a)] != a) {
+                parent[size_t(a)] = parent[size_t(parent[size_t(a)])];
+                a = parent[size_t(a)];
+            }
+            return a;
+        };
         mCells.clear();
         mM0.clear();
         mKind.clear();
@@ -710,6 +725,8 @@ private:
             if (indexOf(s) >= 0) continue;
             queue.push_back(addCell(s, kUnknown));
             mDist.push_back(0);
+            comp.push_back(int32_t(parent.size()));
+            parent.push_back(int32_t(parent.size()));
         }
         cut = false;
         while (!queue.empty()) {
@@ -719,18 +736,39 @@ private:
             const int64_t di = mDist[size_t(i)];
             for (int d = 0; d < mDirs; ++d) {
                 const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                if (indexOf(q) >= 0 || isObstacle(q) || massAt(q) < mTc) continue;
+                const int32_t k = indexOf(q);
+                if (k >= 0) { // every face between two domain cells is seen here, from one side
+                    const int32_t a = find(comp[size_t(i)]), b = find(comp[size_t(k)]);
+                    if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+                    continue;
+                }
+                if (isObstacle(q) || massAt(q) < mTc) continue;
                 if (reach > 0 && di >= reach) continue; // linking below marks the cut
                 const int32_t j = addCell(q, kUnknown);
                 mDist.resize(mCells.size(), 0);
                 mDist[size_t(j)] = di + 1;
+                comp.push_back(comp[size_t(i)]);
                 queue.push_back(j);
             }
         }
-        // Link every unknown cell (Dirichlet cells appear here, after the unknowns).
+        // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
+        // the parts that touch a Dirichlet cell.
+        std::vector<uint8_t>& room = mB.compRoom;
+        room.assign(parent.size(), 0);
         const size_t unknowns = mCells.size();
-        for (size_t i = 0; i < unknowns; ++i)
+        for (size_t i = 0; i < unknowns; ++i) {
             cut |= link(int32_t(i));
+            for (int d = 0; d < mDirs; ++d) {
+                const int32_t j = mNb[i * 6 + size_t(d)];
+                if (j >= 0 && mKind[size_t(j)] == kDirichlet) {
+                    room[size_t(find(comp[i]))] = 1;
+                    break;
+                }
+            }
+        }
+        for (size_t r = 0; r < parent.size(); ++r)
+            if (parent[r] == int32_t(r) && !room[r]) return false;
+        return true;
     }
 
     /// Finds connected parts of the unknowns with no Dirichlet face. @a grow: one was cut by the
