@@ -538,7 +538,8 @@ struct Buffers {
     std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part, comp, compParent;
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
-    std::vector<size_t> counts, changed;
+    std::vector<size_t> counts;
+    std::vector<int32_t> changed;
     std::unique_ptr<Multigrid> mg;
 };
 
@@ -690,6 +691,10 @@ private:
                 j = addCell(q, kDirichlet);
             }
             mNb[size_t(i) * 6 + size_t(d)] = j;
+            // The link back (kDir pairs opposite directions: d ^ 1): a Dirichlet cell then knows
+            // its unknown neighbours, and its inflow is gathered in parallel. Only the unknown
+            // cells' links are read otherwise, and a cell's own link() writes the same values.
+            mNb[size_t(j) * 6 + size_t(d ^ 1)] = i;
         }
         mHasNb[size_t(i)] = 1;
         return cut;
@@ -1057,15 +1062,29 @@ private:
             same = false;
             // Inflow of each Dirichlet cell: sum of p over its unknown faces.
             const size_t cells = mCells.size();
+            // Gathered (the links back) in parallel; added in increasing cell order, as a serial
+            // scatter over the unknown cells would: the same value on any thread count.
             std::vector<double>& inflow = mInflow;
-            inflow.assign(cells, 0.0);
-            for (size_t i = 0; i < cells; ++i) {
-                if (mKind[i] != kUnknown) continue;
-                for (int d = 0; d < mDirs; ++d) {
-                    const int32_t j = mNb[i * 6 + size_t(d)];
-                    if (j >= 0 && mKind[size_t(j)] == kDirichlet) inflow[size_t(j)] += mP[i];
+            inflow.resize(cells);
+            forChunks(cells, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t j = lo; j < hi; ++j) {
+                    inflow[j] = 0.0;
+                    if (mKind[j] != kDirichlet) continue;
+                    int32_t from[6];
+                    int n = 0;
+                    for (int d = 0; d < mDirs; ++d) {
+                        const int32_t i = mNb[j * 6 + size_t(d)];
+                        if (i >= 0 && mKind[size_t(i)] == kUnknown) from[n++] = i;
+                    }
+                    for (int k = 1; k < n; ++k) // insertion sort: at most 6
+                        for (int m = k; m > 0 && from[m - 1] > from[m]; --m)
+                            std::swap(from[m - 1], from[m]);
+                    double sum = 0.0;
+                    for (int k = 0; k < n; ++k)
+                        sum += mP[size_t(from[k])];
+                    inflow[j] = sum;
                 }
-            }
+            });
             std::vector<int32_t>& joined = mJoined;
             std::vector<int32_t>& left = mLeft;
             selectIndices(cells, mSerial, mCounts, joined, [&](size_t i) {
@@ -1109,9 +1128,7 @@ private:
                     }
                 }
             }
-            // Newly joined cells need their neighbours (new Dirichlet cells).
-            for (size_t i = 0; i < mCells.size(); ++i)
-                if (mKind[i] == kUnknown && !mHasNb[i]) link(int32_t(i));
+            // (Every joined cell was linked above, new Dirichlet cells included.)
             mP.resize(mCells.size(), 0.0);
             // A part can lose its last Dirichlet face only by a neighbour joining: if every joined
             // cell touches a Dirichlet cell, each part holding one has room, and so has every part
@@ -1219,21 +1236,33 @@ private:
             cur[i] -= x;
         }
         // Write the changed cells.
-        Box region;
-        std::vector<size_t>& changed = mB.changed;
-        changed.clear();
-        for (size_t i = 0; i < mCells.size(); ++i) {
-            if (cur[i] == mM0[i]) continue;
-            if (cur[i] > INT32_MAX) return; // cannot happen for Tc-sized inflows; refuse to write
-            changed.push_back(i);
-            const Coord& c = mCells[i];
-            region = unite(region, Box{{{c.x(), c.y(), c.z()}}, {{c.x(), c.y(), c.z()}}});
-        }
+        std::vector<int32_t>& changed = mB.changed;
+        selectIndices(mCells.size(), mSerial, mCounts, changed, [&](size_t i) { return cur[i] != mM0[i]; });
         if (changed.empty()) return;
+        // Their bounds, per fixed chunk, united in chunk order.
+        const size_t chunks = (changed.size() + kChunk - 1) / kChunk;
+        std::vector<Box> boxes(chunks);
+        std::vector<uint8_t> tooBig(chunks, 0);
+        forChunks(changed.size(), mSerial, [&](size_t lo, size_t hi) {
+            Coord mn = mCells[size_t(changed[lo])], mx = mn;
+            for (size_t k = lo; k < hi; ++k) {
+                const size_t i = size_t(changed[k]);
+                if (cur[i] > INT32_MAX) tooBig[lo / kChunk] = 1;
+                mn.minComponent(mCells[i]);
+                mx.maxComponent(mCells[i]);
+            }
+            boxes[lo / kChunk] = Box{{{mn.x(), mn.y(), mn.z()}}, {{mx.x(), mx.y(), mx.z()}}};
+        });
+        Box region;
+        for (size_t c = 0; c < chunks; ++c) {
+            if (tooBig[c]) return; // cannot happen for Tc-sized inflows; refuse to write
+            region = unite(region, boxes[c]);
+        }
         rep.region = region;
         mA.edit(region, [&](MassGrid& grid) {
             auto acc = grid.getAccessor();
-            for (size_t i : changed) {
+            for (const int32_t k : changed) {
+                const size_t i = size_t(k);
                 if (cur[i] > 0)
                     acc.setValueOn(mCells[i], int32_t(cur[i]));
                 else
