@@ -539,7 +539,9 @@ struct Buffers {
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
     std::vector<size_t> counts;
-    std::vector<int32_t> changed;
+    std::vector<int32_t> changed, outJ; ///< the routing's changed cells; its gathered lower neighbours
+    std::vector<double> outW, outSum;
+    std::vector<uint8_t> outN;
     std::unique_ptr<Multigrid> mg;
 };
 
@@ -1182,58 +1184,80 @@ private:
             tbb::parallel_sort(order.begin(), order.end(), higher);
         std::vector<int64_t>& cur = mB.cur;
         cur.assign(mM0.begin(), mM0.end());
-        struct Out {
-            int32_t j;
-            double w;
-            int64_t share;
-            double frac;
-            int d;
-        };
-        std::vector<Out> outs;
-        for (int32_t ii : order) {
-            const size_t i = size_t(ii);
-            const int64_t x = cur[i] - mTc;
-            if (x <= 0) continue;
-            const double pi = mP[i];
-            outs.clear();
-            double W = 0;
-            for (int d = 0; d < mDirs; ++d) {
-                const int32_t j = mNb[i * 6 + size_t(d)];
-                if (j < 0) continue;
-                const uint8_t k = mKind[size_t(j)];
-                if (k == kFrozen) continue;
-                const double pj = k == kUnknown ? mP[size_t(j)] : 0.0;
-                if (!(pj < pi)) continue;
-                outs.push_back(Out{j, pi - pj, 0, 0, d});
-                W += pi - pj;
-            }
-            if (outs.empty() || !(W > 0)) continue;
-            int64_t given = 0;
-            for (Out& o : outs) {
-                const double exact = double(x) * (o.w / W);
-                o.share = int64_t(std::floor(exact));
-                o.frac = exact - double(o.share);
-                given += o.share;
-            }
-            std::sort(outs.begin(), outs.end(), [](const Out& a, const Out& b) {
-                if (a.frac != b.frac) return a.frac > b.frac;
-                return a.d < b.d;
-            });
-            int64_t left = x - given;
-            for (size_t k = 0; left != 0 && !outs.empty(); k = (k + 1) % outs.size()) {
-                if (left > 0) {
-                    ++outs[k].share;
-                    --left;
-                } else if (outs[k].share > 0) {
-                    --outs[k].share;
-                    ++left;
+        // Each cell's lower neighbours and drops depend on p and the kinds only, not on what the
+        // cells above sent: gathered in parallel, a block of the order at a time (bounded memory,
+        // read in order by the serial pass, which then only splits the integer excess).
+        constexpr size_t kBlock = size_t(1) << 16;
+        std::vector<int32_t>& outJ = mB.outJ;
+        std::vector<double>& outW = mB.outW;
+        std::vector<double>& outSum = mB.outSum;
+        std::vector<uint8_t>& outN = mB.outN;
+        const size_t block = std::min(kBlock, order.size());
+        outJ.resize(block * 6);
+        outW.resize(block * 6);
+        outSum.resize(block);
+        outN.resize(block);
+        for (size_t t0 = 0; t0 < order.size(); t0 += kBlock) {
+            const size_t t1 = std::min(order.size(), t0 + kBlock);
+            forChunks(t1 - t0, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t u = lo; u < hi; ++u) {
+                    const size_t i = size_t(order[t0 + u]);
+                    const double pi = mP[i];
+                    double W = 0;
+                    uint8_t n = 0;
+                    for (int d = 0; d < mDirs; ++d) {
+                        const int32_t j = mNb[i * 6 + size_t(d)];
+                        if (j < 0) continue;
+                        const uint8_t k = mKind[size_t(j)];
+                        if (k == kFrozen) continue;
+                        const double pj = k == kUnknown ? mP[size_t(j)] : 0.0;
+                        if (!(pj < pi)) continue;
+                        outJ[u * 6 + n] = j;
+                        outW[u * 6 + n] = pi - pj;
+                        ++n;
+                        W += pi - pj;
+                    }
+                    outN[u] = n;
+                    outSum[u] = W;
                 }
+            });
+            for (size_t u = 0; u < t1 - t0; ++u) {
+                const size_t i = size_t(order[t0 + u]);
+                const int64_t x = cur[i] - mTc;
+                if (x <= 0) continue;
+                const int n = outN[u];
+                const double W = outSum[u];
+                if (n == 0 || !(W > 0)) continue;
+                int64_t share[6];
+                double frac[6];
+                int rank[6]; // the outs by decreasing remainder, ties in direction order
+                int64_t given = 0;
+                for (int k = 0; k < n; ++k) {
+                    const double exact = double(x) * (outW[u * 6 + size_t(k)] / W);
+                    share[k] = int64_t(std::floor(exact));
+                    frac[k] = exact - double(share[k]);
+                    given += share[k];
+                    int m = k;
+                    for (; m > 0 && frac[rank[m - 1]] < frac[k]; --m)
+                        rank[m] = rank[m - 1];
+                    rank[m] = k;
+                }
+                int64_t left = x - given;
+                for (int k = 0; left != 0; k = (k + 1) % n) {
+                    if (left > 0) {
+                        ++share[rank[k]];
+                        --left;
+                    } else if (share[rank[k]] > 0) {
+                        --share[rank[k]];
+                        ++left;
+                    }
+                }
+                for (int k = 0; k < n; ++k) {
+                    cur[size_t(outJ[u * 6 + size_t(k)])] += share[k];
+                    rep.massMoved += share[k];
+                }
+                cur[i] -= x;
             }
-            for (const Out& o : outs) {
-                cur[size_t(o.j)] += o.share;
-                rep.massMoved += o.share;
-            }
-            cur[i] -= x;
         }
         // Write the changed cells.
         std::vector<int32_t>& changed = mB.changed;
