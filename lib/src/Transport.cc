@@ -539,7 +539,7 @@ struct Buffers {
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
     std::vector<size_t> counts;
-    std::vector<int32_t> changed, outJ; ///< the routing's changed cells; its gathered lower neighbours
+    std::vector<int32_t> changed, outJ, byCoord; ///< the routing's changed cells; its gathered lower neighbours
     std::vector<double> outW, outSum;
     std::vector<uint8_t> outN;
     std::unique_ptr<Multigrid> mg;
@@ -712,6 +712,8 @@ private:
         std::vector<int32_t>& parent = mB.compParent;
         comp.clear();
         parent.clear();
+        mB.byCoord.clear();
+        mByCoordCells = 0;
         auto find = [&](int32_t a) {
             while (parent[size_t(a)] != a) {
                 parent[size_t(a)] = parent[size_t(parent[size_t(a)])];
@@ -834,9 +836,22 @@ private:
         forChunks(mCells.size(), mSerial, [&](size_t lo, size_t hi) { std::fill(&mRow[lo], &mRow[0] + hi, -1); });
         selectIndices(mCells.size(), mSerial, mCounts, mRowCell, [&](size_t i) { return mKind[i] == kUnknown; });
         const bool multigrid = mRowCell.size() >= mOpt.multigridMin;
-        if (!multigrid)
-            std::sort(mRowCell.begin(), mRowCell.end(),
-                      [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; });
+        if (!multigrid) {
+            // Every cell in coordinate order, kept across the rounds: only the cells added since
+            // the last round are sorted and merged in (the rounds add a thin rim); the rows are the
+            // unknown cells of that list (the same order a sort of the rows would give).
+            std::vector<int32_t>& byCoord = mB.byCoord;
+            const auto before = [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; };
+            const size_t old = byCoord.size();
+            for (size_t i = mByCoordCells; i < mCells.size(); ++i)
+                byCoord.push_back(int32_t(i));
+            std::sort(byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
+            std::inplace_merge(byCoord.begin(), byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
+            mByCoordCells = mCells.size();
+            mRowCell.clear();
+            for (const int32_t i : byCoord)
+                if (mKind[size_t(i)] == kUnknown) mRowCell.push_back(i);
+        }
         forChunks(mRowCell.size(), mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k)
                 mRow[size_t(mRowCell[k])] = int32_t(k);
@@ -1327,6 +1342,7 @@ private:
     std::vector<double> (&mWork)[6];                  ///< the solve's x, r, z, p, q, w
     Multigrid* mSolveMg = nullptr; ///< the solve's multigrid (mB.mg), or none: MIC(0)
     bool mMgBuilt = false;         ///< mB.mg holds this call's hierarchy (of an earlier round)
+    size_t mByCoordCells = 0;      ///< mB.byCoord lists the cells [0, this) (MIC(0)'s row order)
     std::vector<int32_t>& mMgRow;  ///< cell -> its row in mB.mg's finest level, or -1
 };
 
