@@ -284,13 +284,15 @@ private:
     void finish(Level& l)
     {
         l.invDiag.resize(l.n);
+        l.x.resize(l.n);
+        l.r.resize(l.n);
+        l.t.resize(l.n);
         forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
-            for (size_t k = lo; k < hi; ++k)
+            for (size_t k = lo; k < hi; ++k) {
                 l.invDiag[k] = 1.0 / l.diag[k];
+                l.x[k] = l.r[k] = l.t[k] = 0.0;
+            }
         });
-        l.x.assign(l.n, 0.0);
-        l.r.assign(l.n, 0.0);
-        l.t.assign(l.n, 0.0);
     }
 
     static int32_t find(std::vector<int32_t>& parent, int32_t a)
