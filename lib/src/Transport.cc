@@ -12,8 +12,9 @@
 //    obstacle) are Dirichlet cells B (p = 0). Obstacles, and full cells beyond the reach, are
 //    walls: their faces are left out of the Laplacian (no flux).
 // 2. Singular parts. A connected part of D with no face on B has no room: its Poisson problem is
-//    singular. If it was cut by the reach, the reach doubles and the domain is rebuilt (up to the
-//    whole body); otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
+//    singular (the flood finds the parts and which touch B; only then are they searched). If it
+//    was cut by the reach, the reach doubles and the domain is rebuilt (up to the whole body);
+//    otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
 // 3. Active set. Solve L p = m - Tc on D (L: for each non-wall face, p_i - p_j; p_j = 0 on B) by
 //    preconditioned conjugate gradients, warm-started from the previous round, to roundTolerance
 //    while the set changes, then to tolerance (the early rounds only locate the rim): MIC(0) for small
@@ -32,10 +33,13 @@
 //    automaton's cleanup.
 // 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
 //
-// Determinism. The flood, the cell numbering and the routing are serial and ordered (the routing's
-// sort is parallel, on a strict total order: one result). The solver's set-up and vector operations
-// run over fixed chunks of rows; dot products add per-chunk partial sums in chunk order. Every floating-point
-// operation is therefore the same on any thread count, and so is the potential, the routing and the result.
+// Determinism. The flood, the cell numbering and the routing's integer split are serial and ordered
+// (the routing's sort is parallel, on a strict total order: one result; its gathering of each cell's
+// lower neighbours is parallel and exact). Every array lives in a GlobalTransportWorkspace when the
+// caller keeps one (the Sculptor does: no fresh pages each frame); none is read before written. The
+// solver's set-up and vector operations run over fixed chunks of rows; dot products add per-chunk
+// partial sums in chunk order. Every floating-point operation is therefore the same on any thread
+// count, and so is the potential, the routing and the result.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
 // bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
@@ -115,7 +119,8 @@ template <typename Fn> double chunkedSum(size_t n, bool serial, std::vector<doub
 /// @a out = the indices i in [0, n) with keep(i), ascending: counted and written per fixed chunk (parallel
 /// unless serial), the same list on any thread count. @a counts is scratch.
 template <typename Pred>
-void selectIndices(size_t n, bool serial, std::vector<size_t>& counts, std::vector<int32_t>& out, const Pred& keep)
+void selectIndices(size_t n, bool serial, std::vector<size_t>& counts, std::vector<int32_t>& out,
+                   const Pred& keep)
 {
     const size_t chunks = (n + kChunk - 1) / kChunk;
     counts.assign(chunks + 1, 0);
@@ -537,11 +542,13 @@ struct Buffers {
     std::vector<Coord> cells, coord;
     std::vector<int64_t> m0, dist, cur;
     std::vector<uint8_t> kind, hasNb, seen, compRoom;
-    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part, comp, compParent;
+    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part;
+    std::vector<int32_t> comp, compParent; ///< the flood's parts: each unknown cell's, union-find
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
     std::vector<size_t> counts;
-    std::vector<int32_t> changed, outJ, byCoord; ///< the routing's changed cells; its gathered lower neighbours
+    std::vector<int32_t> byCoord;       ///< every cell in coordinate order (MIC(0)'s rows)
+    std::vector<int32_t> changed, outJ; ///< the routing's changed cells; its gathered lower neighbours
     std::vector<double> outW, outSum;
     std::vector<uint8_t> outN;
     std::unique_ptr<Multigrid> mg;
@@ -835,8 +842,10 @@ private:
         // incomplete Cholesky factor.
         // (The multigrid needs no particular order: its rows stay in cell order, the flood's.)
         mRow.resize(mCells.size());
-        forChunks(mCells.size(), mSerial, [&](size_t lo, size_t hi) { std::fill(&mRow[lo], &mRow[0] + hi, -1); });
-        selectIndices(mCells.size(), mSerial, mCounts, mRowCell, [&](size_t i) { return mKind[i] == kUnknown; });
+        forChunks(mCells.size(), mSerial,
+                  [&](size_t lo, size_t hi) { std::fill(&mRow[lo], &mRow[0] + hi, -1); });
+        selectIndices(mCells.size(), mSerial, mCounts, mRowCell,
+                      [&](size_t i) { return mKind[i] == kUnknown; });
         const bool multigrid = mRowCell.size() >= mOpt.multigridMin;
         if (!multigrid) {
             // Every cell in coordinate order, kept across the rounds: only the cells added since
@@ -1339,13 +1348,13 @@ private:
     std::vector<Coord>& mCoord;
     std::vector<double>& mInflow;
     std::vector<size_t>& mCounts;
-    std::vector<int32_t>& mSolveNb;                   ///< the solve's matrix: 6 neighbour rows per row, -1: none
+    std::vector<int32_t>& mSolveNb; ///< the solve's matrix: 6 neighbour rows per row, -1: none
     std::vector<double>&mSolveDiag, &mSolveB, &mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
-    std::vector<double> (&mWork)[6];                  ///< the solve's x, r, z, p, q, w
-    Multigrid* mSolveMg = nullptr; ///< the solve's multigrid (mB.mg), or none: MIC(0)
-    bool mMgBuilt = false;         ///< mB.mg holds this call's hierarchy (of an earlier round)
-    size_t mByCoordCells = 0;      ///< mB.byCoord lists the cells [0, this) (MIC(0)'s row order)
-    std::vector<int32_t>& mMgRow;  ///< cell -> its row in mB.mg's finest level, or -1
+    std::vector<double> (&mWork)[6];                 ///< the solve's x, r, z, p, q, w
+    Multigrid* mSolveMg = nullptr;                   ///< the solve's multigrid (mB.mg), or none: MIC(0)
+    bool mMgBuilt = false;        ///< mB.mg holds this call's hierarchy (of an earlier round)
+    size_t mByCoordCells = 0;     ///< mB.byCoord lists the cells [0, this) (MIC(0)'s row order)
+    std::vector<int32_t>& mMgRow; ///< cell -> its row in mB.mg's finest level, or -1
 };
 
 } // namespace
