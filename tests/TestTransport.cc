@@ -468,6 +468,72 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
     }
 }
 
+TEST_F(TransportTest, AWorkspaceKeptAcrossCallsChangesNoResult)
+{
+    // One workspace serves calls of different sizes, dimensions, preconditioners and thread counts
+    // in turn (large 3D multigrid, small 2D MIC(0), a smaller 3D multigrid, the large one again):
+    // each result and report is that of a call with no workspace (its arrays are never read stale).
+    struct Case {
+        int dims, top, threads;
+        uint64_t multigridMin;
+    };
+    const Case cases[] = {{3, 23, 2, 0}, {2, 40, 1, 20000}, {3, 15, 3, 0}, {3, 23, 1, 0}, {2, 95, 2, 0}};
+    auto make = [](const Case& c) {
+        MassGridPtr g = c.dims == 3 ? block(box(0, 0, 0, c.top, c.top, c.top), 1000)
+                                    : block(box(0, 0, 0, c.top, c.top, 0), 1000);
+        for (int x = 4; x < c.top - 4; x += 2)
+            g->tree().setValue(openvdb::Coord(x, c.top / 2, c.dims == 3 ? c.top / 2 : 0),
+                               c.dims == 3 ? 400000 : 60000);
+        return g;
+    };
+    GlobalTransportWorkspace ws;
+    for (const Case& c : cases) {
+        GlobalTransportOptions go;
+        go.threads = c.threads;
+        go.multigridMin = c.multigridMin;
+        MassGridPtr fresh = make(c), reused = make(c);
+        const int64_t m0 = totalMass(*fresh);
+        Automaton a(fresh, opts(c.dims, c.threads)), b(reused, opts(c.dims, c.threads));
+        const GlobalTransportReport ra = transportGlobally(a, go);
+        const GlobalTransportReport rb = transportGlobally(b, go, &ws);
+        EXPECT_GT(ra.massMoved, 0) << c.dims << "D " << c.top;
+        EXPECT_EQ(contentHash(*reused), contentHash(*fresh)) << c.dims << "D " << c.top;
+        EXPECT_EQ(rb.solves, ra.solves);
+        EXPECT_EQ(rb.iterations, ra.iterations);
+        EXPECT_EQ(rb.multigridReused, ra.multigridReused);
+        EXPECT_EQ(rb.massMoved, ra.massMoved);
+        EXPECT_EQ(totalMass(*reused), m0);
+    }
+    ws.release();
+    MassGridPtr g = make(cases[0]);
+    Automaton a(g, opts(3, 1));
+    EXPECT_GT(transportGlobally(a, {}, &ws).massMoved, 0); // usable again after release()
+}
+
+TEST_F(TransportTest, ALargeSolveRoutesInBlocksIdenticallyOnAnyThreadCount)
+{
+    // Over 65,536 unknowns: the routing gathers its lower neighbours a block of 65,536 cells at a
+    // time, the inflow and the set-up run on many chunks. Same result on 1, 2, 3 and 8 threads,
+    // mass exact, the overload gone.
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        MassGridPtr g = block(box(0, 0, 0, 43, 43, 43), 1000);
+        for (int x = 2; x < 42; x += 3)
+            g->tree().setValue(openvdb::Coord(x, 21, 21), 300000);
+        const int64_t m0 = totalMass(*g);
+        Automaton a(g, opts(3, threads));
+        GlobalTransportOptions go;
+        go.threads = threads;
+        const GlobalTransportReport r = transportGlobally(a, go);
+        EXPECT_GT(r.unknowns, 65536u);
+        EXPECT_EQ(totalMass(*g), m0);
+        EXPECT_LT(r.overloadAfter * 10000, r.overloadBefore);
+        const uint64_t h = contentHash(*g);
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads << " threads";
+    }
+}
+
 TEST_F(TransportTest, WalledInClayIsReportedAsNoRoomAndLeftAsItIs)
 {
     // Chamber A (x 0..3) is full and overloaded; chamber B (x 5..8) is empty; an obstacle wall

@@ -692,6 +692,7 @@ struct Sculptor::Impl {
     MassGridPtr mass;
     openvdb::MaskGrid::Ptr obstacles; ///< static obstacles only
     std::unique_ptr<Automaton> automaton;
+    GlobalTransportWorkspace transportWorkspace; ///< the global layer's arrays, reused frame to frame
     uint64_t frame = 0;                    ///< frames finished
     bool open = false;                     ///< frame + 1 is pushed and partly settled
     uint64_t openSteps = 0;                ///< its settling steps so far
@@ -1140,7 +1141,7 @@ FrameReport Sculptor::runFrame()
             // The overload the push made lies in its region: look for it there only (a frame
             // costs the tool's region, not the model's size).
             if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
-            rep.transport = transportGlobally(*im.automaton, go);
+            rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         }
         im.open = true;
         im.openSteps = 0;

@@ -12,8 +12,9 @@
 //    obstacle) are Dirichlet cells B (p = 0). Obstacles, and full cells beyond the reach, are
 //    walls: their faces are left out of the Laplacian (no flux).
 // 2. Singular parts. A connected part of D with no face on B has no room: its Poisson problem is
-//    singular. If it was cut by the reach, the reach doubles and the domain is rebuilt (up to the
-//    whole body); otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
+//    singular (the flood finds the parts and which touch B; only then are they searched). If it
+//    was cut by the reach, the reach doubles and the domain is rebuilt (up to the whole body);
+//    otherwise it is walled in: its clay stays (NoRoom), it leaves the solve.
 // 3. Active set. Solve L p = m - Tc on D (L: for each non-wall face, p_i - p_j; p_j = 0 on B) by
 //    preconditioned conjugate gradients, warm-started from the previous round, to roundTolerance
 //    while the set changes, then to tolerance (the early rounds only locate the rim): MIC(0) for small
@@ -32,10 +33,13 @@
 //    automaton's cleanup.
 // 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
 //
-// Determinism. The flood, the cell numbering and the routing are serial and ordered (the routing's
-// sort is parallel, on a strict total order: one result). The solver's set-up and vector operations
-// run over fixed chunks of rows; dot products add per-chunk partial sums in chunk order. Every floating-point
-// operation is therefore the same on any thread count, and so is the potential, the routing and the result.
+// Determinism. The flood, the cell numbering and the routing's integer split are serial and ordered
+// (the routing's sort is parallel, on a strict total order: one result; its gathering of each cell's
+// lower neighbours is parallel and exact). Every array lives in a GlobalTransportWorkspace when the
+// caller keeps one (the Sculptor does: no fresh pages each frame); none is read before written. The
+// solver's set-up and vector operations run over fixed chunks of rows; dot products add per-chunk
+// partial sums in chunk order. Every floating-point operation is therefore the same on any thread
+// count, and so is the potential, the routing and the result.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
 // bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
@@ -112,6 +116,30 @@ template <typename Fn> double chunkedSum(size_t n, bool serial, std::vector<doub
     return s;
 }
 
+/// @a out = the indices i in [0, n) with keep(i), ascending: counted and written per fixed chunk (parallel
+/// unless serial), the same list on any thread count. @a counts is scratch.
+template <typename Pred>
+void selectIndices(size_t n, bool serial, std::vector<size_t>& counts, std::vector<int32_t>& out,
+                   const Pred& keep)
+{
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    counts.assign(chunks + 1, 0);
+    forChunks(n, serial, [&](size_t lo, size_t hi) {
+        size_t c = 0;
+        for (size_t i = lo; i < hi; ++i)
+            c += keep(i) ? 1 : 0;
+        counts[lo / kChunk + 1] = c;
+    });
+    for (size_t c = 0; c < chunks; ++c)
+        counts[c + 1] += counts[c];
+    out.resize(counts[chunks]);
+    forChunks(n, serial, [&](size_t lo, size_t hi) {
+        size_t o = counts[lo / kChunk];
+        for (size_t i = lo; i < hi; ++i)
+            if (keep(i)) out[o++] = int32_t(i);
+    });
+}
+
 /// Aggregation multigrid, the preconditioner of the large solves. Level 0 is the solve's matrix (a
 /// graph Laplacian, Dirichlet faces on the diagonal: SPD). Each coarser level aggregates the
 /// face-connected rows of one 2x2x2 block of the level below (2x2 in 2D: z is 0) and takes the
@@ -133,23 +161,26 @@ public:
     static constexpr int kCoarseSweeps = 8;
     static constexpr double kOmega = 0.8, kAlpha = 1.5;
 
-    /// @a nb: 6 per row, the neighbour row or -1; @a diag: the diagonal; @a coord: the rows' cells.
-    Multigrid(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-              std::vector<Coord> coord, bool serial)
-        : mSerial(serial)
+    /// Builds the hierarchy of a matrix. @a nb: 6 per row, the neighbour row or -1; @a diag: the
+    /// diagonal; @a coord: the rows' cells. The levels' arrays of an earlier build are reused (their
+    /// capacity kept: no fresh pages each frame); nothing of the earlier build is read.
+    void build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+               const std::vector<Coord>& coord, bool serial)
     {
-        mLevels.emplace_back();
-        Level& f = mLevels.back();
+        mSerial = serial;
+        mUsed = 1;
+        if (mLevels.empty()) mLevels.emplace_back();
+        Level& f = mLevels.front();
         setMatrix(f, n, nb, diag);
-        f.block = std::move(coord);
-        while (mLevels.back().n > kDense && mLevels.size() < 24 && coarsen()) {
+        f.block.assign(coord.begin(), coord.end());
+        while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
         }
-        Level& c = mLevels.back();
+        Level& c = mLevels[mUsed - 1];
+        c.agg.clear();
+        c.dense = false;
         if (c.n <= kDense) factor(c);
-        for (Level& l : mLevels)
-            colour(l, l.block);
-        // Not through f: coarsen() grows mLevels, which may move the finest level.
-        std::vector<Coord>().swap(mLevels.front().block);
+        for (size_t li = 0; li < mUsed; ++li)
+            colour(mLevels[li], mLevels[li].block);
     }
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
@@ -160,13 +191,17 @@ public:
     /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
     /// still in fixed chunks and row order. Needs levels() >= 2.
     void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                const std::vector<Coord>& coord, const std::vector<int32_t>& oldRow)
+                const std::vector<Coord>& coord, const std::vector<int32_t>& oldRow, bool serial)
     {
+        mSerial = serial;
         Level& f = mLevels.front();
         Level& c = mLevels[1];
-        std::vector<int32_t> agg(n, -1);
-        for (size_t k = 0; k < n; ++k)
-            if (oldRow[k] >= 0) agg[k] = f.agg[size_t(oldRow[k])];
+        std::vector<int32_t>& agg = mScratch;
+        agg.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
+        });
         setMatrix(f, n, nb, diag);
         colour(f, coord);
         f.agg.swap(agg);
@@ -185,13 +220,13 @@ public:
     void apply(const std::vector<double>& in, std::vector<double>& out)
     {
         Level& f = mLevels.front();
-        f.r = in;
+        forChunks(f.n, mSerial, [&](size_t lo, size_t hi) { std::copy(&in[lo], &in[0] + hi, &f.r[lo]); });
         cycle(0);
         out.swap(f.x);
         f.x.resize(f.n);
     }
 
-    size_t levels() const { return mLevels.size(); }
+    size_t levels() const { return mUsed; }
 
 private:
     struct Level {
@@ -210,41 +245,59 @@ private:
     };
 
     /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
-    static void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
     {
         f.n = n;
         f.start.resize(n + 1);
-        f.col.clear();
-        f.col.reserve(n * 6);
-        for (size_t k = 0; k < n; ++k) {
-            f.start[k] = uint32_t(f.col.size());
-            for (int d = 0; d < 6; ++d)
-                if (nb[k * 6 + size_t(d)] >= 0) f.col.push_back(nb[k * 6 + size_t(d)]);
-        }
-        f.start[n] = uint32_t(f.col.size());
-        f.diag = diag;
+        // Row lengths per fixed chunk, their offsets in chunk order, then the columns: in parallel.
+        const size_t chunks = (n + kChunk - 1) / kChunk;
+        mCounts.assign(chunks + 1, 0);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t c = 0;
+            for (size_t k = lo; k < hi; ++k)
+                for (int d = 0; d < 6; ++d)
+                    c += nb[k * 6 + size_t(d)] >= 0 ? 1 : 0;
+            mCounts[lo / kChunk + 1] = c;
+        });
+        for (size_t c = 0; c < chunks; ++c)
+            mCounts[c + 1] += mCounts[c];
+        f.col.resize(mCounts[chunks]);
+        f.diag.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t e = mCounts[lo / kChunk];
+            for (size_t k = lo; k < hi; ++k) {
+                f.start[k] = uint32_t(e);
+                for (int d = 0; d < 6; ++d)
+                    if (nb[k * 6 + size_t(d)] >= 0) f.col[e++] = nb[k * 6 + size_t(d)];
+                f.diag[k] = diag[k];
+            }
+        });
+        f.start[n] = uint32_t(mCounts[chunks]);
         finish(f);
     }
 
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
     /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
-    static void colour(Level& l, const std::vector<Coord>& block)
+    void colour(Level& l, const std::vector<Coord>& block)
     {
-        l.colour[0].clear();
-        l.colour[1].clear();
-        for (size_t k = 0; k < l.n; ++k)
-            l.colour[size_t((block[k].x() + block[k].y() + block[k].z()) & 1)].push_back(int32_t(k));
+        for (int c = 0; c < 2; ++c)
+            selectIndices(l.n, mSerial, mCounts, l.colour[c],
+                          [&](size_t k) { return ((block[k].x() + block[k].y() + block[k].z()) & 1) == c; });
     }
 
-    static void finish(Level& l)
+    void finish(Level& l)
     {
         l.invDiag.resize(l.n);
-        for (size_t k = 0; k < l.n; ++k)
-            l.invDiag[k] = 1.0 / l.diag[k];
-        l.x.assign(l.n, 0.0);
-        l.r.assign(l.n, 0.0);
-        l.t.assign(l.n, 0.0);
+        l.x.resize(l.n);
+        l.r.resize(l.n);
+        l.t.resize(l.n);
+        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                l.invDiag[k] = 1.0 / l.diag[k];
+                l.x[k] = l.r[k] = l.t[k] = 0.0;
+            }
+        });
     }
 
     static int32_t find(std::vector<int32_t>& parent, int32_t a)
@@ -259,9 +312,11 @@ private:
     /// Builds the next level; false if it would not shrink the problem enough.
     bool coarsen()
     {
-        Level& f = mLevels.back();
+        if (mUsed == mLevels.size()) mLevels.emplace_back(); // before taking references into mLevels
+        Level& f = mLevels[mUsed - 1];
         const size_t n = f.n;
-        std::vector<int32_t> parent(n);
+        std::vector<int32_t>& parent = mScratch;
+        parent.resize(n);
         std::iota(parent.begin(), parent.end(), 0);
         auto half = [](const Coord& c) { return Coord(c.x() >> 1, c.y() >> 1, c.z() >> 1); };
         for (size_t k = 0; k < n; ++k) {
@@ -283,8 +338,10 @@ private:
             f.agg.clear();
             return false;
         }
-        Level c;
+        Level& c = mLevels[mUsed];
         c.n = size_t(nc);
+        c.col.clear();
+        c.w.clear();
         c.memberStart.assign(c.n + 1, 0);
         for (size_t k = 0; k < n; ++k)
             ++c.memberStart[size_t(f.agg[k]) + 1];
@@ -331,7 +388,7 @@ private:
         }
         c.start[c.n] = uint32_t(c.col.size());
         finish(c);
-        mLevels.push_back(std::move(c));
+        ++mUsed;
         return true;
     }
 
@@ -402,7 +459,7 @@ private:
     void cycle(size_t li)
     {
         Level& l = mLevels[li];
-        if (li + 1 == mLevels.size()) {
+        if (li + 1 == mUsed) {
             forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
                 for (size_t k = lo; k < hi; ++k)
                     l.x[k] = kOmega * l.invDiag[k] * l.r[k];
@@ -430,8 +487,10 @@ private:
         }
         // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
         // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t.
-        std::fill(l.x.begin(), l.x.end(), 0.0);
-        std::fill(l.t.begin(), l.t.end(), 0.0);
+        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+            std::fill(&l.x[lo], &l.x[0] + hi, 0.0);
+            std::fill(&l.t[lo], &l.t[0] + hi, 0.0);
+        });
         {
             const std::vector<int32_t>& red = l.colour[0];
             forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
@@ -468,19 +527,45 @@ private:
         halfSweep(l, 0);
     }
 
-    bool mSerial;
-    std::vector<Level> mLevels;
+    bool mSerial = true;
+    std::vector<Level> mLevels; ///< the first mUsed are this build's; the rest keep their arrays for reuse
+    size_t mUsed = 0;
+    std::vector<size_t> mCounts; ///< scratch: per-chunk counts
+    std::vector<int32_t> mScratch;
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
 
+/// The layer's arrays, kept from one call to the next by a GlobalTransportWorkspace (cleared, never
+/// read before written: a call's result does not depend on them).
+struct Buffers {
+    std::vector<Coord> cells, coord;
+    std::vector<int64_t> m0, dist, cur;
+    std::vector<uint8_t> kind, hasNb, seen, compRoom;
+    std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part;
+    std::vector<int32_t> comp, compParent; ///< the flood's parts: each unknown cell's, union-find
+    std::vector<double> p, inflow, solveDiag, solveB, inv;
+    std::vector<double> work[6];
+    std::vector<size_t> counts;
+    std::vector<int32_t> byCoord;       ///< every cell in coordinate order (MIC(0)'s rows)
+    std::vector<int32_t> changed, outJ; ///< the routing's changed cells; its gathered lower neighbours
+    std::vector<double> outW, outSum;
+    std::vector<uint8_t> outN;
+    std::unique_ptr<Multigrid> mg;
+};
+
 class Solver {
 public:
-    Solver(Automaton& a, const GlobalTransportOptions& o)
+    Solver(Automaton& a, const GlobalTransportOptions& o, Buffers& b, bool keep)
         : mA(a), mOpt(o), mTc(a.options().rule.threshold), mDirs(a.options().dimensions == 2 ? 4 : 6),
           mMass(a.mass()->constTree()), mObs(a.obstacles() ? &a.obstacles()->constTree() : nullptr),
-          mSerial(o.threads == 1)
+          mSerial(o.threads == 1), mMassAcc(mMass), mB(b), mKeep(keep), mCells(b.cells), mM0(b.m0),
+          mKind(b.kind), mHasNb(b.hasNb), mNb(b.nb), mDist(b.dist), mP(b.p), mRow(b.row), mRowCell(b.rowCell),
+          mOldRow(b.oldRow), mJoined(b.joined), mLeft(b.left), mCoord(b.coord), mInflow(b.inflow),
+          mCounts(b.counts), mSolveNb(b.solveNb), mSolveDiag(b.solveDiag), mSolveB(b.solveB), mInv(b.inv),
+          mWork(b.work), mMgRow(b.mgRow)
     {
+        if (mObs) mObsAcc = std::make_unique<openvdb::tree::ValueAccessor<const openvdb::MaskTree>>(*mObs);
     }
 
     GlobalTransportReport run()
@@ -527,10 +612,10 @@ public:
         int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;
         for (;;) {
             bool cut = false;
-            build(seeds, reach, cut);
+            const bool allRoom = build(seeds, reach, cut);
             rep.reach = reach;
             bool grow = false;
-            freezeSingular(cut, grow, rep);
+            if (!allRoom) freezeSingular(cut, grow, rep);
             if (grow) {
                 reach = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
                 continue;
@@ -544,7 +629,8 @@ public:
     }
 
 private:
-    bool isObstacle(const Coord& c) const { return mObs && mObs->isValueOn(c); }
+    bool isObstacle(const Coord& c) const { return mObsAcc && mObsAcc->isValueOn(c); }
+    int32_t massAt(const Coord& c) const { return mMassAcc.getValue(c); }
 
     /// The overload fits where it is: every over cell has room within two face steps, and the
     /// distinct cells with room within two steps of the over cells hold all of it (compressible
@@ -590,7 +676,7 @@ private:
     {
         const int32_t i = int32_t(mCells.size());
         mCells.push_back(c);
-        mM0.push_back(mMass.getValue(c));
+        mM0.push_back(massAt(c));
         mKind.push_back(kind);
         mNb.insert(mNb.end(), 6, -1);
         mHasNb.push_back(0);
@@ -609,20 +695,41 @@ private:
             int32_t j = indexOf(q);
             if (j < 0) {
                 if (isObstacle(q)) continue;
-                if (mMass.getValue(q) >= mTc) {
+                if (massAt(q) >= mTc) {
                     cut = true; // beyond the reach: a wall for this solve
                     continue;
                 }
                 j = addCell(q, kDirichlet);
             }
             mNb[size_t(i) * 6 + size_t(d)] = j;
+            // The link back (kDir pairs opposite directions: d ^ 1): a Dirichlet cell then knows
+            // its unknown neighbours, and its inflow is gathered in parallel. Only the unknown
+            // cells' links are read otherwise, and a cell's own link() writes the same values.
+            mNb[size_t(j) * 6 + size_t(d ^ 1)] = i;
         }
         mHasNb[size_t(i)] = 1;
         return cut;
     }
 
-    void build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
+    /// Builds the domain. Returns false if some connected part of it may have no room (then
+    /// freezeSingular() must look); true if every part has a Dirichlet face. The parts are found
+    /// during the flood (each seed starts one; two meet when a cell finds a face neighbour already
+    /// in the domain: union-find), so the common case needs no second pass over the domain.
+    bool build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
     {
+        std::vector<int32_t>& comp = mB.comp;
+        std::vector<int32_t>& parent = mB.compParent;
+        comp.clear();
+        parent.clear();
+        mB.byCoord.clear();
+        mByCoordCells = 0;
+        auto find = [&](int32_t a) {
+            while (parent[size_t(a)] != a) {
+                parent[size_t(a)] = parent[size_t(parent[size_t(a)])];
+                a = parent[size_t(a)];
+            }
+            return a;
+        };
         mCells.clear();
         mM0.clear();
         mKind.clear();
@@ -636,6 +743,8 @@ private:
             if (indexOf(s) >= 0) continue;
             queue.push_back(addCell(s, kUnknown));
             mDist.push_back(0);
+            comp.push_back(int32_t(parent.size()));
+            parent.push_back(int32_t(parent.size()));
         }
         cut = false;
         while (!queue.empty()) {
@@ -645,18 +754,39 @@ private:
             const int64_t di = mDist[size_t(i)];
             for (int d = 0; d < mDirs; ++d) {
                 const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                if (indexOf(q) >= 0 || isObstacle(q) || mMass.getValue(q) < mTc) continue;
+                const int32_t k = indexOf(q);
+                if (k >= 0) { // every face between two domain cells is seen here, from one side
+                    const int32_t a = find(comp[size_t(i)]), b = find(comp[size_t(k)]);
+                    if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+                    continue;
+                }
+                if (isObstacle(q) || massAt(q) < mTc) continue;
                 if (reach > 0 && di >= reach) continue; // linking below marks the cut
                 const int32_t j = addCell(q, kUnknown);
                 mDist.resize(mCells.size(), 0);
                 mDist[size_t(j)] = di + 1;
+                comp.push_back(comp[size_t(i)]);
                 queue.push_back(j);
             }
         }
-        // Link every unknown cell (Dirichlet cells appear here, after the unknowns).
+        // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
+        // the parts that touch a Dirichlet cell.
+        std::vector<uint8_t>& room = mB.compRoom;
+        room.assign(parent.size(), 0);
         const size_t unknowns = mCells.size();
-        for (size_t i = 0; i < unknowns; ++i)
+        for (size_t i = 0; i < unknowns; ++i) {
             cut |= link(int32_t(i));
+            for (int d = 0; d < mDirs; ++d) {
+                const int32_t j = mNb[i * 6 + size_t(d)];
+                if (j >= 0 && mKind[size_t(j)] == kDirichlet) {
+                    room[size_t(find(comp[i]))] = 1;
+                    break;
+                }
+            }
+        }
+        for (size_t r = 0; r < parent.size(); ++r)
+            if (parent[r] == int32_t(r) && !room[r]) return false;
+        return true;
     }
 
     /// Finds connected parts of the unknowns with no Dirichlet face. @a grow: one was cut by the
@@ -664,8 +794,9 @@ private:
     void freezeSingular(bool cut, bool& grow, GlobalTransportReport& rep)
     {
         grow = false;
-        std::vector<uint8_t> seen(mCells.size(), 0);
-        std::vector<int32_t> part;
+        std::vector<uint8_t>& seen = mB.seen;
+        seen.assign(mCells.size(), 0);
+        std::vector<int32_t>& part = mB.part;
         for (size_t s = 0; s < mCells.size(); ++s) {
             if (mKind[s] != kUnknown || seen[s]) continue;
             part.clear();
@@ -710,16 +841,32 @@ private:
         // Rows: the unknown cells in coordinate order (x, y, z), the natural order for the
         // incomplete Cholesky factor.
         // (The multigrid needs no particular order: its rows stay in cell order, the flood's.)
-        mRow.assign(mCells.size(), -1);
-        mRowCell.clear();
-        for (size_t i = 0; i < mCells.size(); ++i)
-            if (mKind[i] == kUnknown) mRowCell.push_back(int32_t(i));
+        mRow.resize(mCells.size());
+        forChunks(mCells.size(), mSerial,
+                  [&](size_t lo, size_t hi) { std::fill(&mRow[lo], &mRow[0] + hi, -1); });
+        selectIndices(mCells.size(), mSerial, mCounts, mRowCell,
+                      [&](size_t i) { return mKind[i] == kUnknown; });
         const bool multigrid = mRowCell.size() >= mOpt.multigridMin;
-        if (!multigrid)
-            std::sort(mRowCell.begin(), mRowCell.end(),
-                      [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; });
-        for (size_t k = 0; k < mRowCell.size(); ++k)
-            mRow[size_t(mRowCell[k])] = int32_t(k);
+        if (!multigrid) {
+            // Every cell in coordinate order, kept across the rounds: only the cells added since
+            // the last round are sorted and merged in (the rounds add a thin rim); the rows are the
+            // unknown cells of that list (the same order a sort of the rows would give).
+            std::vector<int32_t>& byCoord = mB.byCoord;
+            const auto before = [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; };
+            const size_t old = byCoord.size();
+            for (size_t i = mByCoordCells; i < mCells.size(); ++i)
+                byCoord.push_back(int32_t(i));
+            std::sort(byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
+            std::inplace_merge(byCoord.begin(), byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
+            mByCoordCells = mCells.size();
+            mRowCell.clear();
+            for (const int32_t i : byCoord)
+                if (mKind[size_t(i)] == kUnknown) mRowCell.push_back(i);
+        }
+        forChunks(mRowCell.size(), mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                mRow[size_t(mRowCell[k])] = int32_t(k);
+        });
         const size_t n = mRowCell.size();
         mSolveMg = nullptr;
         if (n == 0) return;
@@ -749,30 +896,29 @@ private:
         if (multigrid) {
             // The hierarchy of the frame's first round serves the later rounds (rebind) while they
             // keep most of its rows; rows are in cell order, and cells are only ever appended.
-            size_t kept = 0;
-            std::vector<int32_t> oldRow(n, -1);
-            if (mMg && mMg->levels() >= 2)
-                for (size_t k = 0; k < n; ++k) {
-                    const size_t i = size_t(mRowCell[k]);
-                    if (i < mMgRow.size() && mMgRow[i] >= 0) {
-                        oldRow[k] = mMgRow[i];
-                        ++kept;
-                    }
-                }
-            if (kept >= n - n / 20 && kept > 0) {
-                std::vector<Coord> coord(n);
-                for (size_t k = 0; k < n; ++k)
-                    coord[k] = mCells[size_t(mRowCell[k])];
-                mMg->rebind(n, nb, diag, coord, oldRow);
+            std::vector<int32_t>& oldRow = mOldRow;
+            std::vector<Coord>& coord = mCoord;
+            oldRow.resize(n);
+            coord.resize(n);
+            if (!mB.mg) mB.mg = std::make_unique<Multigrid>();
+            Multigrid& mg = *mB.mg;
+            const bool reusable = mMgBuilt && mg.levels() >= 2;
+            std::vector<double> partial;
+            const double kept = chunkedSum(n, mSerial, partial, [&](size_t k) {
+                const size_t i = size_t(mRowCell[k]);
+                coord[k] = mCells[i];
+                oldRow[k] = reusable && i < mMgRow.size() ? mMgRow[i] : -1;
+                return oldRow[k] >= 0 ? 1.0 : 0.0;
+            });
+            if (reusable && kept >= double(n - n / 20) && kept > 0) {
+                mg.rebind(n, nb, diag, coord, oldRow, mSerial);
                 ++rep.multigridReused;
             } else {
-                std::vector<Coord> coord(n);
-                for (size_t k = 0; k < n; ++k)
-                    coord[k] = mCells[size_t(mRowCell[k])];
-                mMg = std::make_unique<Multigrid>(n, nb, diag, std::move(coord), mSerial);
+                mg.build(n, nb, diag, coord, mSerial);
+                mMgBuilt = true;
             }
-            mMgRow = mRow;
-            mSolveMg = mMg.get();
+            mMgRow.swap(mRow); // mRow is rebuilt by the next set-up
+            mSolveMg = &mg;
         }
         if (!multigrid) {
             std::vector<double> piv(n);
@@ -923,14 +1069,16 @@ private:
             });
             ++rep.iterations;
         }
-        for (size_t k = 0; k < n; ++k)
-            mP[size_t(mRowCell[k])] = x[k];
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                mP[size_t(mRowCell[k])] = x[k];
+        });
     }
 
     void activeSet(GlobalTransportReport& rep)
     {
         mP.assign(mCells.size(), 0.0);
-        mMg.reset();
+        mMgBuilt = false;
         mMgRow.clear();
         // Rounds solve loosely until the set stops changing, then once to the tolerance (and on
         // if that still changes it): the early rounds only locate the rim.
@@ -942,21 +1090,36 @@ private:
             same = false;
             // Inflow of each Dirichlet cell: sum of p over its unknown faces.
             const size_t cells = mCells.size();
-            std::vector<double> inflow(cells, 0.0);
-            for (size_t i = 0; i < cells; ++i) {
-                if (mKind[i] != kUnknown) continue;
-                for (int d = 0; d < mDirs; ++d) {
-                    const int32_t j = mNb[i * 6 + size_t(d)];
-                    if (j >= 0 && mKind[size_t(j)] == kDirichlet) inflow[size_t(j)] += mP[i];
+            // Gathered (the links back) in parallel; added in increasing cell order, as a serial
+            // scatter over the unknown cells would: the same value on any thread count.
+            std::vector<double>& inflow = mInflow;
+            inflow.resize(cells);
+            forChunks(cells, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t j = lo; j < hi; ++j) {
+                    inflow[j] = 0.0;
+                    if (mKind[j] != kDirichlet) continue;
+                    int32_t from[6];
+                    int n = 0;
+                    for (int d = 0; d < mDirs; ++d) {
+                        const int32_t i = mNb[j * 6 + size_t(d)];
+                        if (i >= 0 && mKind[size_t(i)] == kUnknown) from[n++] = i;
+                    }
+                    for (int k = 1; k < n; ++k) // insertion sort: at most 6
+                        for (int m = k; m > 0 && from[m - 1] > from[m]; --m)
+                            std::swap(from[m - 1], from[m]);
+                    double sum = 0.0;
+                    for (int k = 0; k < n; ++k)
+                        sum += mP[size_t(from[k])];
+                    inflow[j] = sum;
                 }
-            }
-            std::vector<int32_t> joined, left;
-            for (size_t i = 0; i < cells; ++i) {
-                if (mKind[i] == kDirichlet && inflow[i] > double(mTc - mM0[i]) + 0.5)
-                    joined.push_back(int32_t(i));
-                else if (mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0)
-                    left.push_back(int32_t(i));
-            }
+            });
+            std::vector<int32_t>& joined = mJoined;
+            std::vector<int32_t>& left = mLeft;
+            selectIndices(cells, mSerial, mCounts, joined, [&](size_t i) {
+                return mKind[i] == kDirichlet && inflow[i] > double(mTc - mM0[i]) + 0.5;
+            });
+            selectIndices(cells, mSerial, mCounts, left,
+                          [&](size_t i) { return mKind[i] == kUnknown && mM0[i] < mTc && mP[i] < 0; });
             if (joined.empty() && left.empty()) {
                 if (tight) break;
                 tight = same = true;
@@ -993,9 +1156,7 @@ private:
                     }
                 }
             }
-            // Newly joined cells need their neighbours (new Dirichlet cells).
-            for (size_t i = 0; i < mCells.size(); ++i)
-                if (mKind[i] == kUnknown && !mHasNb[i]) link(int32_t(i));
+            // (Every joined cell was linked above, new Dirichlet cells included.)
             mP.resize(mCells.size(), 0.0);
             // A part can lose its last Dirichlet face only by a neighbour joining: if every joined
             // cell touches a Dirichlet cell, each part holding one has room, and so has every part
@@ -1021,8 +1182,10 @@ private:
     /// Frees what the solves kept across rounds (hierarchy, matrix, work vectors).
     void releaseSolver()
     {
-        mMg.reset();
+        mMgBuilt = false;
         mSolveMg = nullptr;
+        if (mKeep) return;
+        mB.mg.reset();
         std::vector<int32_t>().swap(mMgRow);
         std::vector<int32_t>().swap(mSolveNb);
         std::vector<double>().swap(mSolveDiag);
@@ -1034,9 +1197,8 @@ private:
 
     void route(GlobalTransportReport& rep)
     {
-        std::vector<int32_t> order;
-        for (size_t i = 0; i < mCells.size(); ++i)
-            if (mKind[i] == kUnknown) order.push_back(int32_t(i));
+        std::vector<int32_t>& order = mB.order;
+        selectIndices(mCells.size(), mSerial, mCounts, order, [&](size_t i) { return mKind[i] == kUnknown; });
         // A strict total order (ties by coordinate): the parallel sort gives the same sequence.
         const auto higher = [&](int32_t a, int32_t b) {
             if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
@@ -1046,75 +1208,111 @@ private:
             std::sort(order.begin(), order.end(), higher);
         else
             tbb::parallel_sort(order.begin(), order.end(), higher);
-        std::vector<int64_t> cur(mM0.begin(), mM0.end());
-        struct Out {
-            int32_t j;
-            double w;
-            int64_t share;
-            double frac;
-            int d;
-        };
-        std::vector<Out> outs;
-        for (int32_t ii : order) {
-            const size_t i = size_t(ii);
-            const int64_t x = cur[i] - mTc;
-            if (x <= 0) continue;
-            const double pi = mP[i];
-            outs.clear();
-            double W = 0;
-            for (int d = 0; d < mDirs; ++d) {
-                const int32_t j = mNb[i * 6 + size_t(d)];
-                if (j < 0) continue;
-                const uint8_t k = mKind[size_t(j)];
-                if (k == kFrozen) continue;
-                const double pj = k == kUnknown ? mP[size_t(j)] : 0.0;
-                if (!(pj < pi)) continue;
-                outs.push_back(Out{j, pi - pj, 0, 0, d});
-                W += pi - pj;
-            }
-            if (outs.empty() || !(W > 0)) continue;
-            int64_t given = 0;
-            for (Out& o : outs) {
-                const double exact = double(x) * (o.w / W);
-                o.share = int64_t(std::floor(exact));
-                o.frac = exact - double(o.share);
-                given += o.share;
-            }
-            std::sort(outs.begin(), outs.end(), [](const Out& a, const Out& b) {
-                if (a.frac != b.frac) return a.frac > b.frac;
-                return a.d < b.d;
-            });
-            int64_t left = x - given;
-            for (size_t k = 0; left != 0 && !outs.empty(); k = (k + 1) % outs.size()) {
-                if (left > 0) {
-                    ++outs[k].share;
-                    --left;
-                } else if (outs[k].share > 0) {
-                    --outs[k].share;
-                    ++left;
+        std::vector<int64_t>& cur = mB.cur;
+        cur.assign(mM0.begin(), mM0.end());
+        // Each cell's lower neighbours and drops depend on p and the kinds only, not on what the
+        // cells above sent: gathered in parallel, a block of the order at a time (bounded memory,
+        // read in order by the serial pass, which then only splits the integer excess).
+        constexpr size_t kBlock = size_t(1) << 16;
+        std::vector<int32_t>& outJ = mB.outJ;
+        std::vector<double>& outW = mB.outW;
+        std::vector<double>& outSum = mB.outSum;
+        std::vector<uint8_t>& outN = mB.outN;
+        const size_t block = std::min(kBlock, order.size());
+        outJ.resize(block * 6);
+        outW.resize(block * 6);
+        outSum.resize(block);
+        outN.resize(block);
+        for (size_t t0 = 0; t0 < order.size(); t0 += kBlock) {
+            const size_t t1 = std::min(order.size(), t0 + kBlock);
+            forChunks(t1 - t0, mSerial, [&](size_t lo, size_t hi) {
+                for (size_t u = lo; u < hi; ++u) {
+                    const size_t i = size_t(order[t0 + u]);
+                    const double pi = mP[i];
+                    double W = 0;
+                    uint8_t n = 0;
+                    for (int d = 0; d < mDirs; ++d) {
+                        const int32_t j = mNb[i * 6 + size_t(d)];
+                        if (j < 0) continue;
+                        const uint8_t k = mKind[size_t(j)];
+                        if (k == kFrozen) continue;
+                        const double pj = k == kUnknown ? mP[size_t(j)] : 0.0;
+                        if (!(pj < pi)) continue;
+                        outJ[u * 6 + n] = j;
+                        outW[u * 6 + n] = pi - pj;
+                        ++n;
+                        W += pi - pj;
+                    }
+                    outN[u] = n;
+                    outSum[u] = W;
                 }
+            });
+            for (size_t u = 0; u < t1 - t0; ++u) {
+                const size_t i = size_t(order[t0 + u]);
+                const int64_t x = cur[i] - mTc;
+                if (x <= 0) continue;
+                const int n = outN[u];
+                const double W = outSum[u];
+                if (n == 0 || !(W > 0)) continue;
+                int64_t share[6];
+                double frac[6];
+                int rank[6]; // the outs by decreasing remainder, ties in direction order
+                int64_t given = 0;
+                for (int k = 0; k < n; ++k) {
+                    const double exact = double(x) * (outW[u * 6 + size_t(k)] / W);
+                    share[k] = int64_t(std::floor(exact));
+                    frac[k] = exact - double(share[k]);
+                    given += share[k];
+                    int m = k;
+                    for (; m > 0 && frac[rank[m - 1]] < frac[k]; --m)
+                        rank[m] = rank[m - 1];
+                    rank[m] = k;
+                }
+                int64_t left = x - given;
+                for (int k = 0; left != 0; k = (k + 1) % n) {
+                    if (left > 0) {
+                        ++share[rank[k]];
+                        --left;
+                    } else if (share[rank[k]] > 0) {
+                        --share[rank[k]];
+                        ++left;
+                    }
+                }
+                for (int k = 0; k < n; ++k) {
+                    cur[size_t(outJ[u * 6 + size_t(k)])] += share[k];
+                    rep.massMoved += share[k];
+                }
+                cur[i] -= x;
             }
-            for (const Out& o : outs) {
-                cur[size_t(o.j)] += o.share;
-                rep.massMoved += o.share;
-            }
-            cur[i] -= x;
         }
         // Write the changed cells.
-        Box region;
-        std::vector<size_t> changed;
-        for (size_t i = 0; i < mCells.size(); ++i) {
-            if (cur[i] == mM0[i]) continue;
-            if (cur[i] > INT32_MAX) return; // cannot happen for Tc-sized inflows; refuse to write
-            changed.push_back(i);
-            const Coord& c = mCells[i];
-            region = unite(region, Box{{{c.x(), c.y(), c.z()}}, {{c.x(), c.y(), c.z()}}});
-        }
+        std::vector<int32_t>& changed = mB.changed;
+        selectIndices(mCells.size(), mSerial, mCounts, changed, [&](size_t i) { return cur[i] != mM0[i]; });
         if (changed.empty()) return;
+        // Their bounds, per fixed chunk, united in chunk order.
+        const size_t chunks = (changed.size() + kChunk - 1) / kChunk;
+        std::vector<Box> boxes(chunks);
+        std::vector<uint8_t> tooBig(chunks, 0);
+        forChunks(changed.size(), mSerial, [&](size_t lo, size_t hi) {
+            Coord mn = mCells[size_t(changed[lo])], mx = mn;
+            for (size_t k = lo; k < hi; ++k) {
+                const size_t i = size_t(changed[k]);
+                if (cur[i] > INT32_MAX) tooBig[lo / kChunk] = 1;
+                mn.minComponent(mCells[i]);
+                mx.maxComponent(mCells[i]);
+            }
+            boxes[lo / kChunk] = Box{{{mn.x(), mn.y(), mn.z()}}, {{mx.x(), mx.y(), mx.z()}}};
+        });
+        Box region;
+        for (size_t c = 0; c < chunks; ++c) {
+            if (tooBig[c]) return; // cannot happen for Tc-sized inflows; refuse to write
+            region = unite(region, boxes[c]);
+        }
         rep.region = region;
         mA.edit(region, [&](MassGrid& grid) {
             auto acc = grid.getAccessor();
-            for (size_t i : changed) {
+            for (const int32_t k : changed) {
+                const size_t i = size_t(k);
                 if (cur[i] > 0)
                     acc.setValueOn(mCells[i], int32_t(cur[i]));
                 else
@@ -1131,27 +1329,50 @@ private:
     const openvdb::Int32Tree& mMass;
     const openvdb::MaskTree* mObs;
     bool mSerial;
+    /// Cached lookups for the serial flood and linking (the tree's own getValue starts at the root).
+    mutable openvdb::tree::ValueAccessor<const openvdb::Int32Tree> mMassAcc;
+    std::unique_ptr<openvdb::tree::ValueAccessor<const openvdb::MaskTree>> mObsAcc;
 
+    Buffers& mB;
+    bool mKeep; ///< the buffers outlive the call (a workspace): not freed before the routing
     std::unique_ptr<openvdb::Int32Tree> mIndex;
     std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> mIndexAcc;
-    std::vector<Coord> mCells;
-    std::vector<int64_t> mM0;
-    std::vector<uint8_t> mKind, mHasNb;
-    std::vector<int32_t> mNb; ///< 6 per cell: neighbour cell, or -1 (wall)
-    std::vector<int64_t> mDist;
-    std::vector<double> mP;
-    std::vector<int32_t> mRow, mRowCell;
-    std::vector<int32_t> mSolveNb;                 ///< the solve's matrix: 6 neighbour rows per row, -1: none
-    std::vector<double> mSolveDiag, mSolveB, mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
-    std::vector<double> mWork[6];                  ///< the solve's x, r, z, p, q, w
-    Multigrid* mSolveMg = nullptr;                 ///< the solve's multigrid (mMg), or none: MIC(0)
-    std::unique_ptr<Multigrid> mMg; ///< the round's multigrid hierarchy, kept for the next rounds
-    std::vector<int32_t> mMgRow;    ///< cell -> its row in mMg's finest level, or -1
+    std::vector<Coord>& mCells;
+    std::vector<int64_t>& mM0;
+    std::vector<uint8_t>&mKind, &mHasNb;
+    std::vector<int32_t>& mNb; ///< 6 per cell: neighbour cell, or -1 (wall)
+    std::vector<int64_t>& mDist;
+    std::vector<double>& mP;
+    std::vector<int32_t>&mRow, &mRowCell;
+    std::vector<int32_t>&mOldRow, &mJoined, &mLeft; ///< per-round scratch, kept (no fresh pages each round)
+    std::vector<Coord>& mCoord;
+    std::vector<double>& mInflow;
+    std::vector<size_t>& mCounts;
+    std::vector<int32_t>& mSolveNb; ///< the solve's matrix: 6 neighbour rows per row, -1: none
+    std::vector<double>&mSolveDiag, &mSolveB, &mInv; ///< its diagonal, right-hand side, MIC(0) 1/pivots
+    std::vector<double> (&mWork)[6];                 ///< the solve's x, r, z, p, q, w
+    Multigrid* mSolveMg = nullptr;                   ///< the solve's multigrid (mB.mg), or none: MIC(0)
+    bool mMgBuilt = false;        ///< mB.mg holds this call's hierarchy (of an earlier round)
+    size_t mByCoordCells = 0;     ///< mB.byCoord lists the cells [0, this) (MIC(0)'s row order)
+    std::vector<int32_t>& mMgRow; ///< cell -> its row in mB.mg's finest level, or -1
 };
 
 } // namespace
 
-GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& optionsIn)
+struct GlobalTransportWorkspace::Impl {
+    Buffers buffers;
+};
+
+GlobalTransportWorkspace::GlobalTransportWorkspace() = default;
+GlobalTransportWorkspace::~GlobalTransportWorkspace() = default;
+
+void GlobalTransportWorkspace::release()
+{
+    mImpl.reset();
+}
+
+GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& optionsIn,
+                                        GlobalTransportWorkspace* workspace)
 {
     if (optionsIn.reach < 0)
         throw Error("transportGlobally: reach must be >= 0, got " + std::to_string(optionsIn.reach));
@@ -1163,8 +1384,17 @@ GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransp
     const auto t0 = std::chrono::steady_clock::now();
     GlobalTransportReport rep;
     const GlobalTransportOptions& options = optionsIn;
+    std::unique_ptr<GlobalTransportWorkspace::Impl> local;
+    GlobalTransportWorkspace::Impl* impl = nullptr;
+    if (workspace) {
+        if (!workspace->mImpl) workspace->mImpl = std::make_unique<GlobalTransportWorkspace::Impl>();
+        impl = workspace->mImpl.get();
+    } else {
+        local = std::make_unique<GlobalTransportWorkspace::Impl>();
+        impl = local.get();
+    }
     auto body = [&] {
-        Solver s(automaton, options);
+        Solver s(automaton, options, impl->buffers, workspace != nullptr);
         rep = s.run();
     };
     if (options.threads > 1) {
