@@ -693,11 +693,11 @@ struct Sculptor::Impl {
     openvdb::MaskGrid::Ptr obstacles; ///< static obstacles only
     std::unique_ptr<Automaton> automaton;
     GlobalTransportWorkspace transportWorkspace; ///< the global layer's arrays, reused frame to frame
-    uint64_t frame = 0;                    ///< frames finished
-    bool open = false;                     ///< frame + 1 is pushed and partly settled
-    uint64_t openSteps = 0;                ///< its settling steps so far
-    std::vector<openvdb::Coord> toolCells; ///< cells that are obstacles because a tool is there
-    Box toolRegion;                        ///< bounds of the tools as placed now
+    uint64_t frame = 0;                          ///< frames finished
+    bool open = false;                           ///< frame + 1 is pushed and partly settled
+    uint64_t openSteps = 0;                      ///< its settling steps so far
+    std::vector<openvdb::Coord> toolCells;       ///< cells that are obstacles because a tool is there
+    Box toolRegion;                              ///< bounds of the tools as placed now
     // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
     std::vector<ShapePtr> placed;          ///< the tools as placed now
     openvdb::MaskTree coveredSlots{false}; ///< slots of toolRegion whose tool cells are marked
