@@ -19,8 +19,9 @@
 //                anchors marked by the last passes.)
 //   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks), each
 //                range through processRange (Kernel.h: what a task may write and why it is safe);
-//                in dense mode each task also ORs its items' changes into the candidates of the
-//                next two steps (DenseSink: atomic ORs, order-free). Includes leaf table builds.
+//                in dense mode a pass on one thread also ORs its items' changes into the
+//                candidates of the next two steps (DenseSink, order-free); a pass in several tasks
+//                leaves that to the bookkeeping (atomic ORs cost more). Includes leaf table builds.
 //   grow         a block that must write into a missing leaf is not written in the pass but queued;
 //                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
 //                Since blocks of a phase are disjoint, doing it later gives the identical result.
@@ -287,7 +288,9 @@ struct Automaton::Impl {
         in.mayOverflow = maxBound > INT32_MAX / 8;
         in.dryRun = dryRun;
         in.table = leafTable.valid() ? &leafTable : nullptr;
-        in.sink = dryRun || !in.table ? nullptr : candidates.sink(opts.threads != 1);
+        // One task records its items' changes as it goes; several leave that to record(): their
+        // atomic ORs into shared words cost the pass its second thread (press 128^3: 1.1x, not 1.8x).
+        in.sink = dryRun || !in.table || opts.threads != 1 ? nullptr : candidates.sink(false);
         return in;
     }
 

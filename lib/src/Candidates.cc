@@ -56,12 +56,15 @@ void Candidates::endStep()
 
 void Candidates::record(std::vector<WorkItem>& work)
 {
-    bool indexed = mDense && mSunk;
+    bool indexed = mDense;
     for (size_t i = 0; indexed && i < work.size(); ++i) // (always, for lists gathered in dense mode)
         indexed = work[i].entry != kNoEntry;
     if (indexed) {
-        // The pass recorded every item already: keep the list itself (by swap) for a later
-        // detach(), which turns the last two into changed lists. Nothing per item here.
+        // A pass in several tasks leaves the recording to here (serial, plain ORs: atomic ORs from
+        // the tasks cost more than the whole serial loop). Then, as after a pass that recorded
+        // every item itself, keep the list (by swap) for a later detach(), which turns the last
+        // two into changed lists.
+        if (!mSunk) sinkAll(work);
         mPrevWork[1].swap(mPrevWork[0]);
         mPrevWork[0].swap(work);
         mLazy = std::min(mLazy + 1, 2);
@@ -70,6 +73,20 @@ void Candidates::record(std::vector<WorkItem>& work)
     }
     materialize();
     recordLists(work);
+}
+
+void Candidates::sinkAll(const std::vector<WorkItem>& work)
+{
+    const DenseSink& s = *sink(/*atomic=*/false);
+    auto each = [&](auto sinkOne) {
+        for (const WorkItem& w : work) {
+            if (w.changed) sinkOne(s, w.entry, w.changed);
+        }
+    };
+    if (mIs3D)
+        mPhase == 0 ? each(sinkChanges<0, true>) : each(sinkChanges<1, true>);
+    else
+        mPhase == 0 ? each(sinkChanges<0, false>) : each(sinkChanges<1, false>);
 }
 
 void Candidates::materialize()

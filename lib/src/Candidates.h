@@ -120,7 +120,8 @@ public:
     bool attached() const { return mDense; }
     /// In dense mode, the accumulators for the pass of the step just gathered (null otherwise):
     /// the pass records its items' changes there (sinkChanges), record() then only the items that
-    /// carry no index. @a atomic: the pass runs in several tasks.
+    /// carry no index. @a atomic: several tasks write at once (the Automaton gives a pass in several
+    /// tasks no sink: record() does it after the pass, which measured faster than atomic ORs).
     const DenseSink* sink(bool atomic);
 
 private:
@@ -131,6 +132,8 @@ private:
     struct Run {
         const Anchor *b, *e;
     };
+    /// Dense mode, after a pass that did not record its items (several tasks): records them.
+    void sinkAll(const std::vector<WorkItem>& work);
     void addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D);
     void addPending(const Pending& p, int phase, bool is3D);
     void addDense(int slot, uint32_t e, uint64_t mask);
