@@ -323,9 +323,10 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
 }
 
 // Candidates' dense mode (per-anchor accumulators over the leaf table's anchors, filled by record()
-// or by the pass through DenseSink) against the merged lists, over random step sequences with edits,
-// resets, quiet steps and attach/detach at random steps: the same work lists (anchors, masks, layer
-// order), except anchors the index lacks (no leaf within reach: they read zeros and never change).
+// or by the pass through DenseSink, one sink or one lane per thread) against the merged lists, over
+// random step sequences with edits, resets, quiet steps and attach/detach at random steps: the same
+// work lists (anchors, masks, layer order), except anchors the index lacks (no leaf within reach:
+// they read zeros and never change).
 TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
 {
     for (int is3D = 0; is3D < 2; ++is3D) {
@@ -369,7 +370,7 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
             hot.erase(std::unique(hot.begin(), hot.end()), hot.end());
             merged.reset(hot);
             dense.reset(hot);
-            uint64_t denseSteps = 0, sunkSteps = 0, droppedBlocks = 0;
+            uint64_t denseSteps = 0, sunkSteps = 0, laneSteps = 0, droppedBlocks = 0;
             for (int t = 0; t < 60; ++t) {
                 const int phase = t & 1;
                 const int event = g.range(0, 19);
@@ -421,20 +422,28 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                             ++j;
                         d.changed = wm[j].changed;
                     }
-                    // Half of the dense steps record through the sink, as the pass does.
-                    if (dense.attached() && g.range(0, 1) == 0) {
-                        const DenseSink* sink = dense.sink(g.range(0, 1) == 0);
+                    // Most dense steps record through the sink, as the pass does: one sink (atomic
+                    // or not), or 1-4 lanes (a pass on several threads: each item in a random lane,
+                    // as a thread of the pass would take it), some items recorded twice.
+                    if (dense.attached() && g.range(0, 3) != 0) {
+                        const int mode = g.range(0, 2);
+                        const int lanes = mode == 2 ? g.range(1, 4) : 1;
+                        const DenseSink* sink = mode == 2 ? dense.lanes(lanes) : dense.sink(mode == 0);
                         ASSERT_NE(sink, nullptr);
                         for (const WorkItem& d : wd) {
                             if (!d.changed || d.entry == kNoEntry) continue;
-                            if (is3D)
-                                phase ? sinkChanges<1, true>(*sink, d.entry, d.changed)
-                                      : sinkChanges<0, true>(*sink, d.entry, d.changed);
-                            else
-                                phase ? sinkChanges<1, false>(*sink, d.entry, d.changed)
-                                      : sinkChanges<0, false>(*sink, d.entry, d.changed);
+                            for (int rep = g.range(0, 9) == 0 ? 2 : 1; rep > 0; --rep) {
+                                const DenseSink& s = sink[g.range(0, lanes - 1)];
+                                if (is3D)
+                                    phase ? sinkChanges<1, true>(s, d.entry, d.changed)
+                                          : sinkChanges<0, true>(s, d.entry, d.changed);
+                                else
+                                    phase ? sinkChanges<1, false>(s, d.entry, d.changed)
+                                          : sinkChanges<0, false>(s, d.entry, d.changed);
+                            }
                         }
                         ++sunkSteps;
+                        laneSteps += lanes > 1;
                     }
                     merged.record(wm);
                     dense.record(wd);
@@ -444,6 +453,7 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
             }
             EXPECT_GT(denseSteps, 10u) << "seed " << seed;
             EXPECT_GT(sunkSteps, 3u) << "seed " << seed;
+            EXPECT_GT(laneSteps, 0u) << "seed " << seed;
             if (seed == 1) {
                 EXPECT_GT(droppedBlocks, 0u) << "the test reaches anchors outside the index";
             }

@@ -704,6 +704,56 @@ TEST_F(ShapesTest, PushIsDeterministic)
     EXPECT_EQ(r1.massMoved, r2.massMoved);
 }
 
+// The targets are searched in parallel against the grid alone, then checked in source order against
+// the clay planned before them: where that clay leaves no room, the source must search again.
+TEST_F(ShapesTest, PushTargetsAreTheSameOnAnyThreadCountWhenRoomRunsOut)
+{
+    for (int threads : {1, 2, 3, 8}) {
+        // Two sources (0,0,0) and (1,0,0) in a corridor walled by obstacles; (2,0,0) has room for one
+        // source's clay only, (3,0,0) is empty.
+        auto mass = openvdb::Int32Grid::create(0);
+        mass->tree().setValue(Coord(0, 0, 0), 10);
+        mass->tree().setValue(Coord(1, 0, 0), 10);
+        mass->tree().setValue(Coord(2, 0, 0), INT32_MAX - 15);
+        auto obs = openvdb::MaskGrid::create(false);
+        obs->tree().fill(CoordBBox(Coord(-3), Coord(6)), true, true);
+        obs->tree().voxelizeActiveTiles();
+        for (int x = 0; x <= 3; ++x)
+            obs->tree().setValueOff(Coord(x, 0, 0));
+        AutomatonOptions o = opts();
+        o.threads = threads;
+        Automaton a(mass, o, obs);
+        const PushReport r = push(a, {makeBox({{0, 0, 0}}, {{1, 0, 0}})}, 3);
+        EXPECT_EQ(r.voxelsPushed, 2u) << threads;
+        EXPECT_EQ(r.voxelsTrapped, 0u) << threads;
+        EXPECT_EQ(mass->tree().getValue(Coord(0, 0, 0)), 0) << threads;
+        EXPECT_EQ(mass->tree().getValue(Coord(1, 0, 0)), 0) << threads;
+        EXPECT_EQ(mass->tree().getValue(Coord(2, 0, 0)), INT32_MAX - 5) << threads;
+        EXPECT_EQ(mass->tree().getValue(Coord(3, 0, 0)), 10) << threads;
+    }
+    // A larger push (rotated cylinder and capsule in a box of clay, floods included): the same clay on
+    // 1, 2, 3 and 8 threads.
+    std::vector<uint64_t> hashes, pushed;
+    for (int threads : {1, 2, 3, 8}) {
+        auto mass = clayBox(CoordBBox(Coord(-5, 0, -3), Coord(14, 9, 12)), 80);
+        AutomatonOptions o = opts();
+        o.threads = threads;
+        Automaton a(mass, o);
+        Pose pose;
+        pose.rotationDeg = {{20, 35, 10}};
+        pose.translation = {{2, 5, 4}};
+        const PushReport r = push(a, {makeTransformed(makeCylinder({{0, 0, 0}}, 3, 12, 0), pose),
+                                      makeCapsule({{-6, 9, 0}}, {{6, 3, 9}}, 2.5)});
+        hashes.push_back(contentHash(*mass));
+        pushed.push_back(r.voxelsPushed);
+    }
+    EXPECT_GT(pushed[0], 100u);
+    for (size_t i = 1; i < hashes.size(); ++i) {
+        EXPECT_EQ(hashes[i], hashes[0]) << i;
+        EXPECT_EQ(pushed[i], pushed[0]) << i;
+    }
+}
+
 TEST_F(ShapesTest, PushThenSettleConservesMass)
 {
     auto mass = clayBox(CoordBBox(Coord(0), Coord(11)), 100);

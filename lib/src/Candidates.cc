@@ -144,14 +144,46 @@ void Candidates::addDenseDilated(int slot, uint32_t e, const Anchor& a, int from
     }
 }
 
-void Candidates::clearSlot(int slot)
+template <typename F> void Candidates::drain(int slot, F&& f)
 {
     std::vector<uint64_t>& bits = mTouched[slot];
-    for (size_t k = 0; k < bits.size(); ++k) {
-        for (uint64_t b = bits[k]; b; b &= b - 1)
-            mAcc[slot][64 * k + size_t(__builtin_ctzll(b))] = 0;
-        bits[k] = 0;
+    std::vector<uint64_t>& acc = mAcc[slot];
+    if (!mLanesDirty[slot]) { // one lane (every pass on one thread)
+        for (size_t k = 0; k < bits.size(); ++k) {
+            for (uint64_t b = bits[k]; b; b &= b - 1) {
+                const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
+                f(e, acc[e]);
+                acc[e] = 0;
+            }
+            bits[k] = 0;
+        }
+        return;
     }
+    // A lane's entry is nonzero only where its bit is set, so the union of the bits finds them all.
+    mLanesDirty[slot] = false;
+    for (size_t k = 0; k < bits.size(); ++k) {
+        uint64_t word = bits[k];
+        for (Lane& l : mLanes) {
+            word |= l.touched[slot][k];
+            l.touched[slot][k] = 0;
+        }
+        bits[k] = 0;
+        for (uint64_t b = word; b; b &= b - 1) {
+            const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
+            uint64_t m = acc[e];
+            acc[e] = 0;
+            for (Lane& l : mLanes) {
+                m |= l.acc[slot][e];
+                l.acc[slot][e] = 0;
+            }
+            f(e, m);
+        }
+    }
+}
+
+void Candidates::clearSlot(int slot)
+{
+    drain(slot, [](uint32_t, uint64_t) {});
 }
 
 void Candidates::attach(const AnchorIndex& index, int phase, bool is3D)
@@ -190,6 +222,29 @@ const DenseSink* Candidates::sink(bool atomic)
     return &mSink;
 }
 
+const DenseSink* Candidates::lanes(int n)
+{
+    if (!mDense) return nullptr;
+    if (n <= 1) return sink(false);
+    const DenseSink lane0 = *sink(false);
+    if (mLanes.size() < size_t(n - 1)) mLanes.resize(size_t(n - 1));
+    mLaneSinks.assign(size_t(n), lane0);
+    for (int i = 1; i < n; ++i) {
+        Lane& l = mLanes[size_t(i - 1)];
+        for (int s = 0; s < 2; ++s) {
+            if (l.acc[s].size() != mIndex.size) { // a new lane, or a new index (attach() clears them)
+                l.acc[s].assign(mIndex.size, 0);
+                l.touched[s].assign((mIndex.size + 63) / 64, 0);
+            }
+            mLaneSinks[size_t(i)].acc[s] = l.acc[s].data();
+            mLaneSinks[size_t(i)].touched[s] = l.touched[s].data();
+        }
+    }
+    // Other lanes (a pass on more threads before) hold only zeros: drained with the rest.
+    mLanesDirty[0] = mLanesDirty[1] = true;
+    return mLaneSinks.data();
+}
+
 void Candidates::detach()
 {
     mSunk = false;
@@ -201,6 +256,8 @@ void Candidates::detach()
         mAcc[s].clear();
         mTouched[s].clear();
     }
+    mLanes.clear();
+    mLanesDirty[0] = mLanesDirty[1] = false;
 }
 
 void Candidates::addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D)
@@ -251,16 +308,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // The accumulated candidates, in index order (= layer order); the slot is left empty for
         // the record() of the step after next.
         work.clear();
-        std::vector<uint64_t>& bits = mTouched[phase];
-        std::vector<uint64_t>& acc = mAcc[phase];
-        for (size_t k = 0; k < bits.size(); ++k) {
-            for (uint64_t b = bits[k]; b; b &= b - 1) {
-                const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
-                work.push_back(WorkItem{mIndex.keys[e], acc[e], 0, e});
-                acc[e] = 0;
-            }
-            bits[k] = 0;
-        }
+        drain(phase, [&](uint32_t e, uint64_t m) { work.push_back(WorkItem{mIndex.keys[e], m, 0, e}); });
         return;
     }
     mRuns.clear();
@@ -283,16 +331,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // the hot leaves and the edited regions. (During the full-scan steps after a reset, the slot
         // holds only the last step's dilation, as the lists would.)
         mDenseRun.clear();
-        std::vector<uint64_t>& bits = mTouched[phase];
-        std::vector<uint64_t>& acc = mAcc[phase];
-        for (size_t k = 0; k < bits.size(); ++k) {
-            for (uint64_t b = bits[k]; b; b &= b - 1) {
-                const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
-                mDenseRun.push_back(Anchor{mIndex.keys[e], acc[e]});
-                acc[e] = 0;
-            }
-            bits[k] = 0;
-        }
+        drain(phase, [&](uint32_t e, uint64_t m) { mDenseRun.push_back(Anchor{mIndex.keys[e], m}); });
     }
     for (const Pending& p : mPending)
         addPending(p, phase, is3D);

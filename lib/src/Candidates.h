@@ -25,7 +25,9 @@
 // the hot leaves after a reset need a sort; in dense mode those steps merge the dense run with them.
 // The changed lists (changedPrev, changedPrev2) hold in both modes (in dense mode, the last two
 // work lists are kept and turned into them on detach), so switching costs only the accumulators'
-// fill. All scratch is kept in members: a step allocates nothing once buffers have grown.
+// fill. A pass on several threads records into one lane (accumulators and bit sets) per thread,
+// so no cache line is written by two threads; the gather ORs the lanes as it scans (lanes()).
+// All scratch is kept in members: a step allocates nothing once buffers have grown.
 #pragma once
 
 #include "BlockMasks.h"
@@ -62,10 +64,11 @@ struct AnchorIndex {
     uint32_t find(const Origin& o) const;
 };
 
-/// Dense mode's accumulators as a pass sees them (Candidates::sink()): the pass ORs each item's
-/// changed blocks in as soon as the item is done, in its own task, instead of record() doing it
-/// serially after the pass. OR is commutative and idempotent, so the result does not depend on the
-/// order or the partition; with several tasks the shared words take atomic ORs.
+/// Dense mode's accumulators as a pass sees them (Candidates::sink(), or one lane of lanes()): the
+/// pass ORs each item's changed blocks in as soon as the item is done, in its own task, instead of
+/// record() doing it serially after the pass. OR is commutative and idempotent, so the result does
+/// not depend on the order or the partition. With several threads each writes its own lane (plain
+/// ORs, nothing shared); `atomic` (shared words by atomic ORs) remains for tests, slower.
 struct DenseSink {
     uint64_t* acc[2] = {nullptr, nullptr};
     uint64_t* touched[2] = {nullptr, nullptr};
@@ -120,9 +123,15 @@ public:
     bool attached() const { return mDense; }
     /// In dense mode, the accumulators for the pass of the step just gathered (null otherwise):
     /// the pass records its items' changes there (sinkChanges), record() then only the items that
-    /// carry no index. @a atomic: several tasks write at once (the Automaton gives a pass in several
-    /// tasks no sink: record() does it after the pass, which measured faster than atomic ORs).
+    /// carry no index. @a atomic: several tasks write at once (measured slower than lanes()).
     const DenseSink* sink(bool atomic);
+    /// In dense mode, @a n private sinks for a pass on up to n threads (null otherwise): thread i of
+    /// the pass records into sink i only, with plain ORs (no word is shared between threads); lane 0
+    /// is sink(false)'s, lanes 1.. are copies that the next gathers OR in (OR is commutative and
+    /// idempotent: the candidates do not depend on which thread recorded which item).
+    const DenseSink* lanes(int n);
+    /// The pass did not record every item it was given a sink for: record() records them all.
+    void sinkMissed() { mSunk = false; }
 
 private:
     struct Pending {
@@ -132,8 +141,11 @@ private:
     struct Run {
         const Anchor *b, *e;
     };
-    /// Dense mode, after a pass that did not record its items (several tasks): records them.
+    /// Dense mode, after a pass that did not record its items: records them.
     void sinkAll(const std::vector<WorkItem>& work);
+    /// Empties dense slot @a slot of every lane, calling f(entry, mask) for each nonzero entry in
+    /// index order (the masks of all lanes ORed).
+    template <typename F> void drain(int slot, F&& f);
     void addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D);
     void addPending(const Pending& p, int phase, bool is3D);
     void addDense(int slot, uint32_t e, uint64_t mask);
@@ -155,6 +167,14 @@ private:
     int mPhase = 0;                    // the phase of the last gather (record's step)
     DenseSink mSink;
     bool mSunk = false; // the pass got mSink: items with an index are recorded already
+    // Lanes 1.. of lanes() (lane 0 is mAcc/mTouched): a pass's threads' private accumulators.
+    struct Lane {
+        std::vector<uint64_t> acc[2];
+        std::vector<uint64_t> touched[2];
+    };
+    std::vector<Lane> mLanes;
+    std::vector<DenseSink> mLaneSinks;
+    bool mLanesDirty[2] = {false, false}; // a slot of some lane 1.. may be nonzero
     bool mIs3D = true;
     // The last steps' work lists, kept instead of changed lists while the pass records (mLazy of
     // them, newest first): detach() turns them into mChangedPrev/mChangedPrev2.

@@ -28,6 +28,8 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <climits>
 #include <optional>
@@ -579,6 +581,18 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     if (in.obstacles) oacc.emplace(*in.obstacles);
     LeafSet ls;
     const DenseSink* sink = dryRun ? nullptr : in.sink;
+    if (sink && in.sinkLanes > 1) {
+        // This thread's lane: its slot in the pass's arena, which has sinkLanes slots.
+        // Should it lie outside (not expected), the range records nothing and says so: record()
+        // then records every item again (ORs are idempotent).
+        const int lane = tbb::this_task_arena::current_thread_index();
+        if (lane >= 0 && lane < in.sinkLanes) {
+            sink += lane;
+        } else {
+            sink = nullptr;
+            tot.sinkMissed = true;
+        }
+    }
     // Totals in locals (registers), added to tot once at the end.
     uint64_t examined = 0, overTc = 0, updated = 0;
     int64_t overloadDelta = 0, maxWritten = 0;
@@ -825,6 +839,7 @@ void PassTotals::join(const PassTotals& o)
     updated += o.updated;
     overloadDelta += o.overloadDelta;
     maxWritten = std::max(maxWritten, o.maxWritten);
+    sinkMissed = sinkMissed || o.sinkMissed;
     if (o.overflow && (!overflow || o.overflowItem < overflowItem ||
                        (o.overflowItem == overflowItem && o.overflowBit < overflowBit))) {
         overflow = true;

@@ -11,8 +11,9 @@
 // whose result would flow into a missing leaf is deferred, see PassTotals::deferred); missing leaves
 // read as 0. The only shared words are leaf value masks (active bits), set with an atomic OR when a
 // cell goes from 0 to positive, and, in dense mode, the candidates' accumulators and bit sets
-// (PassInput::sink: atomic ORs, except the item's own same-phase entry, which no other item
-// writes). Nothing in the pass changes the tree's topology.
+// (PassInput::sink: with several threads, each thread records into its own lane,
+// Candidates::lanes(), chosen by its slot in the task arena). Nothing in the pass changes the tree's
+// topology.
 #pragma once
 
 #include "Candidates.h"
@@ -77,6 +78,7 @@ struct PassInput {
     bool portable = false;            // no SIMD: the plain C++ path (tests compare both on the same grids)
     const LeafTable* table = nullptr; // valid leaf table of both trees, or null: accessors
     const DenseSink* sink = nullptr;  // dense candidates: record each item's changes here (not in dry runs)
+    int sinkLanes = 1;                // sink[0..sinkLanes): one per thread of the pass's arena (lanes())
 };
 
 /// What one range of the pass accumulates.
@@ -87,6 +89,7 @@ struct PassTotals {
     int64_t overloadDelta = 0;
     int64_t maxWritten = 0;
     bool overflow = false;
+    bool sinkMissed = false; // a range ran on a thread without a lane: its items were not recorded
     size_t overflowItem = SIZE_MAX;
     int overflowBit = 0;
     struct Deferred {

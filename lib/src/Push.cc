@@ -13,7 +13,9 @@
 //    exceeding INT32_MAX; the march stops at an obstacle that is not part of a tool. Failing that,
 //    a breadth-first flood from the source through passable voxels (inside a tool or not an
 //    obstacle) within Chebyshev distance maxSearch takes the first free voxel it reaches, so clay
-//    never crosses an obstacle, however thin. Failing that, the clay is trapped.
+//    never crosses an obstacle, however thin. Failing that, the clay is trapped. The searches run in
+//    parallel against the grid alone, then are checked in source order against the clay planned
+//    before (the room test), and searched again serially where it no longer fits: the same targets.
 // 4. The plan (sources emptied, targets increased) is computed read-only first, then written in one
 //    Automaton::edit() over the region U grown by maxSearch + 2, cut to the part near clay
 //    (ClayLeaves.h: the same clay blocks are woken, the cost follows the clay), so nothing is
@@ -160,9 +162,45 @@ public:
         return {{n[0] / l, n[1] / l, n[2] / l}};
     }
 
-    /// Where the clay of @a s goes; false if nowhere (trapped).
+    /// What target() found for one source, kept apart (Found) so that sources can be searched in
+    /// parallel against the grid alone and their plans applied in source order (adopt()).
+    struct Found {
+        bool ok = false;
+        Coord to;
+        Vec3 normal{{0, 1, 0}};
+        double t = 0;
+        bool byMarch = false;
+    };
+
+    /// Where the clay of @a s goes; false if nowhere (trapped). Counts the clay planned so far.
     bool target(const Source& s, Coord& out) const
     {
+        const Found f = find(s, /*planned=*/true);
+        if (f.ok) adopt(f, out);
+        mLastByMarch = f.byMarch;
+        return f.ok;
+    }
+
+    /// target() without the clay planned so far (thread-safe: reads the grid and the tools only).
+    /// Exact where it matters: the planned clay only makes voxels less free (isFree's room test) and
+    /// changes neither walls nor passability, so with it the march and the flood visit the same
+    /// voxels up to this one and stop here iff it still has room (fits()); and a source trapped
+    /// without it is trapped with it.
+    Found findAlone(const Source& s) const { return find(s, /*planned=*/false); }
+    /// Whether @a m more clay still fits at @a c with the clay planned so far.
+    bool fits(const Coord& c, int32_t m) const { return planned(c) + m <= INT32_MAX; }
+    /// Takes @a f as target()'s result (what fullChain() continues from).
+    void adopt(const Found& f, Coord& out) const
+    {
+        out = f.to;
+        mLastNormal = f.normal;
+        mLastT = f.t;
+        mLastByMarch = f.byMarch;
+    }
+
+    Found find(const Source& s, bool planned) const
+    {
+        Found f;
         const Vec3 n = unitNormal(s);
 
         const Vec3 p = centre(s.c);
@@ -172,16 +210,16 @@ public:
             const double t = start + 0.5 * k;
             const Coord c = rounded({{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}});
             if (c == s.c) continue;
-            if (isFree(c, s.mass)) {
-                out = c;
-                mLastNormal = n;
-                mLastT = t;
-                mLastByMarch = true;
-                return true;
+            if (isFree(c, s.mass, mRegion, planned)) {
+                f.ok = true;
+                f.to = c;
+                f.normal = n;
+                f.t = t;
+                f.byMarch = true;
+                return f;
             }
             if (isWall(c)) break; // clay does not pass through obstacles
         }
-        mLastByMarch = false;
         // Breadth-first flood from the source through passable voxels (inside a tool, or not an
         // obstacle), 6-connected (4 in 2D), within Chebyshev distance maxSearch: the first free
         // voxel reached. Neighbours are visited in a fixed order, so the choice is deterministic,
@@ -204,14 +242,15 @@ public:
                 }
                 if (acc.isValueOn(q)) continue;
                 acc.setValueOn(q);
-                if (isFree(q, s.mass)) {
-                    out = q;
-                    return true;
+                if (isFree(q, s.mass, mRegion, planned)) {
+                    f.ok = true;
+                    f.to = q;
+                    return f;
                 }
                 if (!isWall(q) && inside(mRegion, q)) queue.push_back(q);
             }
         }
-        return false;
+        return f;
     }
 
     /// Compress push: after target() found @a first by the march, the contiguous full voxels along
@@ -321,7 +360,7 @@ private:
     }
 
     bool isFree(const Coord& c, int32_t m) const { return isFree(c, m, mRegion); }
-    bool isFree(const Coord& c, int32_t m, const Box& region) const
+    bool isFree(const Coord& c, int32_t m, const Box& region, bool planned = true) const
     {
         if (!inside(region, c)) return false;
         if (mIs2D && c.z() != 0) return false;
@@ -330,8 +369,10 @@ private:
             if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return false;
         }
         int64_t now = mMass.getValue(c);
-        const auto it = mAdded.find(c);
-        if (it != mAdded.end()) now += it->second;
+        if (planned) {
+            const auto it = mAdded.find(c);
+            if (it != mAdded.end()) now += it->second;
+        }
         return now + m <= INT32_MAX;
     }
 
@@ -462,9 +503,21 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
         }
         pusher.setChainRegion(grow(u, int64_t(std::max(deepest, maxSearch)) + 2, is2D));
     }
-    for (const Source& s : sources) {
+    // Step 3 in parallel against the grid alone, then in source order: a found target is kept iff
+    // the clay planned before it still leaves room there, else searched again with that clay
+    // (Pusher::findAlone: the same targets as a serial search, on any thread count).
+    std::vector<Pusher::Found> found(sources.size());
+    parallel_internal::forEachIndex(sources.size(), automaton.options().threads,
+                                    [&](size_t i) { found[i] = pusher.findAlone(sources[i]); });
+    for (size_t si = 0; si < sources.size(); ++si) {
+        const Source& s = sources[si];
         Coord to;
-        if (pusher.target(s, to)) {
+        bool ok = found[si].ok; // trapped alone: trapped with the planned clay too
+        if (ok && pusher.fits(found[si].to, s.mass))
+            pusher.adopt(found[si], to);
+        else if (ok)
+            ok = pusher.target(s, to);
+        if (ok) {
             std::vector<Coord> chain;
             if (compress) chain = pusher.fullChain(s, to, depth[s.tool], threshold);
             if (covers[s.tool] && !chain.empty()) {
