@@ -142,6 +142,9 @@ template <typename TreeT> constexpr uint64_t upperNodeBytes()
 /// candidates' two 8-byte accumulators (Candidates.h, dense mode) per anchor that reaches a leaf, at
 /// most 8 anchors per leaf (isolated leaves; compact clay has ~1.3).
 constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 40) + 8 * (264 + 64 + 64 + 16);
+/// Per clay leaf and thread beyond the first: the thread's own lane of those two accumulators and their
+/// bit sets (Candidates::lanes), for up to 8 anchors.
+constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
 /// Per tool voxel: its cell in Sculptor's toolCells (12 bytes, doubled for growth) and, for clay
 /// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
@@ -635,7 +638,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     if (scene.push == PushMode::Compress)
         e.toolBytes +=
             scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
-    e.automatonBytes = e.clayLeavesGrown * kAutomatonBytesPerLeaf;
+    const uint64_t lanes = std::max(1u, std::thread::hardware_concurrency()) - 1; // at most one per thread
+    e.automatonBytes = e.clayLeavesGrown * (kAutomatonBytesPerLeaf + lanes * kAutomatonLaneBytesPerLeaf);
     // The global layer (lib/src/Transport.cc) holds, per full clay cell of the body: its coordinate,
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
     // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
