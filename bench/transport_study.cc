@@ -50,6 +50,15 @@ Run runScene(Scene s)
         out.steps += r.settle.steps;
         out.blocks += r.settle.blocksUpdated;
         out.transportSeconds += r.transport.seconds;
+        if (std::getenv("TRANSPORT_STUDY_PROFILE"))
+            std::printf(
+                "  frame %llu: %.2f ms (global layer %.2f ms)  entered %llu contact %.1f  reach %lld  "
+                "overload %lld  unknowns %llu  solves %llu  iterations %llu  steps %llu\n",
+                (unsigned long long)r.frame, 1e3 * out.frameSeconds.back(), 1e3 * r.transport.seconds,
+                (unsigned long long)r.push.voxelsPushed, r.push.contactSize, (long long)r.transport.reach,
+                (long long)r.transport.overloadBefore, (unsigned long long)r.transport.unknowns,
+                (unsigned long long)r.transport.solves, (unsigned long long)r.transport.iterations,
+                (unsigned long long)r.settle.steps);
     }
     out.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     out.mass = sc.mass();
