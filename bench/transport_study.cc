@@ -3,6 +3,8 @@
 //   transport_study squeeze R0        cylinder R0, H0 = 2 R0 between slip plates, pressed to H = R0
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc
 //   transport_study stroke W          sphere r 6 dipped 9 voxels into a clay sphere W wide, slid 2/frame
+//                                     (no memory budget: the estimate counts the global layer over the
+//                                     whole body, 54 GiB at W 512, where the stroke's domain is local)
 //   transport_study scene FILE        a scene file, its transport and push overridden: steps, block
 //                                     updates, whole run and median frame time (frames 2..)
 // Each runs the four combinations (or those named by --only local-surface,global-compress,...)
@@ -50,6 +52,15 @@ Run runScene(Scene s)
         out.steps += r.settle.steps;
         out.blocks += r.settle.blocksUpdated;
         out.transportSeconds += r.transport.seconds;
+        if (std::getenv("TRANSPORT_STUDY_PROFILE"))
+            std::printf(
+                "  frame %llu: %.2f ms (global layer %.2f ms)  entered %llu contact %.1f  reach %lld  "
+                "overload %lld  unknowns %llu  solves %llu  iterations %llu  steps %llu\n",
+                (unsigned long long)r.frame, 1e3 * out.frameSeconds.back(), 1e3 * r.transport.seconds,
+                (unsigned long long)r.push.voxelsPushed, r.push.contactSize, (long long)r.transport.reach,
+                (long long)r.transport.overloadBefore, (unsigned long long)r.transport.unknowns,
+                (unsigned long long)r.transport.solves, (unsigned long long)r.transport.iterations,
+                (unsigned long long)r.settle.steps);
     }
     out.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     out.mass = sc.mass();
@@ -159,7 +170,7 @@ void stroke(int width, const std::string& only)
         std::snprintf(json, sizeof json, R"({"threshold": 1000, "rule": "prorata", "seed": 1, %s
             "clay": [{"shape": "sphere", "center": [%g, %g, %g], "radius": %g, "mass": 1000}],
             "tools": [{"shape": "sphere", "center": [%g, %g, %g], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 12}]}],
-            "settle": {"max_steps": 5000000}})",
+            "settle": {"max_steps": 5000000}, "memory_budget": "none"})",
                       combo(c[0], c[1]).c_str(), R, R, R, R, R - 12, 2 * R + 6 - 9, R);
         const Run run = runScene(parseScene(json, "stroke", ""));
         std::vector<double> f(run.frameSeconds.begin() + 1, run.frameSeconds.end()); // frame 1 dips

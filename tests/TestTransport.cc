@@ -763,3 +763,69 @@ TEST_F(TransportTest, AThinPlateFlattensClayInsteadOfHoppingOverIt)
             EXPECT_GT(above, 0) << "the unswept push no longer lets clay hop over (update this test)";
     }
 }
+
+TEST_F(TransportTest, TheReachCountsFromTheContactNotFromEveryCellOfACompressChain)
+{
+    // A 21^3 block at Tc; a compress chain from the top face straight down: (10, 20 ... 17, 10), 25
+    // extra each. Reach 4. From the contact (the chain's top cell, the only one with a face on room)
+    // the unknowns are the cells within 4 face steps of it: a half octahedron, 85 cells. From every
+    // over cell (round 4): the union of the four chain cells' octahedra, 208 cells. Both exact: every
+    // cell of the block ends at Tc, the 100 extra above it.
+    for (const bool fromContact : {true, false}) {
+        MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
+        for (int y = 17; y <= 20; ++y)
+            g->tree().setValue(openvdb::Coord(10, y, 10), 1025);
+        Automaton a(g, opts());
+        GlobalTransportOptions go;
+        go.reach = 4;
+        go.reachFromContact = fromContact;
+        const GlobalTransportReport r = transportGlobally(a, go);
+        EXPECT_EQ(r.overloadBefore, 100);
+        EXPECT_EQ(r.overloadAfter, 0) << fromContact;
+        EXPECT_EQ(r.reach, 4);
+        EXPECT_EQ(r.unknowns, fromContact ? 85u : 208u);
+        EXPECT_EQ(a.totalMass(), int64_t(21 * 21 * 21) * 1000 + 100);
+        EXPECT_EQ(totalMass(*g), a.totalMass());
+        int64_t inside = 0;
+        for (int x = 0; x <= 20; ++x)
+            for (int y = 0; y <= 20; ++y)
+                for (int z = 0; z <= 20; ++z)
+                    inside += at(a, x, y, z) == 1000 ? 1 : 0;
+        EXPECT_EQ(inside, 21 * 21 * 21) << fromContact;
+    }
+}
+
+TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdenticallyOnAnyThreadCount)
+{
+    // A chain deeper than the reach: (10, 20 ... 9, 10), 12 cells, 40 extra each, reach 3, and a lone
+    // over cell deep inside (4, 4, 4). The cells the contact's flood misses start floods of their own:
+    // every over cell is solved, all of the block ends at Tc, mass exact, the same on 1, 2, 3, 8 threads.
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
+        for (int y = 9; y <= 20; ++y)
+            g->tree().setValue(openvdb::Coord(10, y, 10), 1040);
+        g->tree().setValue(openvdb::Coord(4, 4, 4), 1300);
+        Automaton a(g, opts(3, threads));
+        GlobalTransportOptions go;
+        go.reach = 3;
+        go.threads = threads;
+        const GlobalTransportReport r = transportGlobally(a, go);
+        EXPECT_EQ(r.overloadBefore, 12 * 40 + 300);
+        EXPECT_EQ(r.overloadAfter, 0) << threads;
+        EXPECT_FALSE(r.noRoom);
+        // The lone cell is 5 steps from room: its margin (2) doubles with the reach, once, to 4, so
+        // its flood links the face cell beside room (one rebuild, not one per doubling up to the body).
+        EXPECT_EQ(r.reach, 6);
+        EXPECT_EQ(totalMass(*g), int64_t(21 * 21 * 21) * 1000 + 780);
+        int64_t inside = 0;
+        for (int x = 0; x <= 20; ++x)
+            for (int y = 0; y <= 20; ++y)
+                for (int z = 0; z <= 20; ++z)
+                    inside += at(a, x, y, z) == 1000 ? 1 : 0;
+        EXPECT_EQ(inside, 21 * 21 * 21) << threads;
+        const uint64_t h = contentHash(*g);
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads;
+    }
+}

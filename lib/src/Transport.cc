@@ -6,11 +6,14 @@
 // pass (docs/TRANSPORT.md, and the prototype study it follows).
 //
 // 1. Domain. Seeds: every non-obstacle cell over Tc, in tree order. A breadth-first flood through
-//    face neighbours that are full (m >= Tc) and not obstacles, at most `reach` steps from a seed
-//    (the plastic zone: a small tool moves clay near itself, a plate covering the body moves the
-//    whole body), gives the unknown cells D. Their face neighbours with room (m < Tc, not an
-//    obstacle) are Dirichlet cells B (p = 0). Obstacles, and full cells beyond the reach, are
-//    walls: their faces are left out of the Laplacian (no flux).
+//    face neighbours that are full (m >= Tc) and not obstacles, at most `reach` steps from the
+//    contact (the seeds with a face on an obstacle, a tool or room; the plastic zone: a small tool
+//    moves clay near itself, a plate covering the body moves the whole body), gives the unknown
+//    cells D. Seeds inside the full clay (a compress push's chains) join at their depth; one beyond
+//    the reach starts its own flood with a margin of 2 (reachFromContact; round 4 flooded `reach`
+//    around every seed: the 128-wide compress stroke's domain 2.5x larger). D's face neighbours
+//    with room (m < Tc, not an obstacle) are Dirichlet cells B (p = 0). Obstacles, and full cells
+//    beyond the reach, are walls: their faces are left out of the Laplacian (no flux).
 // 2. Singular parts. A connected part of D with no face on B has no room: its Poisson problem is
 //    singular (the flood finds the parts and which touch B; only then are they searched). If it
 //    was cut by the reach, the reach doubles and the domain is rebuilt (up to the whole body);
@@ -536,6 +539,10 @@ private:
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
 
+/// reachFromContact: the flood's margin around an over cell the contact's reach missed (doubled with
+/// the reach when a part has no room).
+constexpr int64_t kInnerMargin = 2;
+
 /// The layer's arrays, kept from one call to the next by a GlobalTransportWorkspace (cleared, never
 /// read before written: a call's result does not depend on them).
 struct Buffers {
@@ -544,6 +551,7 @@ struct Buffers {
     std::vector<uint8_t> kind, hasNb, seen, compRoom;
     std::vector<int32_t> nb, row, rowCell, oldRow, joined, left, solveNb, mgRow, order, part;
     std::vector<int32_t> comp, compParent; ///< the flood's parts: each unknown cell's, union-find
+    std::vector<int32_t> innerSeeds;       ///< seeds inside the full clay (indices into the seeds)
     std::vector<double> p, inflow, solveDiag, solveB, inv;
     std::vector<double> work[6];
     std::vector<size_t> counts;
@@ -610,14 +618,16 @@ public:
         }
 
         int64_t reach = mOpt.reach > 0 ? mOpt.reach : 0;
+        int64_t margin = kInnerMargin; // doubles with the reach: a walled-in inner seed grows as fast
         for (;;) {
             bool cut = false;
-            const bool allRoom = build(seeds, reach, cut);
+            const bool allRoom = build(seeds, reach, margin, cut);
             rep.reach = reach;
             bool grow = false;
             if (!allRoom) freezeSingular(cut, grow, rep);
             if (grow) {
                 reach = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
+                margin = std::min<int64_t>(margin * 2, int64_t(1) << 40);
                 continue;
             }
             break;
@@ -715,7 +725,7 @@ private:
     /// freezeSingular() must look); true if every part has a Dirichlet face. The parts are found
     /// during the flood (each seed starts one; two meet when a cell finds a face neighbour already
     /// in the domain: union-find), so the common case needs no second pass over the domain.
-    bool build(const std::vector<Coord>& seeds, int64_t reach, bool& cut)
+    bool build(const std::vector<Coord>& seeds, int64_t reach, int64_t margin, bool& cut)
     {
         std::vector<int32_t>& comp = mB.comp;
         std::vector<int32_t>& parent = mB.compParent;
@@ -739,15 +749,50 @@ private:
         mIndex = std::make_unique<openvdb::Int32Tree>(-1);
         mIndexAcc = std::make_unique<openvdb::tree::ValueAccessor<openvdb::Int32Tree>>(*mIndex);
         std::deque<int32_t> queue;
-        for (const Coord& s : seeds) {
-            if (indexOf(s) >= 0) continue;
+        auto start = [&](const Coord& s, int64_t dist) {
             queue.push_back(addCell(s, kUnknown));
-            mDist.push_back(0);
+            mDist.push_back(dist);
             comp.push_back(int32_t(parent.size()));
             parent.push_back(int32_t(parent.size()));
+        };
+        // The reach counts from the contact: the seeds on the clay's boundary (a face on an obstacle,
+        // a tool, or a cell with room) start the flood; a seed inside the full clay (down a compress
+        // chain) is reached through it at its depth. One the reach did not get to (a chain deeper, in
+        // face steps, than the reach: a diagonal one) starts a flood of its own afterwards, with a
+        // margin of @a margin steps around it (it already lies in the plastic zone). So a compress
+        // push's chains add next to no reach beyond the contact.
+        const bool fromContact = mOpt.reachFromContact;
+        const int64_t innerDist = reach > margin ? reach - margin : 0;
+        bool innerStarted = !fromContact;
+        if (fromContact) {
+            std::vector<int32_t>& inner = mB.innerSeeds;
+            inner.clear();
+            for (size_t si = 0; si < seeds.size(); ++si) {
+                const Coord& s = seeds[si];
+                if (indexOf(s) >= 0) continue;
+                bool boundary = false;
+                for (int d = 0; d < mDirs && !boundary; ++d) {
+                    const Coord q = s.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                    boundary = isObstacle(q) || massAt(q) < mTc;
+                }
+                if (boundary)
+                    start(s, 0);
+                else
+                    inner.push_back(int32_t(si));
+            }
+        } else {
+            for (const Coord& s : seeds)
+                if (indexOf(s) < 0) start(s, 0);
         }
         cut = false;
-        while (!queue.empty()) {
+        for (;;) {
+            if (queue.empty()) { // the seeds the contact's flood did not reach start their own
+                if (innerStarted) break;
+                innerStarted = true;
+                for (const int32_t si : mB.innerSeeds)
+                    if (indexOf(seeds[size_t(si)]) < 0) start(seeds[size_t(si)], innerDist);
+                continue;
+            }
             const int32_t i = queue.front();
             queue.pop_front();
             const Coord c = mCells[size_t(i)];

@@ -30,6 +30,11 @@ struct GlobalTransportOptions {
     /// Only the cells over Tc in this box move (the push's region); empty: every cell of the grid.
     /// Either way nothing runs when the automaton holds no overload (residualOverload() == 0).
     Box seedRegion;
+    /// The reach counts from the over cells on the clay's boundary (a face on an obstacle, a tool or a
+    /// cell with room: where the tool touched), not from every over cell: the over cells a compress
+    /// push spread down its chains add no reach of their own (one the reach misses still starts its
+    /// own flood, 2 steps deep). false: `reach` from every over cell (round 4).
+    bool reachFromContact = true;
     /// Active-set rounds (each one Poisson solve) at most.
     int maxRounds = 12;
     /// Conjugate gradients stop at this residual, relative to the right-hand side. The routing is
