@@ -617,12 +617,14 @@ TEST_F(TransportTest, GlobalPressKeepsMassOverEveryFrameWithEveryRuleIn2DAnd3D)
 
 TEST_F(TransportTest, GlobalPressIsIdenticalOnOneTwoThreeAndEightThreads)
 {
-    for (int dims : {2, 3}) {
-        const std::string s = pressScene("prorata", "compress", "global", dims);
-        const uint64_t h1 = runScene(s, 1);
-        for (int threads : {2, 3, 8})
-            EXPECT_EQ(runScene(s, threads), h1) << dims << "D, " << threads << " threads";
-    }
+    // Surface: the later frames run the automaton's try before the layer (round 4b).
+    for (const char* push : {"compress", "surface"})
+        for (int dims : {2, 3}) {
+            const std::string s = pressScene("prorata", push, "global", dims);
+            const uint64_t h1 = runScene(s, 1);
+            for (int threads : {2, 3, 8})
+                EXPECT_EQ(runScene(s, threads), h1) << push << " " << dims << "D, " << threads << " threads";
+        }
 }
 
 TEST_F(TransportTest, GlobalTransportNeedsFarFewerStepsThanLocal)
@@ -690,6 +692,8 @@ TEST_F(TransportTest, OnCompressibleClayGlobalWithTheSurfacePushSettlesAsLocalDo
     const uint64_t h = runScene(local, 2, nullptr, &localSteps);
     EXPECT_EQ(runScene(global, 2, nullptr, &globalSteps), h);
     EXPECT_EQ(globalSteps, localSteps);
+    for (int threads : {1, 8})
+        EXPECT_EQ(runScene(global, threads), h) << threads << " threads";
     Sculptor sc(parseScene(global, "t.json", ""), 3);
     sc.run(0, [](const FrameReport& r) {
         EXPECT_GT(r.trySteps, 0u) << "frame " << r.frame;
