@@ -153,8 +153,9 @@ constexpr double kReachPerContact = 1.0;
 /// Scene::transport global, the automaton's try before the layer (Sculptor::Impl::settleBounded).
 /// Measured on the 48^3 press at 0.8 Tc (surface push): its frames need up to ~200 visited blocks
 /// per block of the clay (~600 steps); with 256 and 4096 every frame settles in the try (as local);
-/// with 64 or 128 two or three frames gave up and the layer made the run 2x slower. The 64^3 press
-/// at Tc (mean density 0.997 Tc after its push) skips the try.
+/// with 64 or 128 two or three frames gave up and the layer made the run 2x slower. Mean density
+/// (mass / (Tc x voxels with clay)) after each push: that press 0.817-0.920, the 64^3 press at Tc
+/// (surface push) 0.968-0.995, which skips the try; the 0.95 Tc stroke 0.95.
 constexpr uint64_t kTryChunk = 16;
 constexpr uint64_t kTrySteps = 4096;
 constexpr double kTryWork = 256;
@@ -790,9 +791,9 @@ struct Sculptor::Impl {
     /// The global transport's first try (docs/TRANSPORT.md, round 4b): the automaton alone, in chunks
     /// of kTryChunk steps, after a surface push only, unless the clay is saturated on average
     /// (kTrySaturated: a saturated body has room only at its surface, the automaton's random walk
-    /// would not settle it), while the
-    /// blocks it visits stay within kTryWork per 2x2x2 block of the clay (about what the global
-    /// layer costs a frame on it) and the frame within kTrySteps steps. @a finished: the frame ended
+    /// would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of the
+    /// clay (about what the global layer costs a frame on it) and the frame within kTrySteps
+    /// steps. @a finished: the frame ended
     /// here (settled, tolerance, no room, the scene's step budget); otherwise the global layer runs
     /// on what is left. No stop request is honoured here (the try is bounded, as the layer is): a
     /// frame saved open is always past its global layer, so a resumed frame never repeats or skips
