@@ -617,12 +617,14 @@ TEST_F(TransportTest, GlobalPressKeepsMassOverEveryFrameWithEveryRuleIn2DAnd3D)
 
 TEST_F(TransportTest, GlobalPressIsIdenticalOnOneTwoThreeAndEightThreads)
 {
-    for (int dims : {2, 3}) {
-        const std::string s = pressScene("prorata", "compress", "global", dims);
-        const uint64_t h1 = runScene(s, 1);
-        for (int threads : {2, 3, 8})
-            EXPECT_EQ(runScene(s, threads), h1) << dims << "D, " << threads << " threads";
-    }
+    // Surface: the later frames run the automaton's try before the layer (round 4b).
+    for (const char* push : {"compress", "surface"})
+        for (int dims : {2, 3}) {
+            const std::string s = pressScene("prorata", push, "global", dims);
+            const uint64_t h1 = runScene(s, 1);
+            for (int threads : {2, 3, 8})
+                EXPECT_EQ(runScene(s, threads), h1) << push << " " << dims << "D, " << threads << " threads";
+        }
 }
 
 TEST_F(TransportTest, GlobalTransportNeedsFarFewerStepsThanLocal)
@@ -673,58 +675,108 @@ TEST_F(TransportTest, ASqueezedTallCylinderKeepsStraightSides)
     EXPECT_GE(lo, 150) << counts;
 }
 
+TEST_F(TransportTest, OnCompressibleClayGlobalWithTheSurfacePushSettlesAsLocalDoes)
+{
+    // A 24^3 press at 0.8 Tc: after each surface push the automaton's try settles the frame (a
+    // few hundred cheap steps), so the global layer never runs and the result is local's, bit for bit.
+    const auto scene = [](const char* transport) {
+        return std::string(R"({"threshold": 1000, "rule": "prorata", "push": "surface", "transport": ")") +
+               transport + R"(",
+            "clay": [{"shape": "box", "min": [0,0,0], "max": [23,23,23], "mass": 800}],
+            "tools": [{"shape": "box", "min": [-12,24,-12], "max": [35,27,35], "path": [{"translate": [0,-1,0], "frames": 4}]}],
+            "obstacles": [{"shape": "box", "min": [-30,-3,-30], "max": [50,-1,50]}],
+            "settle": {"max_steps": 400000}})";
+    };
+    const std::string local = scene("local"), global = scene("global");
+    uint64_t localSteps = 0, globalSteps = 0;
+    const uint64_t h = runScene(local, 2, nullptr, &localSteps);
+    EXPECT_EQ(runScene(global, 2, nullptr, &globalSteps), h);
+    EXPECT_EQ(globalSteps, localSteps);
+    for (int threads : {1, 8})
+        EXPECT_EQ(runScene(global, threads), h) << threads << " threads";
+    Sculptor sc(parseScene(global, "t.json", ""), 3);
+    sc.run(0, [](const FrameReport& r) {
+        EXPECT_GT(r.trySteps, 0u) << "frame " << r.frame;
+        EXPECT_EQ(r.trySteps, r.settle.steps) << "frame " << r.frame;
+        EXPECT_EQ(r.transport.solves, 0u) << "frame " << r.frame;
+    });
+    EXPECT_EQ(contentHash(*sc.mass()), h);
+}
+
 TEST_F(TransportTest, AGlobalRunStoppedAndResumedIsIdenticalToAnUnbrokenRun)
 {
     // The press, plus clay walled in a closed chamber with more than Tc per cell on average: the
-    // global layer reports it and leaves it, the automaton shuffles it for a few steps (NoRoom),
-    // so frames have steps to be stopped between.
-    std::string json = pressScene("prorata", "surface", "global");
-    json.replace(json.find(R"("clay": [)"), 9,
-                 R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
+    // global layer reports it and leaves it, the automaton shuffles it until the frame's step budget,
+    // so frames have steps to be stopped between. Compress push: the layer runs right after the push.
+    // Surface push: the first frame (the cube at Tc, saturated) goes to the layer at once; in the later
+    // frames (clay spread thin around the cube) the automaton's try runs first, gives up at its work
+    // cap, then the layer runs. A stop asked inside the try is honoured after the layer (a frame saved
+    // open is past its layer): the resumed run never repeats or skips it.
+    for (const char* push : {"compress", "surface"}) {
+        std::string json = pressScene("prorata", push, "global");
+        json.replace(json.find(R"("clay": [)"), 9,
+                     R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
         {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
-    json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
+        json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
         {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
         {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
         {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
-    json.replace(json.find(R"("max_steps": 400000)"), 19, R"("max_steps": 40)");
-    const Scene s = parseScene(json, "t.json", "");
-    Sculptor whole(s, 2);
-    whole.run();
-    const uint64_t h = contentHash(*whole.mass());
-    const uint64_t steps = whole.automaton().stepCount();
-    const std::string ckpt = "/tmp/vdbclay-transport-ckpt-" + std::to_string(::getpid()) + ".vdb";
-    for (uint64_t every : {7, 13}) {
-        Scene cur = s;
-        int checkpoints = 0, midFrame = 0;
-        for (;;) {
-            Sculptor sc(cur, checkpoints % 2 ? 1 : 3);
-            const uint64_t stopAt = sc.automaton().stepCount() + every;
-            sc.setStopRequest([&sc, stopAt] { return sc.automaton().stepCount() >= stopAt; });
-            // A frame reopened from a mid-frame checkpoint neither pushes nor transports again.
-            bool reopened = sc.frameOpen();
-            sc.run(0, [&](const FrameReport& r) {
-                if (reopened) {
-                    EXPECT_EQ(r.push.voxelsPushed, 0u);
-                    EXPECT_EQ(r.transport.solves, 0u);
-                } else {
-                    EXPECT_GT(r.transport.overloadBefore, 0);
+        const bool surface = std::string(push) == "surface";
+        json.replace(json.find(R"("max_steps": 400000)"), 19,
+                     surface ? R"("max_steps": 400)" : R"("max_steps": 40)");
+        const Scene s = parseScene(json, "t.json", "");
+        Sculptor whole(s, 2);
+        uint64_t tried = 0, layers = 0;
+        whole.run(0, [&](const FrameReport& r) {
+            tried += r.trySteps > 0 ? 1 : 0;
+            layers += r.transport.overloadBefore > 0 ? 1 : 0;
+        });
+        EXPECT_EQ(layers, 4u) << push; // every frame reaches the layer
+        EXPECT_EQ(tried, surface ? 3u : 0u) << push;
+        const uint64_t h = contentHash(*whole.mass());
+        const uint64_t steps = whole.automaton().stepCount();
+        const std::string ckpt = "/tmp/vdbclay-transport-ckpt-" + std::to_string(::getpid()) + ".vdb";
+        for (uint64_t every : surface ? std::vector<uint64_t>{37, 91} : std::vector<uint64_t>{7, 13}) {
+            Scene cur = s;
+            int checkpoints = 0, midFrame = 0, insideTry = 0;
+            for (;;) {
+                Sculptor sc(cur, checkpoints % 2 ? 1 : 3);
+                const uint64_t stopAt = sc.automaton().stepCount() + every;
+                sc.setStopRequest([&sc, stopAt] { return sc.automaton().stepCount() >= stopAt; });
+                // A frame reopened from a mid-frame checkpoint neither pushes, tries nor transports again.
+                bool reopened = sc.frameOpen();
+                sc.run(0, [&](const FrameReport& r) {
+                    const uint64_t start = sc.automaton().stepCount() - r.settle.steps;
+                    if (reopened) {
+                        EXPECT_EQ(r.push.voxelsPushed, 0u);
+                        EXPECT_EQ(r.trySteps, 0u);
+                        EXPECT_EQ(r.transport.solves, 0u);
+                    } else {
+                        EXPECT_GT(r.transport.overloadBefore, 0);
+                        // A stop asked inside the try: the frame went on through the layer.
+                        if (r.trySteps > 0 && start + r.trySteps >= stopAt) {
+                            ++insideTry;
+                            EXPECT_GT(sc.automaton().stepCount(), start + r.trySteps);
+                        }
+                    }
+                    reopened = false;
+                });
+                if (!sc.stopped()) {
+                    EXPECT_EQ(contentHash(*sc.mass()), h) << push << " every " << every;
+                    EXPECT_EQ(sc.automaton().stepCount(), steps) << push << " every " << every;
+                    break;
                 }
-                reopened = false;
-            });
-            if (!sc.stopped()) {
-                EXPECT_EQ(contentHash(*sc.mass()), h) << "every " << every;
-                EXPECT_EQ(sc.automaton().stepCount(), steps) << "every " << every;
-                break;
+                const ClayMeta m = sc.checkpointMeta();
+                if (m.frameSteps) ++midFrame;
+                writeClayFile(ckpt, *sc.mass(), m);
+                cur.start = ckpt;
+                ASSERT_LT(++checkpoints, 10000);
             }
-            const ClayMeta m = sc.checkpointMeta();
-            if (m.frameSteps) ++midFrame;
-            writeClayFile(ckpt, *sc.mass(), m);
-            cur.start = ckpt;
-            ASSERT_LT(++checkpoints, 10000);
+            EXPECT_GT(midFrame, 0) << push << " every " << every;
+            if (surface) EXPECT_GT(insideTry, 0) << "every " << every;
         }
-        EXPECT_GT(midFrame, 0) << "every " << every;
+        std::remove(ckpt.c_str());
     }
-    std::remove(ckpt.c_str());
 }
 
 TEST_F(TransportTest, MemoryEstimateCountsTheGlobalLayer)

@@ -153,6 +153,27 @@ constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 constexpr int kMaxSweepSubsteps = 256;
 /// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
 constexpr double kReachPerContact = 1.0;
+/// Scene::transport global, the automaton's try before the layer (Sculptor::Impl::settleBounded).
+/// Measured on the 48^3 press at 0.8 Tc (surface push): its frames need up to ~200 visited blocks
+/// per block of the clay (~600 steps); with 256 and 4096 every frame settles in the try (as local);
+/// with 64 or 128 two or three frames gave up and the layer made the run 2x slower. Mean density
+/// (mass / (Tc x voxels with clay)) after each push: that press 0.817-0.920, the 64^3 press at Tc
+/// (surface push) 0.968-0.995, which skips the try; the 0.95 Tc stroke 0.95.
+constexpr uint64_t kTryChunk = 16;
+constexpr uint64_t kTrySteps = 4096;
+constexpr double kTryWork = 256;
+constexpr double kTrySaturated = 0.96;
+
+/// @a box grown by @a n voxels on every side (clamped to the int32 range).
+Box grownBy(Box box, int64_t n)
+{
+    if (box.empty()) return box;
+    for (int a = 0; a < 3; ++a) {
+        box.min[a] = int32_t(std::max<int64_t>(INT32_MIN, int64_t(box.min[a]) - n));
+        box.max[a] = int32_t(std::min<int64_t>(INT32_MAX, int64_t(box.max[a]) + n));
+    }
+    return box;
+}
 
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
 
@@ -771,6 +792,54 @@ struct Sculptor::Impl {
         return r;
     }
 
+    /// The global transport's first try (docs/TRANSPORT.md, round 4b): the automaton alone, in chunks
+    /// of kTryChunk steps, after a surface push only, unless the clay is saturated on average
+    /// (kTrySaturated: a saturated body has room only at its surface, the automaton's random walk
+    /// would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of the
+    /// clay (about what the global layer costs a frame on it) and the frame within kTrySteps
+    /// steps. @a finished: the frame ended
+    /// here (settled, tolerance, no room, the scene's step budget); otherwise the global layer runs
+    /// on what is left. No stop request is honoured here (the try is bounded, as the layer is): a
+    /// frame saved open is always past its global layer, so a resumed frame never repeats or skips
+    /// it, with no new checkpoint field.
+    StepReport settleBounded(bool& finished)
+    {
+        StepReport total;
+        finished = false;
+        if (automaton->residualOverload() == 0) return total; // the layer would do nothing either
+        // The compress push leaves overload only where the clay ahead of the tool had no room (on
+        // compressible clay it leaves none: the 48^3 press at 0.8 Tc), and global + compress is the
+        // setting for clay at Tc: its results stay those of the layer alone.
+        if (scene.push != PushMode::Surface) return total;
+        const uint64_t voxels = mass->activeVoxelCount();
+        const double tc = double(scene.rule.threshold);
+        if (double(automaton->totalMass()) >= kTrySaturated * tc * double(voxels)) return total;
+        const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
+        for (;;) {
+            SettleOptions so;
+            so.maxSteps = std::min<uint64_t>(scene.settle.maxSteps, openSteps + kTryChunk);
+            so.tolerance = scene.settle.tolerance;
+            so.stepsDone = openSteps;
+            const uint64_t step0 = automaton->stepCount();
+            keepToolsAhead(openSteps, true);
+            so.stop = [this, step0](const Automaton& a) {
+                keepToolsAhead(openSteps + (a.stepCount() - step0), false);
+                return false;
+            };
+            const StepReport r = automaton->settle(so);
+            openSteps += r.steps;
+            total += r;
+            total.reason = r.reason;
+            total.residualOverload = r.residualOverload;
+            total.settled = r.settled;
+            if (r.reason != StopReason::StepBudget || openSteps >= scene.settle.maxSteps) {
+                finished = true;
+                return total;
+            }
+            if (openSteps >= kTrySteps || double(total.blocksVisited) > work) return total;
+        }
+    }
+
     /// Before the automaton's next step, with @a frameSteps steps of the frame run: marks the
     /// tools' cells near leaves created since the last cover (always when @a afterPush), and, when
     /// settle's next check is the no-room flood, as far as the flood can reach.
@@ -1131,8 +1200,8 @@ FrameReport Sculptor::runFrame()
     FrameReport rep;
     rep.frame = im.frame + 1;
     if (!im.open) {
-        // The push and the global layer run once, when the frame opens: a frame resumed from a
-        // checkpoint (im.open) goes straight on settling.
+        // The push, the global transport's try and its layer run once, when the frame opens: a
+        // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
         if (im.scene.transport == Transport::Global) {
             GlobalTransportOptions go;
@@ -1145,12 +1214,29 @@ FrameReport Sculptor::runFrame()
             // The overload the push made lies in its region: look for it there only (a frame
             // costs the tool's region, not the model's size).
             if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
+            // The automaton's try first (compressible clay settles in a few cheap steps, as with
+            // local); the layer only on what it leaves, its seeds looked for as far as the try's
+            // steps can have carried the overload (a Margolus step moves clay one voxel at most).
+            im.open = true;
+            im.openSteps = 0;
+            rep.settle = im.settleBounded(rep.finished);
+            rep.trySteps = rep.settle.steps;
+            if (rep.finished) {
+                im.open = false;
+                im.openSteps = 0;
+                ++im.frame;
+                return rep;
+            }
+            if (rep.push.contactSize > 0) go.seedRegion = grownBy(go.seedRegion, int64_t(rep.settle.steps));
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
+        } else {
+            im.open = true;
+            im.openSteps = 0;
         }
-        im.open = true;
-        im.openSteps = 0;
     }
-    rep.settle = im.settleOpenFrame(rep.finished);
+    const StepReport rest = im.settleOpenFrame(rep.finished);
+    rep.settle += rest; // after the try, if any
+    rep.settle.reason = rest.reason;
     if (rep.finished) {
         im.open = false;
         im.openSteps = 0;
