@@ -422,13 +422,13 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                             ++j;
                         d.changed = wm[j].changed;
                     }
-                    // Most dense steps record through the sink, as the pass does: one sink (atomic
-                    // or not), or 1-4 lanes (a pass on several threads: each item in a random lane,
+                    // Most dense steps record through the sink, as the pass does: one sink, or 1-4
+                    // lanes (a pass on several threads: each item in a random lane,
                     // as a thread of the pass would take it), some items recorded twice.
                     if (dense.attached() && g.range(0, 3) != 0) {
                         const int mode = g.range(0, 2);
                         const int lanes = mode == 2 ? g.range(1, 4) : 1;
-                        const DenseSink* sink = mode == 2 ? dense.lanes(lanes) : dense.sink(mode == 0);
+                        const DenseSink* sink = mode == 2 ? dense.lanes(lanes) : dense.sink();
                         ASSERT_NE(sink, nullptr);
                         for (const WorkItem& d : wd) {
                             if (!d.changed || d.entry == kNoEntry) continue;

@@ -60,9 +60,9 @@ void Candidates::record(std::vector<WorkItem>& work)
     for (size_t i = 0; indexed && i < work.size(); ++i) // (always, for lists gathered in dense mode)
         indexed = work[i].entry != kNoEntry;
     if (indexed) {
-        // A pass in several tasks leaves the recording to here (serial, plain ORs: atomic ORs from
-        // the tasks cost more than the whole serial loop). Then, as after a pass that recorded
-        // every item itself, keep the list (by swap) for a later detach(), which turns the last
+        // A pass that did not record its items (a range ran outside the lanes: sinkMissed) leaves
+        // the recording to here (serial, plain ORs). Then, as after a pass that recorded every item
+        // itself, keep the list (by swap) for a later detach(), which turns the last
         // two into changed lists.
         if (!mSunk) sinkAll(work);
         mPrevWork[1].swap(mPrevWork[0]);
@@ -77,7 +77,7 @@ void Candidates::record(std::vector<WorkItem>& work)
 
 void Candidates::sinkAll(const std::vector<WorkItem>& work)
 {
-    const DenseSink& s = *sink(/*atomic=*/false);
+    const DenseSink& s = *sink();
     auto each = [&](auto sinkOne) {
         for (const WorkItem& w : work) {
             if (w.changed) sinkOne(s, w.entry, w.changed);
@@ -209,7 +209,7 @@ void Candidates::attach(const AnchorIndex& index, int phase, bool is3D)
     }
 }
 
-const DenseSink* Candidates::sink(bool atomic)
+const DenseSink* Candidates::sink()
 {
     if (!mDense) return nullptr;
     mSink.acc[0] = mAcc[0].data();
@@ -217,7 +217,6 @@ const DenseSink* Candidates::sink(bool atomic)
     mSink.touched[0] = mTouched[0].data();
     mSink.touched[1] = mTouched[1].data();
     mSink.nb = mPhase == 0 ? mIndex.up : mIndex.down;
-    mSink.atomic = atomic;
     mSunk = true;
     return &mSink;
 }
@@ -225,8 +224,8 @@ const DenseSink* Candidates::sink(bool atomic)
 const DenseSink* Candidates::lanes(int n)
 {
     if (!mDense) return nullptr;
-    if (n <= 1) return sink(false);
-    const DenseSink lane0 = *sink(false);
+    if (n <= 1) return sink();
+    const DenseSink lane0 = *sink();
     if (mLanes.size() < size_t(n - 1)) mLanes.resize(size_t(n - 1));
     mLaneSinks.assign(size_t(n), lane0);
     for (int i = 1; i < n; ++i) {

@@ -68,33 +68,28 @@ struct AnchorIndex {
 /// pass ORs each item's changed blocks in as soon as the item is done, in its own task, instead of
 /// record() doing it serially after the pass. OR is commutative and idempotent, so the result does
 /// not depend on the order or the partition. With several threads each writes its own lane (plain
-/// ORs, nothing shared); `atomic` (shared words by atomic ORs) remains for tests, slower.
+/// ORs, nothing shared: atomic ORs into shared words measured slower, docs/PERFORMANCE.md round 4).
 struct DenseSink {
     uint64_t* acc[2] = {nullptr, nullptr};
     uint64_t* touched[2] = {nullptr, nullptr};
     const uint32_t* nb = nullptr; // AnchorIndex::up for a step of phase 0, down for phase 1
-    bool atomic = false;
 };
 
 /// Records that the blocks @a changed of anchor @a e changed at a step of phase P (see DenseSink):
 /// into slot P for the step after next, dilated into slot 1 - P for the next step.
 template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed)
 {
-    auto orWord = [&](uint64_t* w, uint64_t m) {
-        if (!s.atomic) return std::exchange(*w, *w | m);
-        if ((__atomic_load_n(w, __ATOMIC_RELAXED) & m) == m) return m; // nothing new
-        return __atomic_fetch_or(w, m, __ATOMIC_RELAXED);
-    };
-    // Only this item writes its own entry of slot P during the pass; the bit set's words are shared.
+    // The sink is this thread's alone (one lane per thread): plain ORs.
     s.acc[P][e] |= changed;
-    orWord(&s.touched[P][e >> 6], uint64_t(1) << (e & 63));
+    s.touched[P][e >> 6] |= uint64_t(1) << (e & 63);
     uint64_t out[8];
     dilateAll<P, D3>(changed, out);
     const uint32_t* nb = s.nb + 8 * size_t(e);
     for (int k = 0; k < (D3 ? 8 : 4); ++k) {
         const uint32_t t = nb[k];
         if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
-        if (orWord(&s.acc[1 - P][t], out[k]) == 0) orWord(&s.touched[1 - P][t >> 6], uint64_t(1) << (t & 63));
+        if (std::exchange(s.acc[1 - P][t], s.acc[1 - P][t] | out[k]) == 0)
+            s.touched[1 - P][t >> 6] |= uint64_t(1) << (t & 63);
     }
 }
 
@@ -123,11 +118,11 @@ public:
     bool attached() const { return mDense; }
     /// In dense mode, the accumulators for the pass of the step just gathered (null otherwise):
     /// the pass records its items' changes there (sinkChanges), record() then only the items that
-    /// carry no index. @a atomic: several tasks write at once (measured slower than lanes()).
-    const DenseSink* sink(bool atomic);
+    /// carry no index. One thread only (several: lanes()).
+    const DenseSink* sink();
     /// In dense mode, @a n private sinks for a pass on up to n threads (null otherwise): thread i of
     /// the pass records into sink i only, with plain ORs (no word is shared between threads); lane 0
-    /// is sink(false)'s, lanes 1.. are copies that the next gathers OR in (OR is commutative and
+    /// is sink()'s, lanes 1.. are copies that the next gathers OR in (OR is commutative and
     /// idempotent: the candidates do not depend on which thread recorded which item).
     const DenseSink* lanes(int n);
     /// The pass did not record every item it was given a sink for: record() records them all.

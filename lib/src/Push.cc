@@ -350,14 +350,7 @@ private:
     }
 
     /// An obstacle that is not part of a tool: clay can neither stop in it nor pass through it.
-    bool isWall(const Coord& c) const
-    {
-        if (!mObs || !mObs->isValueOn(c)) return false;
-        for (size_t t = 0; t < mTools.size(); ++t) {
-            if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return false;
-        }
-        return true;
-    }
+    bool isWall(const Coord& c) const { return mObs && mObs->isValueOn(c) && !inAnyTool(c); }
 
     bool isFree(const Coord& c, int32_t m) const { return isFree(c, m, mRegion); }
     bool isFree(const Coord& c, int32_t m, const Box& region, bool planned = true) const
@@ -365,14 +358,8 @@ private:
         if (!inside(region, c)) return false;
         if (mIs2D && c.z() != 0) return false;
         if (mObs && mObs->isValueOn(c)) return false;
-        for (size_t t = 0; t < mTools.size(); ++t) {
-            if (inside(mBounds[t], c) && mTools[t]->distance(centre(c)) < 0) return false;
-        }
-        int64_t now = mMass.getValue(c);
-        if (planned) {
-            const auto it = mAdded.find(c);
-            if (it != mAdded.end()) now += it->second;
-        }
+        if (inAnyTool(c)) return false;
+        const int64_t now = planned ? this->planned(c) : int64_t(mMass.getValue(c));
         return now + m <= INT32_MAX;
     }
 

@@ -776,19 +776,27 @@ struct Sculptor::Impl {
     /// frame short (StopReason::Stopped).
     StepReport settleOpenFrame(bool& finished)
     {
+        const StepReport r = settleFrameUpTo(scene.settle.maxSteps, /*honourStop=*/true);
+        finished = r.reason != StopReason::Stopped;
+        return r;
+    }
+
+    /// Automaton::settle on the open frame until frame step @a maxSteps (see settleOpenFrame), the
+    /// tools kept ahead of the clay; a stop request ends it only if @a honourStop.
+    StepReport settleFrameUpTo(uint64_t maxSteps, bool honourStop)
+    {
         SettleOptions so;
-        so.maxSteps = scene.settle.maxSteps;
+        so.maxSteps = maxSteps;
         so.tolerance = scene.settle.tolerance;
         so.stepsDone = openSteps;
         const uint64_t step0 = automaton->stepCount();
         keepToolsAhead(openSteps, true);
-        so.stop = [this, step0](const Automaton& a) {
+        so.stop = [this, step0, honourStop](const Automaton& a) {
             keepToolsAhead(openSteps + (a.stepCount() - step0), false);
-            return a.quietSteps() == 0 && stopRequested();
+            return honourStop && a.quietSteps() == 0 && stopRequested();
         };
         const StepReport r = automaton->settle(so);
         openSteps += r.steps;
-        finished = r.reason != StopReason::Stopped;
         return r;
     }
 
@@ -816,18 +824,9 @@ struct Sculptor::Impl {
         if (double(automaton->totalMass()) >= kTrySaturated * tc * double(voxels)) return total;
         const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
         for (;;) {
-            SettleOptions so;
-            so.maxSteps = std::min<uint64_t>(scene.settle.maxSteps, openSteps + kTryChunk);
-            so.tolerance = scene.settle.tolerance;
-            so.stepsDone = openSteps;
-            const uint64_t step0 = automaton->stepCount();
-            keepToolsAhead(openSteps, true);
-            so.stop = [this, step0](const Automaton& a) {
-                keepToolsAhead(openSteps + (a.stepCount() - step0), false);
-                return false;
-            };
-            const StepReport r = automaton->settle(so);
-            openSteps += r.steps;
+            const StepReport r =
+                settleFrameUpTo(std::min<uint64_t>(scene.settle.maxSteps, openSteps + kTryChunk),
+                                /*honourStop=*/false);
             total += r;
             total.reason = r.reason;
             total.residualOverload = r.residualOverload;
