@@ -30,6 +30,10 @@
 
 #include <tbb/task_arena.h>
 
+#if defined(__x86_64__) || defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <climits>
 #include <optional>
@@ -457,6 +461,139 @@ __attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, in
     return top > tc;
 }
 
+// ---- The over-cell filter ------------------------------------------------------------------------
+//
+// Most candidate blocks hold no cell over Tc (press48: 4.4 M of 5.7 M examined), and the block loop
+// spends ~40 instructions on each before it finds that out. The filter decides the item's candidates
+// a column at a time (BlockMasks.h, ColumnTables: the 4 blocks with the same bx, by lie in 4 z-rows of
+// 8 consecutive cells): 4 row compares against Tc ORed, one movemask, one fold table lookup give the
+// column's blocks holding an over cell; on the odd phase the cells z = -1 of the block bz = 0 come
+// from the -z neighbours (4 scalar loads, only when that block is a candidate). The result is exact
+// (a block is kept iff one of its cells is over Tc, obstacles not excluded, as the block loop tests),
+// so the loop skips exactly the blocks it skipped before; blocksVisited still counts every candidate.
+// AVX2 (one row per register) where the CPU has it, chosen at run time; SSE2 (two registers a row)
+// otherwise; 3D only (a 2D block's cells are 8 int32 apart: no row to compare).
+
+/// Whether a cell z = -1 of block bz = 0 of column @a col (odd phase) is over @a tc.
+inline bool lowerZOver(const int32_t* const read[8], int col, int32_t tc)
+{
+    const uint16_t* off = kColumns.rowOffset[1][col];
+    const uint8_t* lf = kColumns.rowLeaf[1][col];
+    const int32_t a = std::max(read[lf[0] | 4][off[0] + 7], read[lf[1] | 4][off[1] + 7]);
+    const int32_t b = std::max(read[lf[2] | 4][off[2] + 7], read[lf[3] | 4][off[3] + 7]);
+    return std::max(a, b) > tc;
+}
+
+#if defined(__SSE2__)
+template <int P>
+__attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], uint64_t mask, int32_t tc)
+{
+    const __m128i t = _mm_set1_epi32(tc);
+    uint32_t cols = columnsOf(mask);
+    uint64_t out = 0;
+    while (cols) {
+        const int col = __builtin_ctz(cols);
+        cols &= cols - 1;
+        const int32_t* r[4];
+        if (P == 0) {
+            const int32_t* d = read[0] + kColumns.rowOffset[0][col][0];
+            r[0] = d, r[1] = d + 64, r[2] = d + 8, r[3] = d + 72;
+        } else {
+            for (int k = 0; k < 4; ++k)
+                r[k] = read[kColumns.rowLeaf[1][col][k]] + kColumns.rowOffset[1][col][k];
+        }
+        __m128i lo = _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r[0])), t);
+        __m128i hi = _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r[0] + 4)), t);
+        for (int k = 1; k < 4; ++k) {
+            lo =
+                _mm_or_si128(lo, _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r[k])), t));
+            hi = _mm_or_si128(
+                hi, _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r[k] + 4)), t));
+        }
+        const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(lo))) |
+                           (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(hi))) << 4);
+        uint64_t blocks = kColumns.zFold[P][z];
+        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        out |= blocks << col;
+    }
+    return out & mask;
+}
+#endif
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define VDBCLAY_HAVE_AVX2_FILTER 1
+template <int P>
+__attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t* const read[8], uint64_t mask,
+                                                                  int32_t tc)
+{
+    const __m256i t = _mm256_set1_epi32(tc);
+    uint32_t cols = columnsOf(mask);
+    uint64_t out = 0;
+    while (cols) {
+        const int col = __builtin_ctz(cols);
+        cols &= cols - 1;
+        const int32_t* r[4];
+        if (P == 0) {
+            const int32_t* d = read[0] + kColumns.rowOffset[0][col][0];
+            r[0] = d, r[1] = d + 64, r[2] = d + 8, r[3] = d + 72;
+        } else {
+            for (int k = 0; k < 4; ++k)
+                r[k] = read[kColumns.rowLeaf[1][col][k]] + kColumns.rowOffset[1][col][k];
+        }
+        __m256i v[4];
+        for (int k = 0; k < 4; ++k) // (no lambda: it would not inherit the target)
+            v[k] = _mm256_cmpgt_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(r[k])), t);
+        const __m256i any = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
+        const uint32_t z = uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(any)));
+        uint64_t blocks = kColumns.zFold[P][z];
+        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        out |= blocks << col;
+    }
+    return out & mask;
+}
+
+bool cpuHasAvx2()
+{
+    static const bool has = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2") != 0;
+    }();
+    return has;
+}
+#else
+bool cpuHasAvx2()
+{
+    return false;
+}
+#endif
+
+/// The filter @a f stands for on this machine and build.
+OverFilter resolveFilter(OverFilter f)
+{
+    if (f == OverFilter::Auto || f == OverFilter::Avx2) {
+        if (cpuHasAvx2()) return OverFilter::Avx2;
+        f = OverFilter::Sse2;
+    }
+#if defined(__SSE2__)
+    return f;
+#else
+    return OverFilter::None;
+#endif
+}
+
+template <int P>
+inline uint64_t filterBlocks(OverFilter f, const int32_t* const read[8], uint64_t mask, int32_t tc)
+{
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+    if (f == OverFilter::Avx2) return overBlocksAvx2<P>(read, mask, tc);
+#endif
+#if defined(__SSE2__)
+    if (f == OverFilter::Sse2) return overBlocksSse2<P>(read, mask, tc);
+#endif
+    (void)f, (void)read, (void)tc;
+    return mask;
+}
+
 /// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
 struct LeafSet {
     MassLeaf* leaf[8] = {};
@@ -575,6 +712,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
 #else
     const bool simd = false;
 #endif
+    const OverFilter filter = (D3 && !in.portable) ? resolveFilter(in.filter) : OverFilter::None;
     MassAcc acc(*in.tree);
     const LeafTable::Impl* table = in.table && in.table->valid() ? in.table->impl() : nullptr;
     std::optional<ObsAcc> oacc;
@@ -605,6 +743,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;
+        if (D3 && filter != OverFilter::None) bits = filterBlocks<P>(filter, ls.read, bits, tc32);
         while (bits) {
             const int b = __builtin_ctzll(bits);
             bits &= bits - 1;
@@ -831,6 +970,19 @@ void dispatch(const PassInput& in, WorkItem* work, size_t begin, size_t end, Pas
 }
 
 } // namespace
+
+OverFilter bestOverFilter()
+{
+    return resolveFilter(OverFilter::Auto);
+}
+
+uint64_t overBlocks(const int32_t* const read[8], uint64_t mask, int32_t tc, bool is3D, int phase,
+                    OverFilter f)
+{
+    if (!is3D) return mask;
+    f = resolveFilter(f);
+    return phase ? filterBlocks<1>(f, read, mask, tc) : filterBlocks<0>(f, read, mask, tc);
+}
 
 void PassTotals::join(const PassTotals& o)
 {
