@@ -259,10 +259,23 @@ template <int N> __attribute__((always_inline)) inline void storeCorners(__m128i
     if constexpr (N == 8) _mm_store_si128(reinterpret_cast<__m128i*>(m + 4), hi);
 }
 
-/// Lanes of -1 where bit c of @a mask is set (c = 0-3 in the low register, 4-7 in the high one).
-__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i laneBits)
+/// kLaneMasks.v[m]: lane c is -1 where bit c of the 4-bit mask m is set, else 0.
+struct LaneMaskTable {
+    alignas(16) int32_t v[16][4];
+    constexpr LaneMaskTable() : v{}
+    {
+        for (int m = 0; m < 16; ++m)
+            for (int c = 0; c < 4; ++c)
+                v[m][c] = ((m >> c) & 1) ? -1 : 0;
+    }
+};
+alignas(64) constexpr LaneMaskTable kLaneMasks;
+
+/// Lanes of -1 where bit c of @a mask4 is set (c = 0-3; the high register takes mask >> 4): one load
+/// from kLaneMasks (a broadcast, an and and a compare before; @a laneBits is no longer needed).
+__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i /*laneBits*/)
 {
-    return _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(mask4)), laneBits), laneBits);
+    return _mm_load_si128(reinterpret_cast<const __m128i*>(kLaneMasks.v[mask4 & 15u]));
 }
 
 __attribute__((always_inline)) inline int32_t hsum(__m128i x)
