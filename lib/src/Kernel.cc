@@ -481,27 +481,41 @@ __attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, in
 // a column at a time (BlockMasks.h, ColumnTables: the 4 blocks with the same bx, by lie in 4 z-rows of
 // 8 consecutive cells): 4 row compares against Tc ORed, one movemask, one fold table lookup give the
 // column's blocks holding an over cell; on the odd phase the cells z = -1 of the block bz = 0 come
-// from the -z neighbours (4 more rows, only when that block is a candidate). The result is exact
+// from the -z neighbours (4 scalar loads, only when that block is a candidate). The result is exact
 // (a block is kept iff one of its cells is over Tc, obstacles not excluded, as the block loop tests),
 // so the loop skips exactly the blocks it skipped before; blocksVisited still counts every candidate.
 // AVX2 (one row per register) where the CPU has it, chosen at run time; SSE2 (two registers a row)
 // otherwise; 3D only (a 2D block's cells are 8 int32 apart: no row to compare).
+//
+// Only the item's own cells are read, as in the block loop: on the odd phase a row's z = 7 cell
+// belongs to the +z anchor's block, which another task may be writing at the same time, so it is
+// left out of the load (AVX2: a masked load, whose masked lane is not accessed; SSE2: z = 4-6 loaded
+// as 8 + 4 bytes), and of the -z rows only the z = 7 cells are read.
 
-/// The 4 z-rows of column @a col (phase P) in @a r, or with @a below the rows under them in the -z
-/// neighbours (odd phase: their z = 7 cells are the column's z = -1). Columns with bx, by >= 1 lie in
-/// one leaf at constant offsets (every column on the even phase); the others go through the tables.
+/// The 4 z-rows of column @a col (phase P) in @a r. Columns with bx, by >= 1 lie in the anchor's leaf
+/// at constant offsets (every column on the even phase); the others go through the tables.
 template <int P>
-__attribute__((always_inline)) inline void columnRows(const int32_t* const read[8], int col, bool below,
+__attribute__((always_inline)) inline void columnRows(const int32_t* const read[8], int col,
                                                       const int32_t* r[4])
 {
-    const int z = below ? 4 : 0;
     if (P == 0 || ((col & 3) && (col >> 2))) {
-        const int32_t* d = read[z] + kColumns.rowOffset[P][col][0];
+        const int32_t* d = read[0] + kColumns.rowOffset[P][col][0];
         r[0] = d, r[1] = d + 64, r[2] = d + 8, r[3] = d + 72;
     } else {
         for (int k = 0; k < 4; ++k)
-            r[k] = read[kColumns.rowLeaf[1][col][k] | z] + kColumns.rowOffset[1][col][k];
+            r[k] = read[kColumns.rowLeaf[1][col][k]] + kColumns.rowOffset[1][col][k];
     }
+}
+
+/// Whether a cell z = -1 of block bz = 0 of column @a col (odd phase) is over @a tc: the z = 7 cells
+/// of the rows below the column's, in the -z neighbours.
+__attribute__((always_inline)) inline bool lowerZOver(const int32_t* const read[8], int col, int32_t tc)
+{
+    const uint16_t* off = kColumns.rowOffset[1][col];
+    const uint8_t* lf = kColumns.rowLeaf[1][col];
+    const int32_t a = std::max(read[lf[0] | 4][off[0] + 7], read[lf[1] | 4][off[1] + 7]);
+    const int32_t b = std::max(read[lf[2] | 4][off[2] + 7], read[lf[3] | 4][off[3] + 7]);
+    return std::max(a, b) > tc;
 }
 
 #if defined(__SSE2__)
@@ -509,8 +523,14 @@ template <int P>
 __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], uint64_t mask, int32_t tc)
 {
     const __m128i t = _mm_set1_epi32(tc);
-    auto cmp = [&](const int32_t* p) {
+    auto lo = [&](const int32_t* p) { // z = 0-3
         return _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)), t);
+    };
+    auto hi = [&](const int32_t* p) { // z = 4-7; odd phase z = 4-6 (lane 3 reads as 0)
+        if (P == 0) return _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p + 4)), t);
+        const __m128i v = _mm_unpacklo_epi64(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p + 4)),
+                                             _mm_cvtsi32_si128(p[6]));
+        return _mm_cmpgt_epi32(v, t);
     };
     uint32_t cols = columnsOf(mask);
     uint64_t out = 0;
@@ -518,20 +538,13 @@ __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], 
         const int col = __builtin_ctz(cols);
         cols &= cols - 1;
         const int32_t* r[4];
-        columnRows<P>(read, col, false, r);
-        const __m128i lo =
-            _mm_or_si128(_mm_or_si128(cmp(r[0]), cmp(r[1])), _mm_or_si128(cmp(r[2]), cmp(r[3])));
-        const __m128i hi = _mm_or_si128(_mm_or_si128(cmp(r[0] + 4), cmp(r[1] + 4)),
-                                        _mm_or_si128(cmp(r[2] + 4), cmp(r[3] + 4)));
-        const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(lo))) |
-                           (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(hi))) << 4);
+        columnRows<P>(read, col, r);
+        const __m128i l = _mm_or_si128(_mm_or_si128(lo(r[0]), lo(r[1])), _mm_or_si128(lo(r[2]), lo(r[3])));
+        const __m128i h = _mm_or_si128(_mm_or_si128(hi(r[0]), hi(r[1])), _mm_or_si128(hi(r[2]), hi(r[3])));
+        const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(l))) |
+                           (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(h))) << 4);
         uint64_t blocks = kColumns.zFold[P][z];
-        if (P == 1 && ((mask >> col) & 1u)) {
-            columnRows<P>(read, col, true, r); // block bz = 0's cells z = -1: lane 3 of the upper halves
-            const __m128i b = _mm_or_si128(_mm_or_si128(cmp(r[0] + 4), cmp(r[1] + 4)),
-                                           _mm_or_si128(cmp(r[2] + 4), cmp(r[3] + 4)));
-            blocks |= uint64_t(_mm_movemask_ps(_mm_castsi128_ps(b)) >> 3);
-        }
+        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -545,25 +558,23 @@ __attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t*
                                                                   int32_t tc)
 {
     const __m256i t = _mm256_set1_epi32(tc);
+    const __m256i lanes = _mm256_setr_epi32(-1, -1, -1, -1, -1, -1, -1, P == 0 ? -1 : 0); // odd: not z = 7
     uint32_t cols = columnsOf(mask);
     uint64_t out = 0;
     while (cols) {
         const int col = __builtin_ctz(cols);
         cols &= cols - 1;
         const int32_t* r[4];
-        columnRows<P>(read, col, false, r);
+        columnRows<P>(read, col, r);
         __m256i v[4];
-        for (int k = 0; k < 4; ++k) // (no lambda: it would not inherit the target)
-            v[k] = _mm256_cmpgt_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(r[k])), t);
+        for (int k = 0; k < 4; ++k) { // (no lambda: it would not inherit the target)
+            const __m256i x = P == 0 ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(r[k]))
+                                     : _mm256_maskload_epi32(r[k], lanes); // lane 7 not read: 0
+            v[k] = _mm256_cmpgt_epi32(x, t);
+        }
         const __m256i any = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
         uint64_t blocks = kColumns.zFold[P][_mm256_movemask_ps(_mm256_castsi256_ps(any))];
-        if (P == 1 && ((mask >> col) & 1u)) {
-            columnRows<P>(read, col, true, r); // block bz = 0's cells z = -1: lane 7
-            for (int k = 0; k < 4; ++k)
-                v[k] = _mm256_cmpgt_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(r[k])), t);
-            const __m256i b = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
-            blocks |= uint64_t(_mm256_movemask_ps(_mm256_castsi256_ps(b)) >> 7);
-        }
+        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
