@@ -767,7 +767,21 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         examined += popcount64(w.mask);
-        fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
+        if (P == 0 && table && w.entry != kNoEntry) {
+            // Even phase from the table: one slot, no call (fetchLeaves' table branch, inlined).
+            const LeafTable::Impl::Entry& e = table->entries[w.entry];
+            ls.leaf[0] = e.leaf[0];
+            ls.data[0] = e.data[0];
+            ls.read[0] = e.read[0];
+            ls.obs[0] = e.obs[0];
+            ls.obsTile[0] = e.obsTile & 1u;
+            ls.anyMissing = (e.missing & 1u) != 0;
+            ls.anyObs = (e.obsAny & 1u) != 0;
+            ls.anchor = w.anchor;
+            ls.fetched = 1;
+        } else {
+            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
+        }
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
         uint64_t bits = w.mask;
