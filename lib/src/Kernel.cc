@@ -780,7 +780,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             ls.anchor = w.anchor;
             ls.fetched = 1;
         } else {
-            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable, table);
+            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable,
+                               table);
         }
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
