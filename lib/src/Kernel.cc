@@ -3,7 +3,9 @@
 // Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
 // holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
 // flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
-// otherwise through value accessors (only the leaves the mask's blocks touch). Then for each candidate block:
+// otherwise through value accessors (only the leaves the mask's blocks touch). In 3D the over-cell
+// filter then drops the candidates holding no cell over Tc, a column of 4 blocks at a time (AVX2 or
+// SSE2, chosen at run time; see "The over-cell filter" below). Then for each candidate block left:
 // load its cells (even: at constant offsets from the block's first cell; odd: through the addressing tables),
 // skip it unless a cell is over Tc, apply the rule (inlined, instantiated for this rule and cell
 // count), and write back only the cells that changed. The overload changes only where a cell

@@ -1,7 +1,8 @@
 // The automaton's per-block kernel: one pass over a range of a step's work list (Kernel.cc).
 //
 // The pass reads each anchor's leaves once (the anchor's own leaf, and on odd steps the lower
-// neighbours its straddling blocks reach into), then runs its candidate blocks through the rule.
+// neighbours its straddling blocks reach into), drops (3D) the candidates that hold no cell over Tc
+// with a vector filter (overBlocks), then runs the rest through the rule.
 // The rule, the dimension and the phase are template parameters of the loop (Kernel.cc picks one of
 // 16 instantiations per pass), so no switch runs per block; the step's part of the block hash is
 // computed once per pass (rules_internal::stepPrefix).
