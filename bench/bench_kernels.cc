@@ -11,12 +11,15 @@
 // the key changes every iteration so the remainder hash is not hoisted out of the loop.
 //
 // Pass: the automaton's kernel (lib/src/Kernel.h, processRange) on a 32^3 cube of random clay, every
-// block of the phase a candidate, on its SIMD path and on its portable path (PassInput::portable),
+// block of the phase a candidate, on its SIMD path (with the over-cell filter chosen at run time, the
+// SSE2 filter, or none: PassInput::filter) and on its portable path (PassInput::portable),
 // one pass per iteration on a fresh copy of the grid (the copy is not timed). items_per_second
 // counts updated blocks: 1e9 / items_per_second is the kernel's ns per updated block.
 //   surplus  cells 900-1600 (Tc 1000): most blocks have more excess than room (E > A), as in a
 //            settling press.
 //   spread   cells 0-1000 with one in eight at 1000-4000: most blocks have room for their excess.
+//   sparse   cells 950-1000 with one in 60 at 1001-1400: most candidate blocks hold no over cell
+//            (a settling press examines ~4 such blocks per updated one: the over-cell filter's case).
 #include "Kernel.h"
 #include "RulesImpl.h"
 #include "vdbclay/Rules.h"
@@ -85,11 +88,13 @@ void Args(benchmark::internal::Benchmark* b)
 }
 
 /// The cube of BM_Pass: 32^3 voxels, values from a fixed xorshift sequence.
-std::shared_ptr<openvdb::Int32Tree> passGrid(bool surplus)
+/// kind: 0 surplus, 1 spread, 2 sparse.
+std::shared_ptr<openvdb::Int32Tree> passGrid(int kind)
 {
     openvdb::initialize();
     auto tree = std::make_shared<openvdb::Int32Tree>(0);
-    uint64_t x = surplus ? 88172645463325252ull : 1234567ull;
+    const bool surplus = kind == 0;
+    uint64_t x = surplus ? 88172645463325252ull : kind == 1 ? 1234567ull : 7654321ull;
     auto next = [&x] {
         x ^= x << 13;
         x ^= x >> 7;
@@ -102,6 +107,8 @@ std::shared_ptr<openvdb::Int32Tree> passGrid(bool surplus)
                 int v;
                 if (surplus)
                     v = 900 + int(next() % 701);
+                else if (kind == 2)
+                    v = (next() % 60 == 0) ? 1001 + int(next() % 400) : 950 + int(next() % 51);
                 else
                     v = (next() % 8 == 0) ? 1000 + int(next() % 3001) : int(next() % 1001);
                 tree->setValue(openvdb::Coord(i, j, k), v);
@@ -112,9 +119,12 @@ std::shared_ptr<openvdb::Int32Tree> passGrid(bool surplus)
 void BM_Pass(benchmark::State& state)
 {
     using namespace vdbclay::automaton_internal;
-    const bool portable = state.range(0) != 0, surplus = state.range(1) == 0;
+    // mode: 0 SIMD (filter chosen at run time), 1 SIMD with the SSE2 filter, 2 SIMD without the
+    // filter, 3 portable.
+    const int mode = int(state.range(0)), kind = int(state.range(1));
+    const bool portable = mode == 3;
     const int phase = int(state.range(2));
-    const auto grid = passGrid(surplus);
+    const auto grid = passGrid(kind);
     std::vector<WorkItem> work;
     for (int y = 0; y < 5; ++y)
         for (int z = 0; z < 5; ++z)
@@ -129,6 +139,7 @@ void BM_Pass(benchmark::State& state)
     in.step = uint64_t(phase);
     in.seed = 1;
     in.portable = portable;
+    in.filter = mode == 1 ? OverFilter::Sse2 : mode == 2 ? OverFilter::None : OverFilter::Auto;
     uint64_t updated = 0;
     for (auto _ : state) {
         state.PauseTiming();
@@ -142,16 +153,22 @@ void BM_Pass(benchmark::State& state)
         benchmark::DoNotOptimize(tot.overloadDelta);
     }
     state.SetItemsProcessed(int64_t(updated));
-    state.SetLabel(std::string(portable ? "portable" : "simd") + "/" + (surplus ? "surplus" : "spread") +
-                   "/phase " + std::to_string(phase));
+    const OverFilter f = mode == 0 ? bestOverFilter() : in.filter;
+    const char* filter = portable                ? ""
+                         : f == OverFilter::Avx2 ? "+avx2"
+                         : f == OverFilter::Sse2 ? "+sse2"
+                                                 : "+nofilter";
+    const char* kinds[] = {"surplus", "spread", "sparse"};
+    state.SetLabel(std::string(portable ? "portable" : "simd") + filter + "/" + kinds[kind] + "/phase " +
+                   std::to_string(phase));
 }
 
 } // namespace
 
 BENCHMARK(BM_Pass)
     ->Name("processRange")
-    ->ArgNames({"portable", "case", "phase"})
-    ->ArgsProduct({{0, 1}, {0, 1}, {0, 1}});
+    ->ArgNames({"mode", "case", "phase"})
+    ->ArgsProduct({{0, 1, 2, 3}, {0, 1, 2}, {0, 1}});
 BENCHMARK_TEMPLATE(BM_Block, false)->Name("repartitionBlock")->Apply(Args);
 BENCHMARK_TEMPLATE(BM_Block, true)->Name("rules_internal::repartition")->Apply(Args);
 

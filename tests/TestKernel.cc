@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
 #include <vector>
 
 #include "TestRng.h"
@@ -39,7 +40,9 @@ struct Scene {
 
 /// A random clay grid over 4x4x4 leaves (2D: 4x4, z = 0), a few of them missing, with obstacles;
 /// every block of both phases a candidate (the work list has one item per anchor, in layer order).
-Scene makeScene(uint64_t seed, bool is3D, int32_t tc)
+/// @a sparseOver: over cells are rare (about 1 in 120 cells), so most blocks hold none (the
+/// over-cell filter's case); otherwise about 3 in 10 cells are over.
+Scene makeScene(uint64_t seed, bool is3D, int32_t tc, bool sparseOver = false)
 {
     vdbclay_test::Rng g(seed);
     Scene s;
@@ -54,7 +57,8 @@ Scene makeScene(uint64_t seed, bool is3D, int32_t tc)
                 openvdb::Int32Tree::LeafNodeType* leaf = s.mass->touchLeaf(o);
                 for (int i = 0; i < 512; ++i) {
                     if (!is3D && (i & 7) != 0) continue; // 2D: z = 0 only
-                    const int kind = g.range(0, 9);
+                    int kind = g.range(0, 9);
+                    if (sparseOver && kind >= 7 && g.range(0, 39) != 0) kind = 6;
                     int32_t v = 0;
                     if (kind <= 2)
                         v = 0; // empty
@@ -95,7 +99,7 @@ struct Result {
 };
 
 Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint64_t step, bool portable,
-               bool useTable = false)
+               bool useTable = false, OverFilter filter = OverFilter::Auto)
 {
     Result r;
     r.mass = std::make_shared<openvdb::Int32Tree>(*s.mass); // deep copy
@@ -115,6 +119,7 @@ Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint
     in.step = step;
     in.seed = 7;
     in.portable = portable;
+    in.filter = filter;
     in.table = useTable ? &table : nullptr;
     // Two ranges, as two tasks would get them, joined in order.
     const size_t half = work.size() / 2;
@@ -209,6 +214,134 @@ TEST_F(KernelTest, LeafTableGivesIdenticalPasses)
                             EXPECT_GT(plain.tot.deferred.size(), 0u) << what;
                         }
                         expectSame(plain, table, what);
+                    }
+}
+
+/// The over-cell filter (Kernel.cc, overBlocks) against brute force on coordinates: the anchor's 8
+/// leaves as plain arrays, each block's 8 cells found from its minimum corner (blockOrigin), not
+/// through the filter's column tables. First one over cell at each corner of each block of both
+/// phases (so every corner position, and on the odd phase every cell that lies across a leaf border
+/// into the -x, -y, -z neighbours and their combinations), then random sparse over cells and random
+/// candidate masks. The filter must return exactly the candidate blocks that hold an over cell, on
+/// each instruction set; in 2D (no filter) the mask unchanged.
+TEST_F(KernelTest, OverFilterFindsExactlyTheBlocksHoldingAnOverCell)
+{
+    std::vector<int32_t> leaves(8 * 512);
+    const int32_t* read[8];
+    for (int w = 0; w < 8; ++w)
+        read[w] = leaves.data() + 512 * w;
+    // The value of the cell at anchor-relative (x, y, z), x, y, z in -8..7.
+    auto cell = [&](int x, int y, int z) -> int32_t& {
+        const int w = (x < 0 ? 1 : 0) | (y < 0 ? 2 : 0) | (z < 0 ? 4 : 0);
+        return leaves[512 * w + ((x & 7) << 6) + ((y & 7) << 3) + (z & 7)];
+    };
+    auto expected = [&](uint64_t mask, int phase, int32_t tc) {
+        uint64_t out = 0;
+        for (int b = 0; b < 64; ++b) {
+            if (!((mask >> b) & 1u)) continue;
+            const Origin o = blockOrigin(Origin(0, 0, 0), b, phase, true);
+            for (int c = 0; c < 8; ++c)
+                if (cell(o.x() + (c & 1), o.y() + ((c >> 1) & 1), o.z() + (c >> 2)) > tc)
+                    out |= uint64_t(1) << b;
+        }
+        return out;
+    };
+    std::vector<OverFilter> filters{OverFilter::Sse2};
+    if (bestOverFilter() == OverFilter::Avx2) filters.push_back(OverFilter::Avx2);
+    if (bestOverFilter() == OverFilter::None) filters = {OverFilter::None}; // a build without SSE2
+    std::printf("over-cell filter on this machine: %s\n", bestOverFilter() == OverFilter::Avx2   ? "AVX2"
+                                                          : bestOverFilter() == OverFilter::Sse2 ? "SSE2"
+                                                                                                 : "none");
+    int checked = 0;
+    for (const OverFilter f : filters) {
+        const int32_t tc = 1000;
+        for (int phase = 0; phase < 2; ++phase)
+            for (int b = 0; b < 64; ++b)
+                for (int c = 0; c < 8; ++c) {
+                    std::fill(leaves.begin(), leaves.end(), tc); // full: not over
+                    const Origin o = blockOrigin(Origin(0, 0, 0), b, phase, true);
+                    cell(o.x() + (c & 1), o.y() + ((c >> 1) & 1), o.z() + (c >> 2)) = tc + 1;
+                    const uint64_t want = expected(~0ull, phase, tc);
+                    ASSERT_EQ(want >> b & 1u, 1u);
+                    const uint64_t got = overBlocks(read, ~0ull, tc, true, phase, f);
+                    if (f == OverFilter::None) {
+                        ASSERT_EQ(got, ~0ull);
+                        continue;
+                    }
+                    ASSERT_EQ(got, want)
+                        << "filter " << int(f) << " phase " << phase << " block " << b << " corner " << c;
+                    // Only the candidates are returned.
+                    const uint64_t some = 0x9A5C3E1F70B6D248ull ^ (uint64_t(b) * 0x2545F4914F6CDD1Dull);
+                    ASSERT_EQ(overBlocks(read, some, tc, true, phase, f), want & some);
+                    ++checked;
+                }
+        vdbclay_test::Rng g(5 + int(f));
+        for (int trial = 0; trial < 3000; ++trial) {
+            const int32_t t = trial % 3 == 0 ? 1 : trial % 3 == 1 ? 1000 : INT32_MAX - 1;
+            const int rate = g.range(10, 400); // one over cell in `rate`
+            for (int32_t& v : leaves) {
+                const int k = g.range(0, rate);
+                v = k == 0   ? (t == INT32_MAX - 1 ? INT32_MAX : t + g.range(1, 100))
+                    : k == 1 ? t
+                             : g.range(0, t);
+            }
+            const int phase = trial & 1;
+            uint64_t mask = g.next() & g.next();
+            if (trial % 5 == 0) mask = ~0ull;
+            const uint64_t got = overBlocks(read, mask, t, true, phase, f);
+            if (f == OverFilter::None) {
+                ASSERT_EQ(got, mask);
+                continue;
+            }
+            ASSERT_EQ(got, expected(mask, phase, t)) << "filter " << int(f) << " trial " << trial;
+            ++checked;
+        }
+        // 2D: no filter, the mask as given.
+        EXPECT_EQ(overBlocks(read, 0xFFFFu, 1000, false, 1, f), 0xFFFFu);
+    }
+    if (filters[0] != OverFilter::None) {
+        EXPECT_GT(checked, 2 * 8 * 64);
+    }
+}
+
+/// The same passes with the filter on each instruction set and off (OverFilter::None), with and
+/// without the leaf table: identical grids, masks and totals, blocksVisited included (it counts the
+/// candidates before the filter). Scenes with rare over cells, so that most blocks are filtered out,
+/// and the usual dense ones; 2D too (where the filter is off on every setting).
+TEST_F(KernelTest, OverFilterGivesIdenticalPasses)
+{
+    std::vector<OverFilter> filters{OverFilter::Sse2, OverFilter::Auto};
+    if (bestOverFilter() == OverFilter::Avx2) filters.push_back(OverFilter::Avx2);
+    const Rule rules[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
+    uint64_t seed = 5000;
+    for (int d3 = 0; d3 < 2; ++d3)
+        for (int sparse = 0; sparse < 2; ++sparse)
+            for (const int32_t tc : {7, 1000})
+                for (const Rule rule : rules)
+                    for (int phase = 0; phase < 2; ++phase) {
+                        const bool is3D = d3 == 1;
+                        const Scene s = makeScene(seed++, is3D, tc, sparse == 1);
+                        const uint64_t step = 60 + uint64_t(phase) + 2 * seed;
+                        const bool useTable = seed % 2 == 0;
+                        const Result none =
+                            runPass(s, rule, tc, is3D, phase, step, false, useTable, OverFilter::None);
+                        const std::string what = std::string(is3D ? "3D" : "2D") +
+                                                 (sparse ? " sparse" : " dense") + " tc " +
+                                                 std::to_string(tc) + " rule " + std::to_string(int(rule)) +
+                                                 " phase " + std::to_string(phase);
+                        if (is3D || !sparse) { // (a sparse 2D scene has a handful of over cells)
+                            EXPECT_GT(none.tot.updated, is3D ? (sparse ? 100u : 1000u) : 40u) << what;
+                        }
+                        if (sparse) {
+                            // Most candidates hold no over cell: the filter has work to do.
+                            EXPECT_GT(none.tot.examined, 3 * none.tot.overTc) << what;
+                        }
+                        for (const OverFilter f : filters) {
+                            const Result r = runPass(s, rule, tc, is3D, phase, step, false, useTable, f);
+                            expectSame(none, r, what + " filter " + std::to_string(int(f)));
+                        }
+                        const Result portable = runPass(s, rule, tc, is3D, phase, step, true, useTable);
+                        expectSame(none, portable, what + " portable");
                     }
 }
 

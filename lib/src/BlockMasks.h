@@ -198,5 +198,50 @@ inline const BlockTables& blockTables()
     return t;
 }
 
+/// Addressing of the over-cell filter (Kernel.cc, overBlocks), 3D. A column is the 4 blocks of one
+/// phase with the same (bx, by), numbered col = bx + 4 by (so block bit = col + 16 bz). Its cells lie
+/// in 4 z-rows of a leaf (8 consecutive int32, z = 0-7), row r = dx + 2 dy at local x = 2 bx - phase
+/// + dx, y = 2 by - phase + dy: in the anchor's leaf, or on the odd phase at local -1 in its -x / -y
+/// neighbours (x, y taken mod 8 there). zFold turns the over mask of the column's cells along z (bit
+/// z: a cell at that z in one of the 4 rows is over Tc) into the column's blocks holding one, as bits
+/// 16 bz (shift left by col to place them in the anchor's mask). Even phase: block bz holds z = 2 bz
+/// and 2 bz + 1. Odd phase: z = 2 bz - 1 and 2 bz, so bit 7 (z = 7) belongs to the +z anchor's
+/// block and is ignored, and the cells z = -1 of block bz = 0 lie in the -z neighbours' rows at
+/// z = 7 (the filter adds that block's bit from them).
+struct ColumnTables {
+    uint16_t rowOffset[2][16][4]; // [phase][col][row]: x << 6 | y << 3, the row's z = 0 cell
+    uint8_t rowLeaf[2][16][4];    // which of the anchor's leaves holds the row (bit 0 = -x, bit 1 = -y)
+    uint64_t zFold[2][256];       // [phase][over cells along z]
+    constexpr ColumnTables() : rowOffset{}, rowLeaf{}, zFold{}
+    {
+        for (int p = 0; p < 2; ++p) {
+            for (int col = 0; col < 16; ++col) {
+                for (int r = 0; r < 4; ++r) {
+                    const int x = 2 * (col & 3) - p + (r & 1), y = 2 * (col >> 2) - p + (r >> 1);
+                    rowLeaf[p][col][r] = uint8_t((x < 0 ? 1 : 0) | (y < 0 ? 2 : 0));
+                    rowOffset[p][col][r] = uint16_t(((x & 7) << 6) | ((y & 7) << 3));
+                }
+            }
+            for (int m = 0; m < 256; ++m) {
+                uint64_t f = 0;
+                for (int bz = 0; bz < 4; ++bz) {
+                    const int lo = 2 * bz - p, hi = 2 * bz - p + 1; // the block's two z
+                    const bool over = (lo >= 0 && ((m >> lo) & 1)) || ((m >> hi) & 1);
+                    if (over) f |= uint64_t(1) << (16 * bz);
+                }
+                zFold[p][m] = f;
+            }
+        }
+    }
+};
+
+inline constexpr ColumnTables kColumns{};
+
+/// The columns (col = bx + 4 by) that hold a block of @a mask.
+inline uint32_t columnsOf(uint64_t mask)
+{
+    return uint32_t((mask | (mask >> 16) | (mask >> 32) | (mask >> 48)) & 0xFFFFu);
+}
+
 } // namespace automaton_internal
 } // namespace vdbclay

@@ -1,7 +1,8 @@
 // The automaton's per-block kernel: one pass over a range of a step's work list (Kernel.cc).
 //
 // The pass reads each anchor's leaves once (the anchor's own leaf, and on odd steps the lower
-// neighbours its straddling blocks reach into), then runs its candidate blocks through the rule.
+// neighbours its straddling blocks reach into), drops (3D) the candidates that hold no cell over Tc
+// with a vector filter (overBlocks), then runs the rest through the rule.
 // The rule, the dimension and the phase are template parameters of the loop (Kernel.cc picks one of
 // 16 instantiations per pass), so no switch runs per block; the step's part of the block hash is
 // computed once per pass (rules_internal::stepPrefix).
@@ -65,6 +66,24 @@ private:
     bool mValid = false;
 };
 
+/// The over-cell filter (Kernel.cc, overBlocks): which instructions find an item's candidate blocks
+/// that hold a cell over Tc before the per-block work. Every choice gives the same result.
+enum class OverFilter : uint8_t {
+    Auto, // AVX2 where the CPU has it, else SSE2 (x86-64), else none
+    Avx2, // AVX2 (falls back to SSE2 where the CPU lacks it)
+    Sse2, // SSE2 (none where the build has no SSE2)
+    None  // no filter: every candidate block is loaded and checked on its own
+};
+
+/// The filter Auto resolves to on this machine (Avx2, Sse2 or None).
+OverFilter bestOverFilter();
+
+/// The blocks of @a mask (phase @a phase, 3D) that hold a cell over @a tc, found by @a f column by
+/// column; read[w] is leaf leafOrigin(anchor, w)'s values (512 int32, OpenVDB's order; on the even
+/// phase only read[0] is used). In 2D, and with OverFilter::None, returns @a mask: the filter is 3D only.
+uint64_t overBlocks(const int32_t* const read[8], uint64_t mask, int32_t tc, bool is3D, int phase,
+                    OverFilter f);
+
 /// What a pass needs to know about the step.
 struct PassInput {
     MassTree* tree = nullptr;
@@ -73,12 +92,13 @@ struct PassInput {
     bool is3D = true;
     int phase = 0;
     uint64_t step = 0, seed = 0;
-    bool mayOverflow = false;         // a result may exceed INT32_MAX: check every written cell
-    bool dryRun = false;              // check for overflow only, write nothing
-    bool portable = false;            // no SIMD: the plain C++ path (tests compare both on the same grids)
-    const LeafTable* table = nullptr; // valid leaf table of both trees, or null: accessors
-    const DenseSink* sink = nullptr;  // dense candidates: record each item's changes here (not in dry runs)
-    int sinkLanes = 1;                // sink[0..sinkLanes): one per thread of the pass's arena (lanes())
+    bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
+    bool dryRun = false;      // check for overflow only, write nothing
+    bool portable = false;    // no SIMD: the plain C++ path (tests compare both on the same grids)
+    OverFilter filter = OverFilter::Auto; // the over-cell filter (None on the portable path)
+    const LeafTable* table = nullptr;     // valid leaf table of both trees, or null: accessors
+    const DenseSink* sink = nullptr; // dense candidates: record each item's changes here (not in dry runs)
+    int sinkLanes = 1;               // sink[0..sinkLanes): one per thread of the pass's arena (lanes())
 };
 
 /// What one range of the pass accumulates.
