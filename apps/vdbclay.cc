@@ -620,7 +620,7 @@ int runScene(const RunArgs& a)
         std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "")
                   << ", transport " << vdbclay::transportName(scene.transport) << "\n";
     const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
-    const vdbclay::MemoryEstimate startEstimate = vdbclay::estimateSceneMemory(scene);
+    const vdbclay::MemoryEstimate startEstimate = sculptor.memoryEstimate(); // the constructor's
     if (!a.quiet) {
         std::cout << "memory: " << startEstimate.describe() << "; budget "
                   << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget))

@@ -24,6 +24,7 @@
 #include "ClayLeaves.h"
 #include "Format.h"
 #include "ParallelFor.h"
+#include "Rasterize.h"
 #include "TreeBytes.h"
 #include "VdbCheck.h"
 
@@ -83,12 +84,36 @@ void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::
     }
 }
 
-/// Every voxel whose centre lies inside @a shape (only z = 0 in 2D) becomes an obstacle.
-void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims)
+/// Every voxel whose centre lies inside @a shape (only z = 0 in 2D) becomes an obstacle; leaf by
+/// leaf on @a threads (Rasterize.h: the voxels of forEachVoxelInside).
+void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims, int threads)
 {
-    auto acc = mask.getAccessor();
-    forEachVoxelInside(shape, dims,
-                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(openvdb::Coord(x, y, z)); });
+    raster_internal::rasterizeInside(mask.tree(), shape, dims, true, threads);
+}
+
+/// Whether any voxel of @a mass holding clay (active and nonzero) is on in @a obstacles: leaf masks
+/// ANDed (a tile of either tree falls back on its voxels). Only says whether; the caller finds the
+/// first such voxel (in value-iterator order) for its message.
+bool clayMeetsObstacles(const openvdb::Int32Tree& mass, const openvdb::MaskTree& obstacles)
+{
+    auto tile = mass.cbeginValueOn();
+    tile.setMaxDepth(tile.getLeafDepth() - 1);
+    for (; tile; ++tile)
+        if (*tile != 0) return true; // rare (a start file's tiles): the caller's voxel walk decides
+    openvdb::tree::ValueAccessor<const openvdb::MaskTree> oacc(obstacles);
+    for (auto it = mass.cbeginLeaf(); it; ++it) {
+        const openvdb::Coord o = it->origin();
+        if (const auto* ol = oacc.probeConstLeaf(o)) {
+            auto both = it->getValueMask();
+            both &= ol->getValueMask();
+            for (auto on = both.beginOn(); on; ++on)
+                if (it->getValue(on.pos()) != 0) return true;
+        } else if (oacc.isValueOn(o)) {
+            for (auto on = it->cbeginValueOn(); on; ++on)
+                if (*on != 0) return true;
+        }
+    }
+    return false;
 }
 
 /// A start file written in the middle of a frame continues that frame: only the scene that wrote it
@@ -700,16 +725,24 @@ uint64_t defaultMemoryBudget()
     return avail / 4 * 3;
 }
 
-void checkMemoryBudget(const Scene& scene)
+namespace {
+/// checkMemoryBudget with the estimate at hand.
+void checkMemoryBudget(const Scene& scene, const MemoryEstimate& e)
 {
     if (scene.memoryBudget == kNoMemoryBudget) return;
     const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget();
-    const MemoryEstimate e = estimateSceneMemory(scene);
     if (e.total() <= budget) return;
     throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " +
                 formatBytes(budget) +
                 (scene.memoryBudget ? "" : " (the default: 3/4 of this machine's memory)") +
                 "; shrink the scene or raise the budget (\"memory_budget\" in the scene, --memory-budget)");
+}
+} // namespace
+
+void checkMemoryBudget(const Scene& scene)
+{
+    if (scene.memoryBudget == kNoMemoryBudget) return;
+    checkMemoryBudget(scene, estimateSceneMemory(scene));
 }
 
 struct Sculptor::Impl {
@@ -732,6 +765,7 @@ struct Sculptor::Impl {
     std::function<bool()> stopPoll;
     bool stopped = false;
     ClayMeta startMeta;
+    std::unique_ptr<MemoryEstimate> estimate; ///< estimateSceneMemory(scene), once computed
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -1040,8 +1074,11 @@ struct Sculptor::Impl {
 Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Impl>())
 {
     openvdb::initialize();
-    checkMemoryBudget(scene);
     Impl& im = *mImpl;
+    if (scene.memoryBudget != kNoMemoryBudget) {
+        im.estimate = std::make_unique<MemoryEstimate>(estimateSceneMemory(scene));
+        checkMemoryBudget(scene, *im.estimate);
+    }
     im.scene = scene;
     AutomatonOptions opt;
     opt.dimensions = scene.dimensions;
@@ -1092,7 +1129,12 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
                 } catch (const Error& e) {
                     throw Error(field + ": " + e.what());
                 }
-                addClay(*im.mass, *g, field);
+                // The first clay into an empty grid: makeClay's grid is what addClay would copy
+                // (active voxels only, no tiles), so it is taken as it is.
+                if (im.mass->tree().empty())
+                    im.mass = g;
+                else
+                    addClay(*im.mass, *g, field);
             }
         }
     }
@@ -1102,8 +1144,8 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     im.obstacles = openvdb::MaskGrid::create(false);
     im.obstacles->setName("obstacles");
     for (const ShapeSpec& o : scene.obstacles)
-        rasterize(*im.obstacles, *o.shape, scene.dimensions);
-    if (!scene.obstacles.empty()) {
+        rasterize(*im.obstacles, *o.shape, scene.dimensions, threads);
+    if (!scene.obstacles.empty() && clayMeetsObstacles(im.mass->tree(), im.obstacles->tree())) {
         auto oacc = im.obstacles->getConstAccessor();
         for (auto it = im.mass->tree().cbeginValueOn(); it; ++it) {
             if (*it != 0 && oacc.isValueOn(it.getCoord())) {
@@ -1128,6 +1170,13 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
 }
 
 Sculptor::~Sculptor() = default;
+
+const MemoryEstimate& Sculptor::memoryEstimate()
+{
+    Impl& im = *mImpl;
+    if (!im.estimate) im.estimate = std::make_unique<MemoryEstimate>(estimateSceneMemory(im.scene));
+    return *im.estimate;
+}
 
 bool Sculptor::done() const
 {
@@ -1284,10 +1333,12 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         if (!r.finished) break; // stopped() is set
     }
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    s.massFinal = totalMass(*im.mass);
-    s.massDrift = s.massFinal - s.massInitial;
+    // The final mass is measureClay's sum (leaf by leaf, in parallel): the automaton keeps no tiles
+    // (it voxelizes them), so it is totalMass()'s walk over every value, without a second walk.
     s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(),
                             im.scene.dimensions, im.automaton->options().threads);
+    s.massFinal = s.metrics.mass;
+    s.massDrift = s.massFinal - s.massInitial;
     s.residualOverload = im.automaton->residualOverload();
     s.settled = im.automaton->settled();
     return s;
