@@ -287,19 +287,19 @@ TEST_F(SurfaceSweepTest, RasterizeByLeavesSetsTheVoxelsOfTheVoxelLoopOnAnyThread
     pose.rotationDeg = {{20, 35, -10}};
     pose.translation = {{3.25, -1.5, 7}};
     pose.pivot = {{2, 2, 2}};
-    const std::vector<ShapePtr> shapes = {makeSphere({{1.5, -2, 3}}, 13.3), makeBox({{-20, -3, -5}}, {{37, 4, 18}}),
-                                          makeTransformed(makeBox({{-9, -4, -6}}, {{11, 5, 8}}), pose),
-                                          makeCylinder({{0, 0, 0}}, 6.5, 30, 1)};
+    const std::vector<ShapePtr> shapes = {
+        makeSphere({{1.5, -2, 3}}, 13.3), makeBox({{-20, -3, -5}}, {{37, 4, 18}}),
+        makeTransformed(makeBox({{-9, -4, -6}}, {{11, 5, 8}}), pose), makeCylinder({{0, 0, 0}}, 6.5, 30, 1)};
     for (int dims : {2, 3}) {
         for (size_t k = 0; k < shapes.size(); ++k) {
             const Shape& shape = *shapes[k];
             for (bool prefilled : {false, true}) {
                 auto prefill = [&](openvdb::Int32Tree& t) {
                     if (!prefilled) return;
-                    t.setValueOn(Coord(0, 0, 0), 7);                           // a leaf the shape meets
-                    t.setValueOn(Coord(-17, 2, 0), 9);                         // another
-                    t.addTile(1, Coord(8, 0, 0), 5, true);                     // an active tile it meets
-                    t.addTile(1, Coord(-8, -8, -8), 0, false);                 // an inactive tile
+                    t.setValueOn(Coord(0, 0, 0), 7);           // a leaf the shape meets
+                    t.setValueOn(Coord(-17, 2, 0), 9);         // another
+                    t.addTile(1, Coord(8, 0, 0), 5, true);     // an active tile it meets
+                    t.addTile(1, Coord(-8, -8, -8), 0, false); // an inactive tile
                 };
                 openvdb::Int32Tree expected(0);
                 prefill(expected);
@@ -318,8 +318,10 @@ TEST_F(SurfaceSweepTest, RasterizeByLeavesSetsTheVoxelsOfTheVoxelLoopOnAnyThread
                     openvdb::Int32Tree got(0);
                     prefill(got);
                     const std::string what = shape.describe() + ", " + std::to_string(dims) + "D, " +
-                                             std::to_string(threads) + " threads" + (prefilled ? ", prefilled" : "");
-                    EXPECT_EQ(raster_internal::rasterizeInside(got, shape, dims, 42, threads), inside) << what;
+                                             std::to_string(threads) + " threads" +
+                                             (prefilled ? ", prefilled" : "");
+                    EXPECT_EQ(raster_internal::rasterizeInside(got, shape, dims, 42, threads), inside)
+                        << what;
                     EXPECT_EQ(got.leafCount(), expected.leafCount()) << what;
                     EXPECT_EQ(got.activeVoxelCount(), expected.activeVoxelCount()) << what;
                     EXPECT_EQ(got.activeTileCount(), expected.activeTileCount()) << what;

@@ -110,8 +110,8 @@ struct Automaton::Impl {
 
     // scratch, reused between steps
     std::vector<WorkItem> work;
-    std::vector<size_t> bounds;            // runPassWeighted's chunks
-    std::vector<PassTotals> chunkTotals;   // and their totals
+    std::vector<size_t> bounds;          // runPassWeighted's chunks
+    std::vector<PassTotals> chunkTotals; // and their totals
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }

@@ -1073,7 +1073,8 @@ struct Sculptor::Impl {
                     leaf->getValueMask() -= off;
                 } else {
                     for (auto it = off.beginOn(); it; ++it)
-                        acc.setValueOff(cells.first + openvdb::MaskTree::LeafNodeType::offsetToLocalCoord(it.pos()));
+                        acc.setValueOff(cells.first +
+                                        openvdb::MaskTree::LeafNodeType::offsetToLocalCoord(it.pos()));
                 }
             }
             toolCells.clear();
