@@ -620,7 +620,7 @@ int runScene(const RunArgs& a)
         std::cout << "push " << vdbclay::pushModeName(scene.push) << (scene.sweep ? " (swept)" : "")
                   << ", transport " << vdbclay::transportName(scene.transport) << "\n";
     const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : vdbclay::defaultMemoryBudget();
-    const vdbclay::MemoryEstimate startEstimate = vdbclay::estimateSceneMemory(scene);
+    const vdbclay::MemoryEstimate startEstimate = sculptor.memoryEstimate(); // the constructor's
     if (!a.quiet) {
         std::cout << "memory: " << startEstimate.describe() << "; budget "
                   << (budget == vdbclay::kNoMemoryBudget ? std::string("none") : vdbclay::formatBytes(budget))
@@ -657,11 +657,23 @@ int runScene(const RunArgs& a)
     // stops where a checkpoint resumes exactly, as on SIGINT.
     const uint64_t fixedBytes = startEstimate.obstacleBytes + startEstimate.toolBytes;
     uint64_t polls = 0, grewTo = 0;
+    // The grid's size changes only with its nodes: it is measured again (a walk of every node)
+    // only when its leaf or internal node count changed since the last poll (a walk of the
+    // internal nodes; press 128^3: ~780 polls, 0.04 s of one core when each measured the tree).
+    openvdb::Index64 lastLeaves = UINT64_MAX, lastInternal = UINT64_MAX;
+    uint64_t lastBytes = 0;
     sculptor.setStopRequest([&] {
         if (testSignal) testSignal(automaton.stepCount());
         if (gStopSignal.load(std::memory_order_relaxed) != 0) return true;
         if (scene.memoryBudget == vdbclay::kNoMemoryBudget || ++polls % 64 != 0) return false;
-        const uint64_t now = vdbclay::clayMemoryInUse(*sculptor.mass()) + fixedBytes;
+        const auto& tree = sculptor.mass()->constTree();
+        const openvdb::Index64 leaves = tree.leafCount(), internal = tree.nonLeafCount();
+        if (leaves != lastLeaves || internal != lastInternal) {
+            lastBytes = vdbclay::clayMemoryInUse(*sculptor.mass());
+            lastLeaves = leaves;
+            lastInternal = internal;
+        }
+        const uint64_t now = lastBytes + fixedBytes;
         if (now <= budget) return false;
         grewTo = now;
         return true;

@@ -3,6 +3,8 @@
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
+#include "PassSplit.h"
+
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
@@ -315,6 +317,48 @@ TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
         }
         EXPECT_GT(updated[0], 1000u);
     }
+}
+
+TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
+{
+    // The experimental pass split (PassSplit.h): chunks of about equal candidate blocks, serial below
+    // a threshold. Every item exactly once: the same hash, and the same blocks examined and updated
+    // (a lost or doubled item changes the counts), as the default split on one thread.
+    using automaton_internal::PassSplit;
+    const PassSplit saved = automaton_internal::passSplit();
+    for (Rule rule : {Rule::Prorata, Rule::Arata}) {
+        for (int dims : {2, 3}) {
+            auto runOnce = [&](int threads) {
+                Rng rng(11);
+                auto mass = newMass();
+                auto obs = openvdb::MaskGrid::create(false);
+                const int z = dims == 3 ? 20 : 0;
+                randomScene(rng, CoordBBox(Coord(-20, -12, -z), Coord(20, 12, z)), dims, 260, 3, *mass,
+                            obs.get(), nullptr);
+                Automaton a(mass, options(rule, dims, 100, threads, 3), obs);
+                const StepReport r = a.run(80);
+                return std::vector<uint64_t>{contentHash(*mass), r.blocksVisited, r.blocksUpdated,
+                                             r.blocksOverTc};
+            };
+            automaton_internal::passSplit() = PassSplit();
+            const std::vector<uint64_t> expected = runOnce(1);
+            EXPECT_GT(expected[2], 1000u);
+            for (int k : {1, 2, 3}) {
+                for (uint64_t minBlocks : {uint64_t(0), uint64_t(300)}) {
+                    PassSplit p;
+                    p.weighted = true;
+                    p.perThread = k;
+                    p.minBlocks = minBlocks;
+                    automaton_internal::passSplit() = p;
+                    for (int threads : {1, 2, 3, 8})
+                        EXPECT_EQ(runOnce(threads), expected)
+                            << ruleName(rule) << " " << dims << "D, K " << k << ", MIN " << minBlocks << ", "
+                            << threads << " threads";
+                }
+            }
+        }
+    }
+    automaton_internal::passSplit() = saved;
 }
 
 TEST_F(AutomatonTest, SeedChangesTheResultButNotTheMass)

@@ -48,6 +48,7 @@
 #include "Candidates.h"
 #include "Format.h"
 #include "Kernel.h"
+#include "PassSplit.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -60,6 +61,9 @@
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <sstream>
 #include <type_traits>
 #include <vector>
@@ -106,6 +110,8 @@ struct Automaton::Impl {
 
     // scratch, reused between steps
     std::vector<WorkItem> work;
+    std::vector<size_t> bounds;          // runPassWeighted's chunks
+    std::vector<PassTotals> chunkTotals; // and their totals
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -321,9 +327,56 @@ struct Automaton::Impl {
             }
             void join(Body& o) { tot.join(o.tot); }
         };
+        if (passSplit().weighted) return runPassWeighted(in);
         Body body(&in, work.data());
         inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
         return std::move(body.tot);
+    }
+
+    /// The weighted split (passSplit). Same items, same per-item work, totals joined (sums, maxima,
+    /// the first overflow, deferred blocks sorted later): the result is that of any other partition.
+    PassTotals runPassWeighted(const PassInput& in)
+    {
+        const PassSplit split = passSplit();
+        const size_t n = work.size();
+        uint64_t total = 0;
+        for (const WorkItem& w : work)
+            total += uint64_t(__builtin_popcountll(w.mask));
+        PassTotals tot;
+        if (total < split.minBlocks) {
+            PassInput one = in;
+            one.sinkLanes = 1; // this thread records into lane 0
+            processRange(one, work.data(), 0, n, tot);
+            return tot;
+        }
+        const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+        const size_t chunks = std::min(n, size_t(std::max(threads, 1)) * size_t(split.perThread));
+        bounds.clear();
+        bounds.push_back(0);
+        uint64_t acc = 0;
+        size_t cut = 1;
+        for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
+            acc += uint64_t(__builtin_popcountll(work[i].mask));
+            if (acc * chunks >= total * cut) {
+                bounds.push_back(i + 1);
+                ++cut;
+            }
+        }
+        bounds.push_back(n);
+        const size_t m = bounds.size() - 1;
+        chunkTotals.assign(m, PassTotals());
+        inArena([&] {
+            tbb::parallel_for(
+                tbb::blocked_range<size_t>(0, m, 1),
+                [&](const tbb::blocked_range<size_t>& r) {
+                    for (size_t c = r.begin(); c != r.end(); ++c)
+                        processRange(in, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+                },
+                tbb::simple_partitioner());
+        });
+        for (const PassTotals& t : chunkTotals)
+            tot.join(t);
+        return tot;
     }
 
     [[noreturn]] void throwOverflow(const PassTotals& tot, int phase)
@@ -490,6 +543,24 @@ struct Automaton::Impl {
         return massSeen > tc * int64_t(cellsSeen);
     }
 };
+
+namespace automaton_internal {
+PassSplit& passSplit()
+{
+    static PassSplit split = [] {
+        PassSplit p;
+        const char* env = std::getenv("VDBCLAY_PASS_SPLIT");
+        if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
+        p.weighted = true;
+        int k = 1;
+        unsigned long long m = 0;
+        if (std::sscanf(env, "weighted:%d:%llu", &k, &m) >= 1 && k >= 1 && k <= 64) p.perThread = k;
+        p.minBlocks = m;
+        return p;
+    }();
+    return split;
+}
+} // namespace automaton_internal
 
 // ---- public API ----------------------------------------------------------------------------------
 

@@ -9,6 +9,7 @@
 #include "vdbclay/Metrics.h"
 
 #include "AtomicFile.h"
+#include "Rasterize.h"
 #include "Surface.h"
 #include "VdbCheck.h"
 
@@ -864,9 +865,8 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
                         std::to_string(massPerVoxel) + " per voxel)");
         }
     } else {
-        forEachVoxelInside(shape, dimensions, [&](int32_t x, int32_t y, int32_t z) {
-            acc.setValueOn(openvdb::Coord(x, y, z), massPerVoxel);
-        });
+        // The voxels forEachVoxelInside visits, leaf by leaf on every core (Rasterize.h).
+        raster_internal::rasterizeInside(grid->tree(), shape, dimensions, massPerVoxel, /*threads=*/0);
     }
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +

@@ -160,22 +160,38 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
         const MassLeaf& leaf = *leaves[li];
         LeafSums& out = sums[li];
         auto acc = mass.getConstAccessor();
-        std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
-        if (obstacles)
-            oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+        // The leaf's obstacles once (a leaf, an active tile or none), and face neighbours inside the
+        // leaf read from its buffer: only the voxels on the leaf's faces read through the accessor.
+        const openvdb::MaskTree::LeafNodeType* ol = nullptr;
+        bool obstacleTile = false;
+        if (obstacles) {
+            ol = obstacles->tree().probeConstLeaf(leaf.origin());
+            obstacleTile = !ol && obstacles->tree().isValueOn(leaf.origin());
+        }
+        const int32_t* d = leaf.buffer().data();
+        constexpr int kDim = int(MassLeaf::DIM);
+        // offset steps of the faces in kFaces' order: +-x (DIM^2), +-y (DIM), +-z (1)
+        const int step[6] = {kDim * kDim, -kDim * kDim, kDim, -kDim, 1, -1};
         for (openvdb::Index i = 0; i < MassLeaf::SIZE; ++i) {
-            const int32_t m = leaf.getValue(i);
+            const int32_t m = d[i];
             if (m == 0) continue;
             const Coord c = leaf.offsetToGlobalCoord(i);
             out.mass += m;
             out.maxCell = std::max(out.maxCell, m);
             ++out.clayVoxels;
             if (occupied(m, threshold)) ++out.occupiedVoxels;
-            const bool obstacle = oacc && oacc->isValueOn(c);
+            const bool obstacle = ol ? ol->isValueOn(i) : obstacleTile;
             if (!obstacle && m > threshold) out.residualOverload += int64_t(m) - threshold;
             bool interior = !obstacle && !(dims == 2 && c.z() != 0);
-            for (int f = 0; f < faces && interior; ++f)
-                interior = acc.getValue(c + kFaces[f]) != 0;
+            const int local[3] = {int(i >> (2 * MassLeaf::LOG2DIM)), int(i >> MassLeaf::LOG2DIM) & (kDim - 1),
+                                  int(i) & (kDim - 1)};
+            for (int f = 0; f < faces && interior; ++f) {
+                const int axis = f >> 1, to = local[axis] + ((f & 1) ? -1 : 1);
+                if (to >= 0 && to < kDim)
+                    interior = d[int(i) + step[f]] != 0;
+                else
+                    interior = acc.getValue(c + kFaces[f]) != 0;
+            }
             if (interior) {
                 out.interior.setOn(i);
                 ++out.interiorCells;

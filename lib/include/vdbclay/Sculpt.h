@@ -134,6 +134,9 @@ public:
 
     /// The metadata of the scene's start file (defaults when there is none or it has none).
     const ClayMeta& startMeta() const;
+    /// estimateSceneMemory(scene()): the constructor's, when it checked the budget (computed
+    /// here otherwise), so a caller reporting it does not pay for a second estimate.
+    const MemoryEstimate& memoryEstimate();
 
     bool done() const;
     uint64_t frame() const; ///< frames finished so far (including those of the start file)
