@@ -801,16 +801,19 @@ struct Sculptor::Impl {
     }
 
     /// The global transport's first try (docs/TRANSPORT.md, round 4b): the automaton alone, in chunks
-    /// of kTryChunk steps, after a surface push only, unless the clay is saturated on average
-    /// (kTrySaturated: a saturated body has room only at its surface, the automaton's random walk
-    /// would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of the
-    /// clay (about what the global layer costs a frame on it) and the frame within kTrySteps
-    /// steps. @a finished: the frame ended
-    /// here (settled, tolerance, no room, the scene's step budget); otherwise the global layer runs
-    /// on what is left. No stop request is honoured here (the try is bounded, as the layer is): a
-    /// frame saved open is always past its global layer, so a resumed frame never repeats or skips
-    /// it, with no new checkpoint field.
-    StepReport settleBounded(bool& finished)
+    /// of kTryChunk steps, after a surface push only, unless the clay near the overload is saturated
+    /// on average (kTrySaturated: saturated clay has room only at its surface, the automaton's random
+    /// walk would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of
+    /// that clay (about what the global layer costs a frame on it) and the frame within kTrySteps
+    /// steps. The clay near the overload: the clay leaves meeting @a near (the push's region grown
+    /// by the layer's reach: its plastic zone; round 5), the whole body when @a near is empty (no tool
+    /// touched clay): a frame costs the tool's zone, not the model, and a saturated lump beside a
+    /// loose one is judged by itself. @a finished: the frame ended here (settled, tolerance, no
+    /// room, the scene's step budget); otherwise the global layer runs on what is left. No stop
+    /// request is honoured here (the try is bounded, as the layer is): a frame saved open is always
+    /// past its global layer, so a resumed frame never repeats or skips it, with no new checkpoint
+    /// field.
+    StepReport settleBounded(bool& finished, const Box& near)
     {
         StepReport total;
         finished = false;
@@ -819,9 +822,23 @@ struct Sculptor::Impl {
         // compressible clay it leaves none: the 48^3 press at 0.8 Tc), and global + compress is the
         // setting for clay at Tc: its results stay those of the layer alone.
         if (scene.push != PushMode::Surface) return total;
-        const uint64_t voxels = mass->activeVoxelCount();
+        uint64_t voxels = 0;
+        int64_t clay = 0;
+        if (near.empty()) {
+            voxels = mass->activeVoxelCount();
+            clay = automaton->totalMass();
+        } else { // exact integers (a voxel is active exactly when it holds clay: Automaton::edit)
+            for (const clay_internal::MassLeafT* leaf : clay_internal::leavesNear(mass->constTree(), near)) {
+                voxels += leaf->onVoxelCount();
+                const int32_t* d = leaf->buffer().data();
+                int64_t sum = 0;
+                for (openvdb::Index i = 0; i < clay_internal::MassLeafT::SIZE; ++i)
+                    sum += d[i];
+                clay += sum;
+            }
+        }
         const double tc = double(scene.rule.threshold);
-        if (double(automaton->totalMass()) >= kTrySaturated * tc * double(voxels)) return total;
+        if (double(clay) >= kTrySaturated * tc * double(voxels)) return total;
         const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
         for (;;) {
             const StepReport r =
@@ -1218,7 +1235,7 @@ FrameReport Sculptor::runFrame()
             // steps can have carried the overload (a Margolus step moves clay one voxel at most).
             im.open = true;
             im.openSteps = 0;
-            rep.settle = im.settleBounded(rep.finished);
+            rep.settle = im.settleBounded(rep.finished, go.reach > 0 ? grownBy(go.seedRegion, go.reach) : Box());
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
                 im.open = false;
