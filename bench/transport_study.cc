@@ -194,10 +194,11 @@ void stroke(int width, int mass, const std::string& only)
         const Run run = runScene(parseScene(json, "stroke", ""));
         std::vector<double> f(run.frameSeconds.begin() + 1, run.frameSeconds.end()); // frame 1 dips
         std::sort(f.begin(), f.end());
-        std::printf("stroke %d (m0 %d) %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld  "
-                    "hash %016llx\n",
-                    width, mass, c[0], c[1], 1e3 * f[f.size() / 2], (unsigned long long)run.steps,
-                    (long long)run.drift, (unsigned long long)contentHash(*run.mass));
+        std::printf(
+            "stroke %d (m0 %d) %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld  "
+            "hash %016llx\n",
+            width, mass, c[0], c[1], 1e3 * f[f.size() / 2], (unsigned long long)run.steps,
+            (long long)run.drift, (unsigned long long)contentHash(*run.mass));
         std::fflush(stdout);
     }
 }
@@ -229,9 +230,8 @@ int main(int argc, char** argv)
 {
     openvdb::initialize();
     if (argc < 2) {
-        std::fprintf(
-            stderr,
-            "usage: transport_study squeeze R0 | poke | stroke W [--mass M] | scene FILE  [--only local-surface,...]\n");
+        std::fprintf(stderr, "usage: transport_study squeeze R0 | poke | stroke W [--mass M] | scene FILE  "
+                             "[--only local-surface,...]\n");
         return 2;
     }
     std::string only;

@@ -108,7 +108,9 @@ void voxelizeActiveTilesIn(MassTree& tree, const Box& region)
         tree.voxelizeActiveTiles();
         return;
     }
-    auto floorTo = [](int64_t v, int64_t dim) { return v >= 0 ? v / dim * dim : -((-v + dim - 1) / dim) * dim; };
+    auto floorTo = [](int64_t v, int64_t dim) {
+        return v >= 0 ? v / dim * dim : -((-v + dim - 1) / dim) * dim;
+    };
     for (int64_t x = floorTo(region.min[0], u); x <= region.max[0]; x += u)
         for (int64_t y = floorTo(region.min[1], u); y <= region.max[1]; y += u)
             for (int64_t z = floorTo(region.min[2], u); z <= region.max[2]; z += u)

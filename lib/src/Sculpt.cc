@@ -1235,7 +1235,8 @@ FrameReport Sculptor::runFrame()
             // steps can have carried the overload (a Margolus step moves clay one voxel at most).
             im.open = true;
             im.openSteps = 0;
-            rep.settle = im.settleBounded(rep.finished, go.reach > 0 ? grownBy(go.seedRegion, go.reach) : Box());
+            rep.settle =
+                im.settleBounded(rep.finished, go.reach > 0 ? grownBy(go.seedRegion, go.reach) : Box());
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
                 im.open = false;
