@@ -4,8 +4,8 @@
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc
 //   transport_study stroke W          sphere r 6 dipped 9 voxels into a clay sphere W wide, slid 2/frame
 //                                     (--mass M: the clay's mass per voxel, default 1000 = Tc)
-//                                     (no memory budget: the estimate counts the global layer over the
-//                                     whole body, 54 GiB at W 512, where the stroke's domain is local)
+//                                     (no memory budget: the surface push's estimate counts the global
+//                                     layer over the whole body, 54 GiB at W 512; compress: 5.7 GiB)
 //   transport_study scene FILE        a scene file, its transport and push overridden: steps, block
 //                                     updates, whole run and median frame time (frames 2..)
 // Each runs the four combinations (or those named by --only local-surface,global-compress,...)
