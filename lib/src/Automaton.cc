@@ -230,16 +230,14 @@ struct Automaton::Impl {
                     leaf.setValueOff(i);
                     continue;
                 }
-                const Coord c = leaf.offsetToGlobalCoord(i);
                 if (v < 0) {
-                    per[k].error = std::string(context) + ": voxel " + coordStr(c) + " holds negative mass " +
-                                   std::to_string(v);
+                    per[k].error = std::string(context) + ": voxel " + coordStr(leaf.offsetToGlobalCoord(i)) +
+                                   " holds negative mass " + std::to_string(v);
                     return;
                 }
-                if (!is3D() && c.z() != 0) {
-                    per[k].error = std::string(context) +
-                                   ": 2D clay must lie in the z = 0 layer, but voxel " + coordStr(c) +
-                                   " holds mass " + std::to_string(v);
+                if (!is3D() && leaf.offsetToGlobalCoord(i).z() != 0) { // (its coordinate only when needed)
+                    per[k].error = std::string(context) + ": 2D clay must lie in the z = 0 layer, but voxel " +
+                                   coordStr(leaf.offsetToGlobalCoord(i)) + " holds mass " + std::to_string(v);
                     return;
                 }
                 leaf.setValueOn(i);
