@@ -340,6 +340,33 @@ TEST_F(TransportTest, GlobalLayerMovesTheOverloadToRoomExactly)
     EXPECT_EQ(outside, 5000);
 }
 
+TEST_F(TransportTest, TheDenseCellIndexAndTheTreeBeyondItGiveOneResult)
+{
+    // Round 5's cell index is a dense array over the seeds' bounds grown by the reach + 2, a tree
+    // beyond it. Clay at 0.99 Tc with 20 Tc extra in one cell: the cell is the whole flood (no full
+    // cell beside it) with reach 1 as with reach 0 (no dense index at all), and the active set joins
+    // cells with room (10 each) shell by shell, far past the dense box: both give one result, on any
+    // thread count, exact.
+    uint64_t ref = 0;
+    for (int64_t reach : {0, 1})
+        for (int threads : {1, 3}) {
+            MassGridPtr g = block(box(0, 0, 0, 23, 23, 23), 990);
+            g->tree().setValue(openvdb::Coord(12, 12, 12), 990 + 20000);
+            Automaton a(g, opts(3, threads));
+            GlobalTransportOptions o;
+            o.reach = reach;
+            o.threads = threads;
+            const GlobalTransportReport r = transportGlobally(a, o);
+            EXPECT_EQ(r.overloadBefore, 20000 - 10);
+            EXPECT_FALSE(r.noRoom);
+            EXPECT_GT(r.unknowns, 343u) << "the set should grow past the dense box (7^3 cells)";
+            EXPECT_EQ(totalMass(*g), int64_t(24 * 24 * 24) * 990 + 20000);
+            const uint64_t h = contentHash(*g);
+            if (ref == 0) ref = h;
+            EXPECT_EQ(h, ref) << "reach " << reach << ", " << threads << " threads";
+        }
+}
+
 TEST_F(TransportTest, GlobalLayerSkipsOverloadThatFitsWhereItIs)
 {
     // Compressible clay (m0 = Tc / 2) with 3000 extra in one cell: its 24 cells within two steps
