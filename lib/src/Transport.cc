@@ -360,6 +360,8 @@ private:
         c.block.resize(c.n);
         c.start.resize(c.n + 1);
         std::vector<std::pair<int32_t, float>> row;
+        std::vector<int32_t>& where = mWhere; // coarse row -> its place in row, or -1 (reset per row)
+        where.assign(c.n, -1);
         for (size_t i = 0; i < c.n; ++i) {
             c.start[i] = uint32_t(c.col.size());
             c.block[i] = half(f.block[size_t(c.members[c.memberStart[i]])]);
@@ -375,18 +377,20 @@ private:
                         dg -= double(wt);
                         continue;
                     }
-                    auto it =
-                        std::find_if(row.begin(), row.end(), [&](const auto& q) { return q.first == J; });
-                    if (it == row.end())
+                    int32_t& at = where[size_t(J)];
+                    if (at < 0) {
+                        at = int32_t(row.size());
                         row.emplace_back(J, wt);
-                    else
-                        it->second += wt;
+                    } else {
+                        row[size_t(at)].second += wt;
+                    }
                 }
             }
             c.diag[i] = dg;
             for (const auto& q : row) {
                 c.col.push_back(q.first);
                 c.w.push_back(q.second);
+                where[size_t(q.first)] = -1;
             }
         }
         c.start[c.n] = uint32_t(c.col.size());
@@ -535,6 +539,7 @@ private:
     size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
     std::vector<int32_t> mScratch;
+    std::vector<int32_t> mWhere; ///< scratch of coarsen(): a coarse row's place in the row being built
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
