@@ -3,18 +3,26 @@
 //   transport_study squeeze R0        cylinder R0, H0 = 2 R0 between slip plates, pressed to H = R0
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc
 //   transport_study stroke W          sphere r 6 dipped 9 voxels into a clay sphere W wide, slid 2/frame
-//                                     (no memory budget: the estimate counts the global layer over the
-//                                     whole body, 54 GiB at W 512, where the stroke's domain is local)
+//                                     (--mass M: the clay's mass per voxel, default 1000 = Tc)
+//                                     (no memory budget: the surface push's estimate counts the global
+//                                     layer over the whole body, 54 GiB at W 512; compress: 5.7 GiB)
 //   transport_study scene FILE        a scene file, its transport and push overridden: steps, block
 //                                     updates, whole run and median frame time (frames 2..)
 // Each runs the four combinations (or those named by --only local-surface,global-compress,...)
-// on one thread and prints one line per combination.
+// on one thread and prints one line per combination. TRANSPORT_STUDY_PROFILE=1: a line per frame;
+// TRANSPORT_STUDY_CALLGRIND=1 under `valgrind --tool=callgrind --instr-atstart=no`: the instructions of
+// frames 2.. only (noise-free; the set-up runs uninstrumented).
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
 
 #include <openvdb/openvdb.h>
+
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#define VDBCLAY_HAVE_CALLGRIND 1
+#endif
 
 #include <algorithm>
 #include <chrono>
@@ -45,8 +53,14 @@ Run runScene(Scene s)
     Sculptor sc(s, 1);
     const int64_t m0 = sc.automaton().totalMass();
     const auto t0 = Clock::now();
+    // TRANSPORT_STUDY_CALLGRIND=1 under `valgrind --tool=callgrind --instr-atstart=no`: instructions
+    // of frames 2.. only (the set-up of a large model runs uninstrumented).
+    const bool callgrind = std::getenv("TRANSPORT_STUDY_CALLGRIND") != nullptr;
     while (!sc.done()) {
         const auto tf = Clock::now();
+#ifdef VDBCLAY_HAVE_CALLGRIND
+        if (callgrind && sc.frame() == 1) CALLGRIND_START_INSTRUMENTATION;
+#endif
         const FrameReport r = sc.runFrame();
         out.frameSeconds.push_back(std::chrono::duration<double>(Clock::now() - tf).count());
         out.steps += r.settle.steps;
@@ -55,13 +69,18 @@ Run runScene(Scene s)
         if (std::getenv("TRANSPORT_STUDY_PROFILE"))
             std::printf(
                 "  frame %llu: %.2f ms (global layer %.2f ms)  entered %llu contact %.1f  reach %lld  "
-                "overload %lld  unknowns %llu  solves %llu  iterations %llu  steps %llu\n",
+                "overload %lld  unknowns %llu  solves %llu  iterations %llu  steps %llu (try %llu)\n",
                 (unsigned long long)r.frame, 1e3 * out.frameSeconds.back(), 1e3 * r.transport.seconds,
                 (unsigned long long)r.push.voxelsPushed, r.push.contactSize, (long long)r.transport.reach,
                 (long long)r.transport.overloadBefore, (unsigned long long)r.transport.unknowns,
                 (unsigned long long)r.transport.solves, (unsigned long long)r.transport.iterations,
-                (unsigned long long)r.settle.steps);
+                (unsigned long long)r.settle.steps, (unsigned long long)r.trySteps);
     }
+#ifdef VDBCLAY_HAVE_CALLGRIND
+    if (callgrind) CALLGRIND_STOP_INSTRUMENTATION;
+#else
+    if (callgrind) std::fprintf(stderr, "transport_study: built without valgrind/callgrind.h\n");
+#endif
     out.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     out.mass = sc.mass();
     out.drift = totalMass(*sc.mass()) - m0;
@@ -161,23 +180,25 @@ void poke(const std::string& only)
     }
 }
 
-void stroke(int width, const std::string& only)
+void stroke(int width, int mass, const std::string& only)
 {
     const double R = width / 2.0;
     for (auto& c : kCombos) {
         if (!wanted(only, c[0], c[1])) continue;
         char json[2048];
         std::snprintf(json, sizeof json, R"({"threshold": 1000, "rule": "prorata", "seed": 1, %s
-            "clay": [{"shape": "sphere", "center": [%g, %g, %g], "radius": %g, "mass": 1000}],
+            "clay": [{"shape": "sphere", "center": [%g, %g, %g], "radius": %g, "mass": %d}],
             "tools": [{"shape": "sphere", "center": [%g, %g, %g], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 12}]}],
             "settle": {"max_steps": 5000000}, "memory_budget": "none"})",
-                      combo(c[0], c[1]).c_str(), R, R, R, R, R - 12, 2 * R + 6 - 9, R);
+                      combo(c[0], c[1]).c_str(), R, R, R, R, mass, R - 12, 2 * R + 6 - 9, R);
         const Run run = runScene(parseScene(json, "stroke", ""));
         std::vector<double> f(run.frameSeconds.begin() + 1, run.frameSeconds.end()); // frame 1 dips
         std::sort(f.begin(), f.end());
-        std::printf("stroke %d %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld\n",
-                    width, c[0], c[1], 1e3 * f[f.size() / 2], (unsigned long long)run.steps,
-                    (long long)run.drift);
+        std::printf(
+            "stroke %d (m0 %d) %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld  "
+            "hash %016llx\n",
+            width, mass, c[0], c[1], 1e3 * f[f.size() / 2], (unsigned long long)run.steps,
+            (long long)run.drift, (unsigned long long)contentHash(*run.mass));
         std::fflush(stdout);
     }
 }
@@ -195,9 +216,10 @@ void sceneFile(const std::string& path, const std::string& only)
         std::sort(f.begin(), f.end());
         std::printf(
             "%s %-6s %-8s  steps %llu  blocks %llu  %.3f s (global layer %.3f s)  median frame %.2f ms  "
-            "drift %lld\n",
+            "drift %lld  hash %016llx\n",
             path.c_str(), c[0], c[1], (unsigned long long)run.steps, (unsigned long long)run.blocks,
-            run.seconds, run.transportSeconds, 1e3 * f[f.size() / 2], (long long)run.drift);
+            run.seconds, run.transportSeconds, 1e3 * f[f.size() / 2], (long long)run.drift,
+            (unsigned long long)contentHash(*run.mass));
         std::fflush(stdout);
     }
 }
@@ -208,14 +230,16 @@ int main(int argc, char** argv)
 {
     openvdb::initialize();
     if (argc < 2) {
-        std::fprintf(
-            stderr,
-            "usage: transport_study squeeze R0 | poke | stroke W | scene FILE  [--only local-surface,...]\n");
+        std::fprintf(stderr, "usage: transport_study squeeze R0 | poke | stroke W [--mass M] | scene FILE  "
+                             "[--only local-surface,...]\n");
         return 2;
     }
     std::string only;
-    for (int i = 1; i + 1 < argc; ++i)
+    int mass = 1000;
+    for (int i = 1; i + 1 < argc; ++i) {
         if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
+        if (!std::strcmp(argv[i], "--mass")) mass = std::atoi(argv[i + 1]);
+    }
     const std::string what = argv[1];
     if (what == "squeeze")
         squeeze(argc > 2 ? std::atoi(argv[2]) : 16, only);
@@ -224,7 +248,7 @@ int main(int argc, char** argv)
     else if (what == "scene" && argc > 2)
         sceneFile(argv[2], only);
     else if (what == "stroke")
-        stroke(argc > 2 ? std::atoi(argv[2]) : 128, only);
+        stroke(argc > 2 && argv[2][0] != '-' ? std::atoi(argv[2]) : 128, mass, only);
     else
         return 2;
     return 0;

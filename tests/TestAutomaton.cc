@@ -595,6 +595,26 @@ TEST_F(AutomatonTest, EditWakesTheRegionAndTracksMass)
     EXPECT_EQ(a.totalMass(), totalMass(*mass));
 }
 
+TEST_F(AutomatonTest, EditVoxelizesTheActiveTilesItMakesInItsRegion)
+{
+    // The edit voxelizes the tiles of the nodes meeting its region only (it costs the region, not the
+    // model): a leaf-sized tile and a 128^3 tile (a lower node's) written by the edit are voxelized
+    // and counted exactly; clay far away is not touched.
+    auto mass = lump(CoordBBox(Coord(1000, 0, 0), Coord(1003, 3, 3)), 100);
+    Automaton a(mass, options(Rule::Prorata, 3, 100));
+    const int64_t m0 = a.totalMass();
+    a.edit(Box{{{0, 0, 0}}, {{7, 7, 7}}},
+           [](MassGrid& g) { g.tree().fill(CoordBBox(Coord(0, 0, 0), Coord(7, 7, 7)), 3, true); });
+    EXPECT_EQ(a.totalMass(), m0 + 3 * 512);
+    EXPECT_EQ(mass->tree().activeTileCount(), 0u);
+    a.edit(Box{{{-128, 0, 0}}, {{-1, 127, 127}}},
+           [](MassGrid& g) { g.tree().fill(CoordBBox(Coord(-128, 0, 0), Coord(-1, 127, 127)), 1, true); });
+    EXPECT_EQ(a.totalMass(), m0 + 3 * 512 + 128 * 128 * 128);
+    EXPECT_EQ(a.totalMass(), totalMass(*mass));
+    EXPECT_EQ(mass->tree().activeTileCount(), 0u);
+    EXPECT_EQ(mass->tree().activeVoxelCount(), uint64_t(64 + 512 + 128 * 128 * 128));
+}
+
 TEST_F(AutomatonTest, QuietStepsCountStepsThatChangeNothingAndEditsRestartThem)
 {
     // A 4^3 lump, every cell over Tc, walled in by obstacles: no block has an under cell, so no

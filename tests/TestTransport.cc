@@ -340,6 +340,33 @@ TEST_F(TransportTest, GlobalLayerMovesTheOverloadToRoomExactly)
     EXPECT_EQ(outside, 5000);
 }
 
+TEST_F(TransportTest, TheDenseCellIndexAndTheTreeBeyondItGiveOneResult)
+{
+    // Round 5's cell index is a dense array over the seeds' bounds grown by the reach + 2, a tree
+    // beyond it. Clay at 0.99 Tc with 20 Tc extra in one cell: the cell is the whole flood (no full
+    // cell beside it) with reach 1 as with reach 0 (no dense index at all), and the active set joins
+    // cells with room (10 each) shell by shell, far past the dense box: both give one result, on any
+    // thread count, exact.
+    uint64_t ref = 0;
+    for (int64_t reach : {0, 1})
+        for (int threads : {1, 3}) {
+            MassGridPtr g = block(box(0, 0, 0, 23, 23, 23), 990);
+            g->tree().setValue(openvdb::Coord(12, 12, 12), 990 + 20000);
+            Automaton a(g, opts(3, threads));
+            GlobalTransportOptions o;
+            o.reach = reach;
+            o.threads = threads;
+            const GlobalTransportReport r = transportGlobally(a, o);
+            EXPECT_EQ(r.overloadBefore, 20000 - 10);
+            EXPECT_FALSE(r.noRoom);
+            EXPECT_GT(r.unknowns, 343u) << "the set should grow past the dense box (7^3 cells)";
+            EXPECT_EQ(totalMass(*g), int64_t(24 * 24 * 24) * 990 + 20000);
+            const uint64_t h = contentHash(*g);
+            if (ref == 0) ref = h;
+            EXPECT_EQ(h, ref) << "reach " << reach << ", " << threads << " threads";
+        }
+}
+
 TEST_F(TransportTest, GlobalLayerSkipsOverloadThatFitsWhereItIs)
 {
     // Compressible clay (m0 = Tc / 2) with 3000 extra in one cell: its 24 cells within two steps
@@ -701,6 +728,48 @@ TEST_F(TransportTest, OnCompressibleClayGlobalWithTheSurfacePushSettlesAsLocalDo
         EXPECT_EQ(r.transport.solves, 0u) << "frame " << r.frame;
     });
     EXPECT_EQ(contentHash(*sc.mass()), h);
+}
+
+TEST_F(TransportTest, TheTryIsJudgedByTheClayNearTheToolNotByTheWholeBody)
+{
+    // A sphere of clay at Tc (32 wide) stroked by a small sphere, beside a large loose lump (0.5 Tc)
+    // the tool never touches: the body's mean density is ~0.55, under the try's 0.96, but the
+    // stroked clay is saturated. Judged near the tool (the push's region grown by the layer's reach;
+    // round 5), every frame goes straight to the layer, as the stroke at Tc on its own does; round
+    // 4b's whole-body gate ran the automaton's try first (250-380 steps a frame here, up to its cap
+    // of 4096 on larger clay) and cost a scan of the whole body every frame. A sphere pressed into
+    // the loose lump is still settled by the try alone.
+    const auto scene = [](const std::string& tool) {
+        return R"({"threshold": 1000, "rule": "prorata", "push": "surface", "transport": "global",
+            "clay": [{"shape": "sphere", "center": [16,16,16], "radius": 16, "mass": 1000},
+                     {"shape": "box", "min": [80,0,0], "max": [143,63,63], "mass": 500}],
+            "tools": [)" +
+               tool + R"(],
+            "obstacles": [{"shape": "box", "min": [-30,-3,-30], "max": [170,-1,100]}],
+            "settle": {"max_steps": 400000}})";
+    };
+    const std::string plate =
+        R"({"shape": "sphere", "center": [10, 34, 16], "radius": 4, "path": [{"translate": [2,0,0], "frames": 4}]})";
+    const std::string sphere =
+        R"({"shape": "sphere", "center": [112, 67, 32], "radius": 4, "path": [{"translate": [0,-1,0], "frames": 3}]})";
+    uint64_t solves = 0, tries = 0;
+    Sculptor pressed(parseScene(scene(plate), "t.json", ""), 2);
+    const int64_t m0 = pressed.automaton().totalMass();
+    pressed.run(0, [&](const FrameReport& r) {
+        tries += r.trySteps;
+        solves += r.transport.solves;
+    });
+    EXPECT_EQ(tries, 0u);
+    EXPECT_GT(solves, 0u);
+    EXPECT_EQ(totalMass(*pressed.mass()), m0);
+    solves = tries = 0;
+    Sculptor poked(parseScene(scene(sphere), "t.json", ""), 2);
+    poked.run(0, [&](const FrameReport& r) {
+        tries += r.trySteps;
+        solves += r.transport.solves;
+    });
+    EXPECT_GT(tries, 0u);
+    EXPECT_EQ(solves, 0u);
 }
 
 TEST_F(TransportTest, AGlobalRunStoppedAndResumedIsIdenticalToAnUnbrokenRun)

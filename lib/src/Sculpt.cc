@@ -581,12 +581,22 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
     uint64_t toolLeaves = 0;
     std::vector<Box> toolBoxes;
+    uint64_t toolMost = 0;  // voxels of the largest tool's bounds at one frame
+    double toolExtent = 0;  // the largest tool's diagonal
     for (const ToolSpec& t : scene.tools) {
         const auto sw = sweep(t, scene.frames, dims, toolBudget);
         areas.push_back({sw.first, false, true});
         e.toolVoxels += sw.second;
         toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
         toolBoxes.push_back(sw.first);
+        toolMost = std::max(toolMost, sw.second);
+        const Box b = t.shape.shape->bounds(); // its diagonal: any pose's extent
+        if (!b.empty()) {
+            double d2 = 0;
+            for (int a = 0; a < 3; ++a)
+                d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
+            toolExtent = std::max(toolExtent, std::sqrt(d2));
+        }
     }
     // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and leaves
     // than their sweeps hold together.
@@ -686,14 +696,57 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
     const uint64_t lanes = std::max(1u, std::thread::hardware_concurrency()) - 1; // at most one per thread
     e.automatonBytes = e.clayLeavesGrown * (kAutomatonBytesPerLeaf + lanes * kAutomatonLaneBytesPerLeaf);
-    // The global layer (lib/src/Transport.cc) holds, per full clay cell of the body: its coordinate,
+    // The global layer (lib/src/Transport.cc) holds, per cell of its domain: its coordinate,
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
     // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
     // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
-    // work vectors, coordinates, aggregates, members over every level: ~88 bytes). The full cells
-    // are at most the clay's leaves' voxels.
-    if (scene.transport == Transport::Global)
-        e.transportBytes = e.clayLeavesGrown * 512 * kTransportBytesPerCell;
+    // work vectors, coordinates, aggregates, members over every level: ~88 bytes). Its domain is at
+    // most the clay's leaves' voxels, and (round 5) with the compress push and tools that cover no
+    // clay shape, the clay near the tools' sweeps: the over cells lie within the contact depth of a
+    // tool (the chains go as deep as the contact is wide: contact <= sqrt(the tool's voxels at a
+    // frame), 2D their number), the flood goes reach = ceil(contact) + 2 beyond them, or, where a
+    // part the reach cut has no room and the reach doubles, up to twice the distance to room, which a
+    // tool entering from the clay's surface finds within its extent, an inner seed 2 x 2 more, and
+    // the Dirichlet cells one more; counted as every voxel of the leaves meeting those boxes. The
+    // whole body otherwise: a tool that covers the clay compresses it all the way down; an obstacle
+    // near the tool may wall the clay in (the reach then doubles up to the whole body); the surface
+    // push's try may carry the overload up to kTrySteps voxels before the layer; clay over Tc or
+    // from a file may overflow anywhere, with no tool near.
+    if (scene.transport == Transport::Global) {
+        uint64_t cells = e.clayLeavesGrown * 512;
+        const bool clayMoves = std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+        if (scene.push == PushMode::Compress && !toolBoxes.empty() && !clayMoves) {
+            bool covers = false;
+            for (const Box& t : toolBoxes)
+                for (const Area& a : areas) {
+                    if (!a.clay) continue;
+                    int spans = 0;
+                    for (int ax = 0; ax < 3; ++ax)
+                        spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
+                    covers |= spans >= 2; // in 2D z spans trivially: one more axis
+                }
+            if (!covers) {
+                Box extent; // where the clay can be
+                for (const Box& b : grownBoxes)
+                    extent = unite(extent, b);
+                const double contact = dims == 2 ? double(toolMost) : std::sqrt(double(toolMost));
+                const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
+                const int64_t depth = int64_t(std::ceil(contact));
+                const int64_t d = std::max(reach, 2 * int64_t(std::ceil(toolExtent))) + depth + 4 + 1;
+                uint64_t near = 0;
+                bool walled = false;
+                for (const Box& t : toolBoxes) {
+                    const Box g = grownBy(t, d);
+                    for (const Box& o : obsBoxes)
+                        walled |= !intersect(g, o).empty();
+                    const Box b = intersect(g, extent);
+                    near += b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+                }
+                if (!walled) cells = std::min(cells, near);
+            }
+        }
+        e.transportBytes = cells * kTransportBytesPerCell;
+    }
     // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
     // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
     // over a band around the surface): counted as three float grids on the clay's leaves, plus
@@ -836,16 +889,19 @@ struct Sculptor::Impl {
     }
 
     /// The global transport's first try (docs/TRANSPORT.md, round 4b): the automaton alone, in chunks
-    /// of kTryChunk steps, after a surface push only, unless the clay is saturated on average
-    /// (kTrySaturated: a saturated body has room only at its surface, the automaton's random walk
-    /// would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of the
-    /// clay (about what the global layer costs a frame on it) and the frame within kTrySteps
-    /// steps. @a finished: the frame ended
-    /// here (settled, tolerance, no room, the scene's step budget); otherwise the global layer runs
-    /// on what is left. No stop request is honoured here (the try is bounded, as the layer is): a
-    /// frame saved open is always past its global layer, so a resumed frame never repeats or skips
-    /// it, with no new checkpoint field.
-    StepReport settleBounded(bool& finished)
+    /// of kTryChunk steps, after a surface push only, unless the clay near the overload is saturated
+    /// on average (kTrySaturated: saturated clay has room only at its surface, the automaton's random
+    /// walk would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of
+    /// that clay (about what the global layer costs a frame on it) and the frame within kTrySteps
+    /// steps. The clay near the overload: the clay leaves meeting @a near (the push's region grown
+    /// by the layer's reach: its plastic zone; round 5), the whole body when @a near is empty (no tool
+    /// touched clay): a frame costs the tool's zone, not the model, and a saturated lump beside a
+    /// loose one is judged by itself. @a finished: the frame ended here (settled, tolerance, no
+    /// room, the scene's step budget); otherwise the global layer runs on what is left. No stop
+    /// request is honoured here (the try is bounded, as the layer is): a frame saved open is always
+    /// past its global layer, so a resumed frame never repeats or skips it, with no new checkpoint
+    /// field.
+    StepReport settleBounded(bool& finished, const Box& near)
     {
         StepReport total;
         finished = false;
@@ -854,9 +910,23 @@ struct Sculptor::Impl {
         // compressible clay it leaves none: the 48^3 press at 0.8 Tc), and global + compress is the
         // setting for clay at Tc: its results stay those of the layer alone.
         if (scene.push != PushMode::Surface) return total;
-        const uint64_t voxels = mass->activeVoxelCount();
+        uint64_t voxels = 0;
+        int64_t clay = 0;
+        if (near.empty()) {
+            voxels = mass->activeVoxelCount();
+            clay = automaton->totalMass();
+        } else { // exact integers (a voxel is active exactly when it holds clay: Automaton::edit)
+            for (const clay_internal::MassLeafT* leaf : clay_internal::leavesNear(mass->constTree(), near)) {
+                voxels += leaf->onVoxelCount();
+                const int32_t* d = leaf->buffer().data();
+                int64_t sum = 0;
+                for (openvdb::Index i = 0; i < clay_internal::MassLeafT::SIZE; ++i)
+                    sum += d[i];
+                clay += sum;
+            }
+        }
         const double tc = double(scene.rule.threshold);
-        if (double(automaton->totalMass()) >= kTrySaturated * tc * double(voxels)) return total;
+        if (double(clay) >= kTrySaturated * tc * double(voxels)) return total;
         const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
         for (;;) {
             const StepReport r =
@@ -1286,7 +1356,8 @@ FrameReport Sculptor::runFrame()
             // steps can have carried the overload (a Margolus step moves clay one voxel at most).
             im.open = true;
             im.openSteps = 0;
-            rep.settle = im.settleBounded(rep.finished);
+            rep.settle =
+                im.settleBounded(rep.finished, go.reach > 0 ? grownBy(go.seedRegion, go.reach) : Box());
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
                 im.open = false;

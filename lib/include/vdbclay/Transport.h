@@ -46,8 +46,10 @@ struct GlobalTransportOptions {
     double roundTolerance = 1e-2;
     /// Solves with at least this many unknowns are preconditioned by an aggregation multigrid
     /// V-cycle (iterations nearly flat in N); smaller ones by MIC(0) (cheaper per iteration).
-    /// 0: always multigrid.
-    uint64_t multigridMin = 20000;
+    /// 0: always multigrid. 16,000 (round 5; 20,000 before): the compress strokes' domains (19,000-
+    /// 24,500) always take the multigrid (13 iterations a frame, against 36-49 with MIC(0) on the frames
+    /// under 20,000: the 512-wide stroke's every frame), the surface strokes' (11,800-14,400) MIC(0).
+    uint64_t multigridMin = 16000;
     /// Worker threads for the solver's vector operations: 0 all cores, 1 serial. The result does
     /// not depend on it (fixed chunks, partial sums added in chunk order).
     int threads = 0;
