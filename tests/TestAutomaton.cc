@@ -321,9 +321,10 @@ TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
 
 TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
 {
-    // The experimental pass split (PassSplit.h): chunks of about equal candidate blocks, serial below
-    // a threshold. Every item exactly once: the same hash, and the same blocks examined and updated
-    // (a lost or doubled item changes the counts), as the default split on one thread.
+    // The pass splits (PassSplit.h): the default weighted one (chunks of about equal candidate blocks,
+    // serial below a threshold) and round 4's auto partitioner. Every item exactly once: the same
+    // hash, and the same blocks examined and updated (a lost or doubled item changes the counts), as
+    // one thread (which takes no split).
     using automaton_internal::PassSplit;
     const PassSplit saved = automaton_internal::passSplit();
     for (Rule rule : {Rule::Prorata, Rule::Arata}) {
@@ -343,6 +344,12 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
             automaton_internal::passSplit() = PassSplit();
             const std::vector<uint64_t> expected = runOnce(1);
             EXPECT_GT(expected[2], 1000u);
+            PassSplit autoSplit;
+            autoSplit.weighted = false;
+            automaton_internal::passSplit() = autoSplit;
+            for (int threads : {2, 3, 8})
+                EXPECT_EQ(runOnce(threads), expected)
+                    << ruleName(rule) << " " << dims << "D, auto split, " << threads << " threads";
             for (int k : {1, 2, 3}) {
                 for (uint64_t minBlocks : {uint64_t(0), uint64_t(300)}) {
                     PassSplit p;

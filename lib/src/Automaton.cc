@@ -242,7 +242,8 @@ struct Automaton::Impl {
                     return;
                 }
                 if (!is3D() && leaf.offsetToGlobalCoord(i).z() != 0) { // (its coordinate only when needed)
-                    per[k].error = std::string(context) + ": 2D clay must lie in the z = 0 layer, but voxel " +
+                    per[k].error = std::string(context) +
+                                   ": 2D clay must lie in the z = 0 layer, but voxel " +
                                    coordStr(leaf.offsetToGlobalCoord(i)) + " holds mass " + std::to_string(v);
                     return;
                 }
@@ -587,8 +588,11 @@ PassSplit& passSplit()
     static PassSplit split = [] {
         PassSplit p;
         const char* env = std::getenv("VDBCLAY_PASS_SPLIT");
+        if (env && std::strcmp(env, "auto") == 0) {
+            p.weighted = false;
+            return p;
+        }
         if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
-        p.weighted = true;
         int k = 1;
         unsigned long long m = 0;
         if (std::sscanf(env, "weighted:%d:%llu", &k, &m) >= 1 && k >= 1 && k <= 64) p.perThread = k;

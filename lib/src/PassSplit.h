@@ -1,12 +1,15 @@
 // How the automaton cuts a pass on several threads (Automaton.cc, runPass).
 //
-// Default: tbb::parallel_reduce with its auto partitioner over the work items (grain 4), which
-// splits ranges as threads steal them. The alternative, "weighted", is experimental and off unless
-// the environment sets VDBCLAY_PASS_SPLIT=weighted[:K[:MIN]] (read at the first pass): the work
-// list (layer order) is cut into K chunks per thread of about equal candidate blocks (a pass's cost
-// follows them), one task each under a simple partitioner, so a step pays for one task per chunk
-// and each thread keeps about the same layers from step to step; a pass with fewer than MIN
-// candidate blocks runs on the calling thread alone (no fork/join). Defaults K = 1, MIN = 0.
+// Default, "weighted": the work list (layer order) is cut into K chunks per thread of about equal
+// candidate blocks (a pass's cost follows them), one task each under a simple partitioner, so a
+// step pays for one task per chunk and each thread keeps about the same layers from step to step;
+// a pass with fewer than MIN candidate blocks runs on the calling thread alone (no fork/join).
+// Defaults K = 1, MIN = 0; the environment may set VDBCLAY_PASS_SPLIT=weighted[:K[:MIN]] (read at
+// the first pass). VDBCLAY_PASS_SPLIT=auto restores round 4's split: tbb::parallel_reduce with its
+// auto partitioner over the work items (grain 4), which splits ranges as threads steal them. On a
+// quiet 2-core machine the weighted split ran the 128^3 compressible press on 2 threads in 1.80-1.92 s
+// (median 1.82; user CPU 3.16-3.39 s) against 1.82-1.88 s (median 1.865; 3.26-3.36 s), six runs of
+// each alternated (docs/PERFORMANCE.md, "Round 5, merged": a small gain, but never a loss).
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
@@ -18,7 +21,7 @@ namespace vdbclay {
 namespace automaton_internal {
 
 struct PassSplit {
-    bool weighted = false;
+    bool weighted = true;
     int perThread = 1;      ///< K: chunks per thread
     uint64_t minBlocks = 0; ///< MIN: fewer candidate blocks than this run serially
 };

@@ -581,8 +581,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
     uint64_t toolLeaves = 0;
     std::vector<Box> toolBoxes;
-    uint64_t toolMost = 0;  // voxels of the largest tool's bounds at one frame
-    double toolExtent = 0;  // the largest tool's diagonal
+    uint64_t toolMost = 0; // voxels of the largest tool's bounds at one frame
+    double toolExtent = 0; // the largest tool's diagonal
     for (const ToolSpec& t : scene.tools) {
         const auto sw = sweep(t, scene.frames, dims, toolBudget);
         areas.push_back({sw.first, false, true});
@@ -714,7 +714,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // from a file may overflow anywhere, with no tool near.
     if (scene.transport == Transport::Global) {
         uint64_t cells = e.clayLeavesGrown * 512;
-        const bool clayMoves = std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+        const bool clayMoves =
+            std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
         if (scene.push == PushMode::Compress && !toolBoxes.empty() && !clayMoves) {
             bool covers = false;
             for (const Box& t : toolBoxes)
@@ -809,7 +810,7 @@ struct Sculptor::Impl {
     uint64_t openSteps = 0;                      ///< its settling steps so far
     /// cells that are obstacles because a tool is there: per leaf slot (origin), a mask of them
     std::vector<std::pair<openvdb::Coord, openvdb::MaskTree::LeafNodeType::NodeMaskType>> toolCells;
-    Box toolRegion;                              ///< bounds of the tools as placed now
+    Box toolRegion; ///< bounds of the tools as placed now
     // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
     std::vector<ShapePtr> placed;          ///< the tools as placed now
     openvdb::MaskTree coveredSlots{false}; ///< slots of toolRegion whose tool cells are marked

@@ -741,7 +741,8 @@ private:
         }
         mDenseLo = Coord(int32_t(int64_t(lo.x()) - g), int32_t(int64_t(lo.y()) - g),
                          int32_t(int64_t(lo.z()) - (mDirs == 4 ? 0 : g)));
-        if (int64_t(lo.x()) - g < INT32_MIN || int64_t(lo.y()) - g < INT32_MIN || int64_t(lo.z()) - g < INT32_MIN)
+        if (int64_t(lo.x()) - g < INT32_MIN || int64_t(lo.y()) - g < INT32_MIN ||
+            int64_t(lo.z()) - g < INT32_MIN)
             return;
         mB.denseIndex.assign(size_t(volume), -1);
         mDense = true;
@@ -1451,7 +1452,7 @@ private:
     bool mKeep; ///< the buffers outlive the call (a workspace): not freed before the routing
     std::unique_ptr<openvdb::Int32Tree> mIndex; ///< the cell index beyond the dense box (made on demand)
     std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> mIndexAcc;
-    bool mDense = false;      ///< mB.denseIndex holds the index over the box at mDenseLo, mDenseDim
+    bool mDense = false; ///< mB.denseIndex holds the index over the box at mDenseLo, mDenseDim
     Coord mDenseLo;
     int64_t mDenseDim[3] = {0, 0, 0};
     std::vector<Coord>& mCells;
