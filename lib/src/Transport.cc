@@ -174,7 +174,7 @@ public:
         mUsed = 1;
         if (mLevels.empty()) mLevels.emplace_back();
         Level& f = mLevels.front();
-        setMatrix(f, n, nb, diag);
+        setMatrix(f, n, nb, diag, true);
         f.block.assign(coord.begin(), coord.end());
         while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
         }
@@ -205,7 +205,7 @@ public:
             for (size_t k = lo; k < hi; ++k)
                 agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
         });
-        setMatrix(f, n, nb, diag);
+        setMatrix(f, n, nb, diag, false);
         colour(f, coord);
         f.agg.swap(agg);
         c.memberStart.assign(c.n + 1, 0);
@@ -226,10 +226,14 @@ public:
         forChunks(f.n, mSerial, [&](size_t lo, size_t hi) { std::copy(&in[lo], &in[0] + hi, &f.r[lo]); });
         cycle(0);
         out.swap(f.x);
-        f.x.resize(f.n);
+        out.resize(f.n);
+        f.x.resize(f.n + 1);
+        f.x[f.n] = -0.0; // the sentinel of the finest level's missing faces
     }
 
     size_t levels() const { return mUsed; }
+    /// The finest level's rows at a fixed width: 6 per row, the neighbour row or n (none).
+    const std::vector<int32_t>& finestRows() const { return mLevels.front().nb6; }
 
 private:
     struct Level {
@@ -244,13 +248,42 @@ private:
         std::vector<int32_t> members;      ///<   in row order
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
         std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
+        /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
+        /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
+        std::vector<int32_t> nb6;
         bool dense = false;
     };
 
-    /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
-    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
+    /// @a diag: its fixed-width rows, and the CSR rows when @a csr (only coarsen() reads them).
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                   bool csr)
     {
         f.n = n;
+        f.nb6.resize(n * 6);
+        f.diag.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                for (int d = 0; d < 6; ++d) {
+                    const int32_t j = nb[k * 6 + size_t(d)];
+                    f.nb6[k * 6 + size_t(d)] = j >= 0 ? j : int32_t(n);
+                }
+                f.diag[k] = diag[k];
+            }
+        });
+        if (!csr) {
+            f.start.clear();
+            f.col.clear();
+        } else {
+            setCsr(f, n, nb);
+        }
+        finish(f);
+        f.x.resize(n + 1);
+        f.x[n] = -0.0;
+    }
+
+    void setCsr(Level& f, size_t n, const std::vector<int32_t>& nb)
+    {
         f.start.resize(n + 1);
         // Row lengths per fixed chunk, their offsets in chunk order, then the columns: in parallel.
         const size_t chunks = (n + kChunk - 1) / kChunk;
@@ -265,18 +298,15 @@ private:
         for (size_t c = 0; c < chunks; ++c)
             mCounts[c + 1] += mCounts[c];
         f.col.resize(mCounts[chunks]);
-        f.diag.resize(n);
         forChunks(n, mSerial, [&](size_t lo, size_t hi) {
             size_t e = mCounts[lo / kChunk];
             for (size_t k = lo; k < hi; ++k) {
                 f.start[k] = uint32_t(e);
                 for (int d = 0; d < 6; ++d)
                     if (nb[k * 6 + size_t(d)] >= 0) f.col[e++] = nb[k * 6 + size_t(d)];
-                f.diag[k] = diag[k];
             }
         });
         f.start[n] = uint32_t(mCounts[chunks]);
-        finish(f);
     }
 
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
@@ -439,6 +469,22 @@ private:
         return s;
     }
 
+    /// residual() on the finest level, through its fixed-width rows: the same additions in the same
+    /// order (a missing face adds x[n] = -0, which leaves every sum unchanged, a zero's sign too).
+    static double residual0(const Level& l, size_t k)
+    {
+        const int32_t* nb = &l.nb6[k * 6];
+        const double* x = l.x.data();
+        double s = l.r[k] - l.diag[k] * x[k];
+        s += x[nb[0]];
+        s += x[nb[1]];
+        s += x[nb[2]];
+        s += x[nb[3]];
+        s += x[nb[4]];
+        s += x[nb[5]];
+        return s;
+    }
+
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l)
     {
@@ -455,7 +501,15 @@ private:
     void halfSweep(Level& l, int c)
     {
         const std::vector<int32_t>& rows = l.colour[c];
+        const bool finest = &l == &mLevels.front();
         forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+            if (finest) {
+                for (size_t q = lo; q < hi; ++q) {
+                    const size_t k = size_t(rows[q]);
+                    l.x[k] += l.invDiag[k] * residual0(l, k);
+                }
+                return;
+            }
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
                 l.x[k] += l.invDiag[k] * residual(l, k);
@@ -507,10 +561,11 @@ private:
                 }
             });
             halfSweep(l, 1);
+            const bool finest = li == 0;
             forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
                 for (size_t q = lo; q < hi; ++q) {
                     const size_t k = size_t(red[q]);
-                    l.t[k] = residual(l, k);
+                    l.t[k] = finest ? residual0(l, k) : residual(l, k);
                 }
             });
         }
@@ -1127,6 +1182,11 @@ private:
         });
         precondition(r, z);
         p = z;
+        // With the multigrid, A p reads the fixed-width rows (a missing face: p[n] = +0, and v - (+0)
+        // is v, a zero's sign too: the same values as the loop over nb).
+        const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
+        p.resize(n + 1);
+        p[n] = 0.0;
         const double bnorm =
             std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
         const double stop = tolerance * std::max(bnorm, 1e-300);
@@ -1147,6 +1207,21 @@ private:
             if (std::sqrt(rr) <= stop) break;
             const double pq = pass([&](size_t lo, size_t hi) { // q = A p, and p . q
                 double sum = 0;
+                if (nb6) {
+                    for (size_t k = lo; k < hi; ++k) {
+                        const int32_t* row = nb6 + k * 6;
+                        double v = diag[k] * p[k];
+                        v -= p[size_t(row[0])];
+                        v -= p[size_t(row[1])];
+                        v -= p[size_t(row[2])];
+                        v -= p[size_t(row[3])];
+                        v -= p[size_t(row[4])];
+                        v -= p[size_t(row[5])];
+                        q[k] = v;
+                        sum += p[k] * v;
+                    }
+                    return sum;
+                }
                 for (size_t k = lo; k < hi; ++k) {
                     double v = diag[k] * p[k];
                     for (int d = 0; d < 6; ++d) {
