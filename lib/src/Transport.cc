@@ -312,11 +312,31 @@ private:
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
     /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
+    /// Both colours in one count and one write pass (per fixed chunk: the lists of two selectIndices).
     void colour(Level& l, const std::vector<Coord>& block)
     {
-        for (int c = 0; c < 2; ++c)
-            selectIndices(l.n, mSerial, mCounts, l.colour[c],
-                          [&](size_t k) { return ((block[k].x() + block[k].y() + block[k].z()) & 1) == c; });
+        const size_t n = l.n, chunks = (n + kChunk - 1) / kChunk;
+        std::vector<size_t>& red = mCounts; // per chunk: its red rows, then their offsets
+        red.assign(chunks + 1, 0);
+        mParity.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t c = 0;
+            for (size_t k = lo; k < hi; ++k) {
+                const uint8_t odd = uint8_t((block[k].x() + block[k].y() + block[k].z()) & 1);
+                mParity[k] = odd;
+                c += odd ? 0 : 1;
+            }
+            red[lo / kChunk + 1] = c;
+        });
+        for (size_t c = 0; c < chunks; ++c)
+            red[c + 1] += red[c];
+        l.colour[0].resize(red[chunks]);
+        l.colour[1].resize(n - red[chunks]);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t o[2] = {red[lo / kChunk], lo - red[lo / kChunk]}; // black rows before lo: lo - red ones
+            for (size_t k = lo; k < hi; ++k)
+                l.colour[mParity[k]][o[mParity[k]]++] = int32_t(k);
+        });
     }
 
     void finish(Level& l)
@@ -594,7 +614,8 @@ private:
     size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
     std::vector<int32_t> mScratch;
-    std::vector<int32_t> mWhere; ///< scratch of coarsen(): a coarse row's place in the row being built
+    std::vector<int32_t> mWhere;  ///< scratch of coarsen(): a coarse row's place in the row being built
+    std::vector<uint8_t> mParity; ///< scratch of colour(): each row's colour
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
