@@ -1059,18 +1059,25 @@ private:
         std::vector<int32_t>& nb = mSolveNb;
         std::vector<double>& diag = mSolveDiag;
         std::vector<double>& b = mSolveB;
-        nb.assign(n * 6, -1);
-        diag.assign(n, 0.0);
-        b.assign(n, 0.0);
+        // Every entry written: a neighbour's row is mRow's (-1 for a Dirichlet or frozen cell, and
+        // mNb holds -1 past mDirs); the diagonal counts the faces to non-frozen cells.
+        nb.resize(n * 6);
+        diag.resize(n);
+        b.resize(n);
         forChunks(n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k) {
                 const size_t i = size_t(mRowCell[k]);
-                for (int d = 0; d < mDirs; ++d) {
+                int faces = 0;
+                for (int d = 0; d < 6; ++d) {
                     const int32_t j = mNb[i * 6 + size_t(d)];
-                    if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
-                    diag[k] += 1;
-                    if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+                    int32_t row = -1;
+                    if (j >= 0) {
+                        faces += mKind[size_t(j)] != kFrozen ? 1 : 0;
+                        row = mRow[size_t(j)];
+                    }
+                    nb[k * 6 + size_t(d)] = row;
                 }
+                diag[k] = double(faces);
                 b[k] = double(mM0[i] - mTc);
             }
         });
