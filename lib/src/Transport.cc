@@ -1189,8 +1189,29 @@ private:
                 out[k] = w[k] + s * inv[k];
             }
         };
-        auto apply = [&](const std::vector<double>& v, std::vector<double>& out) {
+        // With the multigrid, A v reads its fixed-width rows (a missing face: v[n] = +0, and v - (+0)
+        // is v, a zero's sign too: the same values as the loop over nb).
+        const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
+        auto apply = [&](std::vector<double>& v, std::vector<double>& out) {
+            if (nb6) {
+                v.resize(n + 1);
+                v[n] = 0.0;
+            }
             forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+                if (nb6) {
+                    for (size_t k = lo; k < hi; ++k) {
+                        const int32_t* row = nb6 + k * 6;
+                        double s = diag[k] * v[k];
+                        s -= v[size_t(row[0])];
+                        s -= v[size_t(row[1])];
+                        s -= v[size_t(row[2])];
+                        s -= v[size_t(row[3])];
+                        s -= v[size_t(row[4])];
+                        s -= v[size_t(row[5])];
+                        out[k] = s;
+                    }
+                    return;
+                }
                 for (size_t k = lo; k < hi; ++k) {
                     double s = diag[k] * v[k];
                     for (int d = 0; d < 6; ++d) {
@@ -1210,10 +1231,7 @@ private:
         });
         precondition(r, z);
         p = z;
-        // With the multigrid, A p reads the fixed-width rows (a missing face: p[n] = +0, and v - (+0)
-        // is v, a zero's sign too: the same values as the loop over nb).
-        const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
-        p.resize(n + 1);
+        p.resize(n + 1); // A p below: the sentinel, as in apply()
         p[n] = 0.0;
         const double bnorm =
             std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
