@@ -772,10 +772,12 @@ private:
     int32_t indexOf(const Coord& c) const
     {
         if (mDense) {
-            const int64_t x = int64_t(c.x()) - mDenseLo.x(), y = int64_t(c.y()) - mDenseLo.y(),
-                          z = int64_t(c.z()) - mDenseLo.z();
-            if (x >= 0 && y >= 0 && z >= 0 && x < mDenseDim[0] && y < mDenseDim[1] && z < mDenseDim[2])
-                return mB.denseIndex[size_t((x * mDenseDim[1] + y) * mDenseDim[2] + z)];
+            // One unsigned comparison per axis: a negative offset wraps past every dimension.
+            const uint64_t x = uint64_t(int64_t(c.x()) - mDenseLo.x()),
+                           y = uint64_t(int64_t(c.y()) - mDenseLo.y()),
+                           z = uint64_t(int64_t(c.z()) - mDenseLo.z());
+            if (x < uint64_t(mDenseDim[0]) && y < uint64_t(mDenseDim[1]) && z < uint64_t(mDenseDim[2]))
+                return mB.denseIndex[size_t((x * uint64_t(mDenseDim[1]) + y) * uint64_t(mDenseDim[2]) + z)];
         }
         return mIndexAcc ? mIndexAcc->getValue(c) : -1;
     }
