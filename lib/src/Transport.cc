@@ -62,7 +62,6 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
-#include <deque>
 #include <memory>
 #include <numeric>
 
@@ -890,9 +889,11 @@ private:
         mHasNb.clear();
         mDist.clear();
         resetIndex(seeds, reach);
-        std::deque<int32_t> queue;
+        // The queue is the cells themselves: the flood appends the unknown cells in the order it
+        // reaches them (the Dirichlet cells come after it, in link()), so cells [head, size) are queued.
+        size_t head = 0;
         auto start = [&](const Coord& s, int64_t dist) {
-            queue.push_back(addCell(s, kUnknown));
+            addCell(s, kUnknown);
             mDist.push_back(dist);
             comp.push_back(int32_t(parent.size()));
             parent.push_back(int32_t(parent.size()));
@@ -928,15 +929,14 @@ private:
         }
         cut = false;
         for (;;) {
-            if (queue.empty()) { // the seeds the contact's flood did not reach start their own
+            if (head == mCells.size()) { // the seeds the contact's flood did not reach start their own
                 if (innerStarted) break;
                 innerStarted = true;
                 for (const int32_t si : mB.innerSeeds)
                     if (indexOf(seeds[size_t(si)]) < 0) start(seeds[size_t(si)], innerDist);
                 continue;
             }
-            const int32_t i = queue.front();
-            queue.pop_front();
+            const int32_t i = int32_t(head++);
             const Coord c = mCells[size_t(i)];
             const int64_t di = mDist[size_t(i)];
             for (int d = 0; d < mDirs; ++d) {
@@ -950,11 +950,9 @@ private:
                 }
                 if (isObstacle(q) || massAt(q) < mTc) continue;
                 if (reach > 0 && di >= reach) continue; // linking below marks the cut
-                const int32_t j = addCell(q, kUnknown);
-                mDist.resize(mCells.size(), 0);
-                mDist[size_t(j)] = di + 1;
+                addCell(q, kUnknown);
+                mDist.push_back(di + 1);
                 comp.push_back(comp[size_t(i)]);
-                queue.push_back(j);
             }
         }
         // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
