@@ -495,6 +495,34 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
     }
 }
 
+TEST_F(TransportTest, TheMultigridsFixedWidthFinestRowsGiveRoundFivesResults)
+{
+    // Round 5b: the V-cycle's finest-level residual and CG's A p read 6 neighbour rows per row (a
+    // missing face points at a -0 / +0 sentinel) instead of the CSR rows: the same additions in the
+    // same order. The active-set scene above (first solve builds the hierarchy, later rounds rebind
+    // it; 2D and 3D, 1 and 3 threads) gives round 5's results: content hash and CG iterations as
+    // computed by round 5's library (main 8573fb6).
+    const uint64_t pinnedHash[2] = {0xc9607a28cfb7c329ull, 0xac3ff2ff670d6ecfull};
+    const uint64_t pinnedIterations[2] = {24, 12};
+    for (int dims : {2, 3})
+        for (int threads : {1, 3}) {
+            const int top = dims == 3 ? 23 : 95;
+            MassGridPtr g =
+                dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
+            for (int x = 4; x < top - 4; x += 2)
+                g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0),
+                                   dims == 3 ? 400000 : 60000);
+            Automaton a(g, opts(dims, threads));
+            GlobalTransportOptions go;
+            go.threads = threads;
+            go.multigridMin = 0;
+            const GlobalTransportReport r = transportGlobally(a, go);
+            EXPECT_GE(r.multigridReused, 2u) << dims << "D";
+            EXPECT_EQ(contentHash(*g), pinnedHash[dims - 2]) << dims << "D, " << threads << " threads";
+            EXPECT_EQ(r.iterations, pinnedIterations[dims - 2]) << dims << "D, " << threads << " threads";
+        }
+}
+
 TEST_F(TransportTest, AWorkspaceKeptAcrossCallsChangesNoResult)
 {
     // One workspace serves calls of different sizes, dimensions, preconditioners and thread counts

@@ -62,7 +62,6 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
-#include <deque>
 #include <memory>
 #include <numeric>
 
@@ -174,7 +173,7 @@ public:
         mUsed = 1;
         if (mLevels.empty()) mLevels.emplace_back();
         Level& f = mLevels.front();
-        setMatrix(f, n, nb, diag);
+        setMatrix(f, n, nb, diag, true);
         f.block.assign(coord.begin(), coord.end());
         while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
         }
@@ -205,7 +204,7 @@ public:
             for (size_t k = lo; k < hi; ++k)
                 agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
         });
-        setMatrix(f, n, nb, diag);
+        setMatrix(f, n, nb, diag, false);
         colour(f, coord);
         f.agg.swap(agg);
         c.memberStart.assign(c.n + 1, 0);
@@ -226,10 +225,14 @@ public:
         forChunks(f.n, mSerial, [&](size_t lo, size_t hi) { std::copy(&in[lo], &in[0] + hi, &f.r[lo]); });
         cycle(0);
         out.swap(f.x);
-        f.x.resize(f.n);
+        out.resize(f.n);
+        f.x.resize(f.n + 1);
+        f.x[f.n] = -0.0; // the sentinel of the finest level's missing faces
     }
 
     size_t levels() const { return mUsed; }
+    /// The finest level's rows at a fixed width: 6 per row, the neighbour row or n (none).
+    const std::vector<int32_t>& finestRows() const { return mLevels.front().nb6; }
 
 private:
     struct Level {
@@ -244,13 +247,42 @@ private:
         std::vector<int32_t> members;      ///<   in row order
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
         std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
+        /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
+        /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
+        std::vector<int32_t> nb6;
         bool dense = false;
     };
 
-    /// Level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1), @a diag.
-    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+    /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
+    /// @a diag: its fixed-width rows, and the CSR rows when @a csr (only coarsen() reads them).
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                   bool csr)
     {
         f.n = n;
+        f.nb6.resize(n * 6);
+        f.diag.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k) {
+                for (int d = 0; d < 6; ++d) {
+                    const int32_t j = nb[k * 6 + size_t(d)];
+                    f.nb6[k * 6 + size_t(d)] = j >= 0 ? j : int32_t(n);
+                }
+                f.diag[k] = diag[k];
+            }
+        });
+        if (!csr) {
+            f.start.clear();
+            f.col.clear();
+        } else {
+            setCsr(f, n, nb);
+        }
+        finish(f);
+        f.x.resize(n + 1);
+        f.x[n] = -0.0;
+    }
+
+    void setCsr(Level& f, size_t n, const std::vector<int32_t>& nb)
+    {
         f.start.resize(n + 1);
         // Row lengths per fixed chunk, their offsets in chunk order, then the columns: in parallel.
         const size_t chunks = (n + kChunk - 1) / kChunk;
@@ -265,28 +297,45 @@ private:
         for (size_t c = 0; c < chunks; ++c)
             mCounts[c + 1] += mCounts[c];
         f.col.resize(mCounts[chunks]);
-        f.diag.resize(n);
         forChunks(n, mSerial, [&](size_t lo, size_t hi) {
             size_t e = mCounts[lo / kChunk];
             for (size_t k = lo; k < hi; ++k) {
                 f.start[k] = uint32_t(e);
                 for (int d = 0; d < 6; ++d)
                     if (nb[k * 6 + size_t(d)] >= 0) f.col[e++] = nb[k * 6 + size_t(d)];
-                f.diag[k] = diag[k];
             }
         });
         f.start[n] = uint32_t(mCounts[chunks]);
-        finish(f);
     }
 
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
     /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
+    /// Both colours in one count and one write pass (per fixed chunk: the lists of two selectIndices).
     void colour(Level& l, const std::vector<Coord>& block)
     {
-        for (int c = 0; c < 2; ++c)
-            selectIndices(l.n, mSerial, mCounts, l.colour[c],
-                          [&](size_t k) { return ((block[k].x() + block[k].y() + block[k].z()) & 1) == c; });
+        const size_t n = l.n, chunks = (n + kChunk - 1) / kChunk;
+        std::vector<size_t>& red = mCounts; // per chunk: its red rows, then their offsets
+        red.assign(chunks + 1, 0);
+        mParity.resize(n);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t c = 0;
+            for (size_t k = lo; k < hi; ++k) {
+                const uint8_t odd = uint8_t((block[k].x() + block[k].y() + block[k].z()) & 1);
+                mParity[k] = odd;
+                c += odd ? 0 : 1;
+            }
+            red[lo / kChunk + 1] = c;
+        });
+        for (size_t c = 0; c < chunks; ++c)
+            red[c + 1] += red[c];
+        l.colour[0].resize(red[chunks]);
+        l.colour[1].resize(n - red[chunks]);
+        forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+            size_t o[2] = {red[lo / kChunk], lo - red[lo / kChunk]}; // black rows before lo: lo - red ones
+            for (size_t k = lo; k < hi; ++k)
+                l.colour[mParity[k]][o[mParity[k]]++] = int32_t(k);
+        });
     }
 
     void finish(Level& l)
@@ -439,6 +488,22 @@ private:
         return s;
     }
 
+    /// residual() on the finest level, through its fixed-width rows: the same additions in the same
+    /// order (a missing face adds x[n] = -0, which leaves every sum unchanged, a zero's sign too).
+    static double residual0(const Level& l, size_t k)
+    {
+        const int32_t* nb = &l.nb6[k * 6];
+        const double* x = l.x.data();
+        double s = l.r[k] - l.diag[k] * x[k];
+        s += x[nb[0]];
+        s += x[nb[1]];
+        s += x[nb[2]];
+        s += x[nb[3]];
+        s += x[nb[4]];
+        s += x[nb[5]];
+        return s;
+    }
+
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l)
     {
@@ -455,7 +520,15 @@ private:
     void halfSweep(Level& l, int c)
     {
         const std::vector<int32_t>& rows = l.colour[c];
+        const bool finest = &l == &mLevels.front();
         forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+            if (finest) {
+                for (size_t q = lo; q < hi; ++q) {
+                    const size_t k = size_t(rows[q]);
+                    l.x[k] += l.invDiag[k] * residual0(l, k);
+                }
+                return;
+            }
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
                 l.x[k] += l.invDiag[k] * residual(l, k);
@@ -507,10 +580,11 @@ private:
                 }
             });
             halfSweep(l, 1);
+            const bool finest = li == 0;
             forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
                 for (size_t q = lo; q < hi; ++q) {
                     const size_t k = size_t(red[q]);
-                    l.t[k] = residual(l, k);
+                    l.t[k] = finest ? residual0(l, k) : residual(l, k);
                 }
             });
         }
@@ -539,7 +613,8 @@ private:
     size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
     std::vector<int32_t> mScratch;
-    std::vector<int32_t> mWhere; ///< scratch of coarsen(): a coarse row's place in the row being built
+    std::vector<int32_t> mWhere;  ///< scratch of coarsen(): a coarse row's place in the row being built
+    std::vector<uint8_t> mParity; ///< scratch of colour(): each row's colour
 };
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
@@ -696,10 +771,12 @@ private:
     int32_t indexOf(const Coord& c) const
     {
         if (mDense) {
-            const int64_t x = int64_t(c.x()) - mDenseLo.x(), y = int64_t(c.y()) - mDenseLo.y(),
-                          z = int64_t(c.z()) - mDenseLo.z();
-            if (x >= 0 && y >= 0 && z >= 0 && x < mDenseDim[0] && y < mDenseDim[1] && z < mDenseDim[2])
-                return mB.denseIndex[size_t((x * mDenseDim[1] + y) * mDenseDim[2] + z)];
+            // One unsigned comparison per axis: a negative offset wraps past every dimension.
+            const uint64_t x = uint64_t(int64_t(c.x()) - mDenseLo.x()),
+                           y = uint64_t(int64_t(c.y()) - mDenseLo.y()),
+                           z = uint64_t(int64_t(c.z()) - mDenseLo.z());
+            if (x < uint64_t(mDenseDim[0]) && y < uint64_t(mDenseDim[1]) && z < uint64_t(mDenseDim[2]))
+                return mB.denseIndex[size_t((x * uint64_t(mDenseDim[1]) + y) * uint64_t(mDenseDim[2]) + z)];
         }
         return mIndexAcc ? mIndexAcc->getValue(c) : -1;
     }
@@ -812,9 +889,11 @@ private:
         mHasNb.clear();
         mDist.clear();
         resetIndex(seeds, reach);
-        std::deque<int32_t> queue;
+        // The queue is the cells themselves: the flood appends the unknown cells in the order it
+        // reaches them (the Dirichlet cells come after it, in link()), so cells [head, size) are queued.
+        size_t head = 0;
         auto start = [&](const Coord& s, int64_t dist) {
-            queue.push_back(addCell(s, kUnknown));
+            addCell(s, kUnknown);
             mDist.push_back(dist);
             comp.push_back(int32_t(parent.size()));
             parent.push_back(int32_t(parent.size()));
@@ -850,15 +929,14 @@ private:
         }
         cut = false;
         for (;;) {
-            if (queue.empty()) { // the seeds the contact's flood did not reach start their own
+            if (head == mCells.size()) { // the seeds the contact's flood did not reach start their own
                 if (innerStarted) break;
                 innerStarted = true;
                 for (const int32_t si : mB.innerSeeds)
                     if (indexOf(seeds[size_t(si)]) < 0) start(seeds[size_t(si)], innerDist);
                 continue;
             }
-            const int32_t i = queue.front();
-            queue.pop_front();
+            const int32_t i = int32_t(head++);
             const Coord c = mCells[size_t(i)];
             const int64_t di = mDist[size_t(i)];
             for (int d = 0; d < mDirs; ++d) {
@@ -872,11 +950,9 @@ private:
                 }
                 if (isObstacle(q) || massAt(q) < mTc) continue;
                 if (reach > 0 && di >= reach) continue; // linking below marks the cut
-                const int32_t j = addCell(q, kUnknown);
-                mDist.resize(mCells.size(), 0);
-                mDist[size_t(j)] = di + 1;
+                addCell(q, kUnknown);
+                mDist.push_back(di + 1);
                 comp.push_back(comp[size_t(i)]);
-                queue.push_back(j);
             }
         }
         // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
@@ -983,18 +1059,25 @@ private:
         std::vector<int32_t>& nb = mSolveNb;
         std::vector<double>& diag = mSolveDiag;
         std::vector<double>& b = mSolveB;
-        nb.assign(n * 6, -1);
-        diag.assign(n, 0.0);
-        b.assign(n, 0.0);
+        // Every entry written: a neighbour's row is mRow's (-1 for a Dirichlet or frozen cell, and
+        // mNb holds -1 past mDirs); the diagonal counts the faces to non-frozen cells.
+        nb.resize(n * 6);
+        diag.resize(n);
+        b.resize(n);
         forChunks(n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k) {
                 const size_t i = size_t(mRowCell[k]);
-                for (int d = 0; d < mDirs; ++d) {
+                int faces = 0;
+                for (int d = 0; d < 6; ++d) {
                     const int32_t j = mNb[i * 6 + size_t(d)];
-                    if (j < 0 || mKind[size_t(j)] == kFrozen) continue;
-                    diag[k] += 1;
-                    if (mKind[size_t(j)] == kUnknown) nb[k * 6 + size_t(d)] = mRow[size_t(j)];
+                    int32_t row = -1;
+                    if (j >= 0) {
+                        faces += mKind[size_t(j)] != kFrozen ? 1 : 0;
+                        row = mRow[size_t(j)];
+                    }
+                    nb[k * 6 + size_t(d)] = row;
                 }
+                diag[k] = double(faces);
                 b[k] = double(mM0[i] - mTc);
             }
         });
@@ -1106,8 +1189,29 @@ private:
                 out[k] = w[k] + s * inv[k];
             }
         };
-        auto apply = [&](const std::vector<double>& v, std::vector<double>& out) {
+        // With the multigrid, A v reads its fixed-width rows (a missing face: v[n] = +0, and v - (+0)
+        // is v, a zero's sign too: the same values as the loop over nb).
+        const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
+        auto apply = [&](std::vector<double>& v, std::vector<double>& out) {
+            if (nb6) {
+                v.resize(n + 1);
+                v[n] = 0.0;
+            }
             forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+                if (nb6) {
+                    for (size_t k = lo; k < hi; ++k) {
+                        const int32_t* row = nb6 + k * 6;
+                        double s = diag[k] * v[k];
+                        s -= v[size_t(row[0])];
+                        s -= v[size_t(row[1])];
+                        s -= v[size_t(row[2])];
+                        s -= v[size_t(row[3])];
+                        s -= v[size_t(row[4])];
+                        s -= v[size_t(row[5])];
+                        out[k] = s;
+                    }
+                    return;
+                }
                 for (size_t k = lo; k < hi; ++k) {
                     double s = diag[k] * v[k];
                     for (int d = 0; d < 6; ++d) {
@@ -1127,6 +1231,8 @@ private:
         });
         precondition(r, z);
         p = z;
+        p.resize(n + 1); // A p below: the sentinel, as in apply()
+        p[n] = 0.0;
         const double bnorm =
             std::sqrt(chunkedSum(n, mSerial, partial, [&](size_t k) { return b[k] * b[k]; }));
         const double stop = tolerance * std::max(bnorm, 1e-300);
@@ -1147,6 +1253,21 @@ private:
             if (std::sqrt(rr) <= stop) break;
             const double pq = pass([&](size_t lo, size_t hi) { // q = A p, and p . q
                 double sum = 0;
+                if (nb6) {
+                    for (size_t k = lo; k < hi; ++k) {
+                        const int32_t* row = nb6 + k * 6;
+                        double v = diag[k] * p[k];
+                        v -= p[size_t(row[0])];
+                        v -= p[size_t(row[1])];
+                        v -= p[size_t(row[2])];
+                        v -= p[size_t(row[3])];
+                        v -= p[size_t(row[4])];
+                        v -= p[size_t(row[5])];
+                        q[k] = v;
+                        sum += p[k] * v;
+                    }
+                    return sum;
+                }
                 for (size_t k = lo; k < hi; ++k) {
                     double v = diag[k] * p[k];
                     for (int d = 0; d < 6; ++d) {
