@@ -1,8 +1,7 @@
 // The memory estimate against the heap a run really takes (issue 12: the global layer's estimate
 // follows the tools' reach, not the whole body; round 5).
 //
-// This executable replaces the global operator new and delete (plain, array, nothrow and sized forms)
-// with malloc/free versions that keep the live heap bytes (malloc_usable_size: what malloc handed out)
+// This executable counts the heap through tests/AllocationCounter.h: the live bytes malloc handed out
 // and their peak. Aligned new keeps the library's own implementation and is not counted. The figures
 // do not depend on time or load; they depend on the allocator only through the usable sizes, which
 // only make the measured peak larger (a stricter test of an upper bound).
@@ -14,80 +13,10 @@
 
 #include <gtest/gtest.h>
 
-#include <malloc.h>
-
-#include <atomic>
 #include <cstdint>
-#include <cstdlib>
-#include <new>
 #include <string>
 
-namespace heap {
-std::atomic<int64_t> live{0}, peak{0};
-void add(void* p)
-{
-    const int64_t now = live.fetch_add(int64_t(malloc_usable_size(p)), std::memory_order_relaxed) +
-                        int64_t(malloc_usable_size(p));
-    int64_t seen = peak.load(std::memory_order_relaxed);
-    while (now > seen && !peak.compare_exchange_weak(seen, now, std::memory_order_relaxed)) {
-    }
-}
-/// Starts a new peak from the heap in use now.
-void resetPeak()
-{
-    peak.store(live.load());
-}
-} // namespace heap
-
-void* operator new(std::size_t n)
-{
-    void* p = std::malloc(n ? n : 1);
-    if (!p) throw std::bad_alloc();
-    heap::add(p);
-    return p;
-}
-void* operator new[](std::size_t n)
-{
-    return ::operator new(n);
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept
-{
-    try {
-        return ::operator new(n);
-    } catch (...) {
-        return nullptr;
-    }
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept
-{
-    return ::operator new(n, t);
-}
-void operator delete(void* p) noexcept
-{
-    if (!p) return;
-    heap::live.fetch_sub(int64_t(malloc_usable_size(p)), std::memory_order_relaxed);
-    std::free(p);
-}
-void operator delete[](void* p) noexcept
-{
-    ::operator delete(p);
-}
-void operator delete(void* p, std::size_t) noexcept
-{
-    ::operator delete(p);
-}
-void operator delete[](void* p, std::size_t) noexcept
-{
-    ::operator delete(p);
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept
-{
-    ::operator delete(p);
-}
-void operator delete[](void* p, const std::nothrow_t&) noexcept
-{
-    ::operator delete(p);
-}
+#include "AllocationCounter.h" // the byte-counting operator new and delete
 
 using namespace vdbclay;
 
@@ -101,13 +30,13 @@ protected:
 /// The heap's peak above what was in use before, over building the Sculptor and running @a scene.
 uint64_t peakOfRun(const std::string& json, int threads)
 {
-    heap::resetPeak();
-    const int64_t before = heap::live.load();
+    alloc_counter::resetPeak();
+    const int64_t before = alloc_counter::liveBytes.load();
     {
         Sculptor sc(parseScene(json, "s.json", ""), threads);
         sc.run();
     }
-    return uint64_t(heap::peak.load() - before);
+    return uint64_t(alloc_counter::peakBytes.load() - before);
 }
 
 /// The stroke of transport_study (a sphere tool r 6 dipped 9 into a clay sphere @a w wide at Tc,
