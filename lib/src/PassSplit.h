@@ -9,7 +9,7 @@
 // auto partitioner over the work items (grain 4), which splits ranges as threads steal them. On a
 // quiet 2-core machine the weighted split ran the 128^3 compressible press on 2 threads in 1.80-1.92 s
 // (median 1.82; user CPU 3.16-3.39 s) against 1.82-1.88 s (median 1.865; 3.26-3.36 s), six runs of
-// each alternated (docs/PERFORMANCE.md, "Round 5, merged": a small gain, but never a loss).
+// each alternated (docs/PERFORMANCE.md, "Round 5, merged"): a small gain, within the noise of one run.
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
