@@ -458,6 +458,20 @@ TEST_F(TransportTest, MultigridSolvesAreExactIdenticalOnAnyThreadCountAndNeedFew
     }
 }
 
+namespace {
+/// A block at Tc with a row of cells loaded far beyond the room of its first shell of air: the active
+/// set grows over several rounds, the later ones rebinding the first round's multigrid hierarchy.
+MassGridPtr rebindingActiveSetScene(int dims)
+{
+    const int top = dims == 3 ? 23 : 95;
+    MassGridPtr g =
+        dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
+    for (int x = 4; x < top - 4; x += 2)
+        g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0), dims == 3 ? 400000 : 60000);
+    return g;
+}
+} // namespace
+
 TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThreadCount)
 {
     // An overload far larger than the room of the block's first shell of air: the active set grows
@@ -467,12 +481,7 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
     for (int dims : {2, 3}) {
         uint64_t first = 0, solves = 0;
         for (int threads : {1, 2, 3, 8}) {
-            const int top = dims == 3 ? 23 : 95;
-            MassGridPtr g =
-                dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
-            for (int x = 4; x < top - 4; x += 2)
-                g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0),
-                                   dims == 3 ? 400000 : 60000);
+            MassGridPtr g = rebindingActiveSetScene(dims);
             const int64_t m0 = totalMass(*g);
             Automaton a(g, opts(dims, threads));
             GlobalTransportOptions go;
@@ -506,12 +515,7 @@ TEST_F(TransportTest, TheMultigridsFixedWidthFinestRowsGiveRoundFivesResults)
     const uint64_t pinnedIterations[2] = {24, 12};
     for (int dims : {2, 3})
         for (int threads : {1, 3}) {
-            const int top = dims == 3 ? 23 : 95;
-            MassGridPtr g =
-                dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
-            for (int x = 4; x < top - 4; x += 2)
-                g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0),
-                                   dims == 3 ? 400000 : 60000);
+            MassGridPtr g = rebindingActiveSetScene(dims);
             Automaton a(g, opts(dims, threads));
             GlobalTransportOptions go;
             go.threads = threads;

@@ -189,17 +189,6 @@ constexpr uint64_t kTrySteps = 4096;
 constexpr double kTryWork = 256;
 constexpr double kTrySaturated = 0.96;
 
-/// @a box grown by @a n voxels on every side (clamped to the int32 range).
-Box grownBy(Box box, int64_t n)
-{
-    if (box.empty()) return box;
-    for (int a = 0; a < 3; ++a) {
-        box.min[a] = int32_t(std::max<int64_t>(INT32_MIN, int64_t(box.min[a]) - n));
-        box.max[a] = int32_t(std::min<int64_t>(INT32_MAX, int64_t(box.max[a]) + n));
-    }
-    return box;
-}
-
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
 
 int64_t leafIndex(int32_t v, int log2)
@@ -232,7 +221,7 @@ Box clip2D(Box b, int dims)
     }
     return b;
 }
-Box growBox(Box b, int by, int dims)
+Box growBox(Box b, int64_t by, int dims)
 {
     if (b.empty()) return b;
     for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
@@ -737,7 +726,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 uint64_t near = 0;
                 bool walled = false;
                 for (const Box& t : toolBoxes) {
-                    const Box g = grownBy(t, d);
+                    const Box g = growBox(t, d, 3);
                     for (const Box& o : obsBoxes)
                         walled |= !intersect(g, o).empty();
                     const Box b = intersect(g, extent);
@@ -1358,7 +1347,7 @@ FrameReport Sculptor::runFrame()
             im.open = true;
             im.openSteps = 0;
             rep.settle =
-                im.settleBounded(rep.finished, go.reach > 0 ? grownBy(go.seedRegion, go.reach) : Box());
+                im.settleBounded(rep.finished, go.reach > 0 ? growBox(go.seedRegion, go.reach, 3) : Box());
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
                 im.open = false;
@@ -1366,7 +1355,8 @@ FrameReport Sculptor::runFrame()
                 ++im.frame;
                 return rep;
             }
-            if (rep.push.contactSize > 0) go.seedRegion = grownBy(go.seedRegion, int64_t(rep.settle.steps));
+            if (rep.push.contactSize > 0)
+                go.seedRegion = growBox(go.seedRegion, int64_t(rep.settle.steps), 3);
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         } else {
             im.open = true;

@@ -1192,34 +1192,33 @@ private:
         // With the multigrid, A v reads its fixed-width rows (a missing face: v[n] = +0, and v - (+0)
         // is v, a zero's sign too: the same values as the loop over nb).
         const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
+        // Row k of A v (v[n] must be +0 when nb6 is used).
+        auto rowOfA = [&](const std::vector<double>& v, size_t k) {
+            double s = diag[k] * v[k];
+            if (nb6) {
+                const int32_t* row = nb6 + k * 6;
+                s -= v[size_t(row[0])];
+                s -= v[size_t(row[1])];
+                s -= v[size_t(row[2])];
+                s -= v[size_t(row[3])];
+                s -= v[size_t(row[4])];
+                s -= v[size_t(row[5])];
+                return s;
+            }
+            for (int d = 0; d < 6; ++d) {
+                const int32_t j = nb[k * 6 + size_t(d)];
+                if (j >= 0) s -= v[size_t(j)];
+            }
+            return s;
+        };
         auto apply = [&](std::vector<double>& v, std::vector<double>& out) {
             if (nb6) {
                 v.resize(n + 1);
                 v[n] = 0.0;
             }
             forChunks(n, mSerial, [&](size_t lo, size_t hi) {
-                if (nb6) {
-                    for (size_t k = lo; k < hi; ++k) {
-                        const int32_t* row = nb6 + k * 6;
-                        double s = diag[k] * v[k];
-                        s -= v[size_t(row[0])];
-                        s -= v[size_t(row[1])];
-                        s -= v[size_t(row[2])];
-                        s -= v[size_t(row[3])];
-                        s -= v[size_t(row[4])];
-                        s -= v[size_t(row[5])];
-                        out[k] = s;
-                    }
-                    return;
-                }
-                for (size_t k = lo; k < hi; ++k) {
-                    double s = diag[k] * v[k];
-                    for (int d = 0; d < 6; ++d) {
-                        const int32_t j = nb[k * 6 + size_t(d)];
-                        if (j >= 0) s -= v[size_t(j)];
-                    }
-                    out[k] = s;
-                }
+                for (size_t k = lo; k < hi; ++k)
+                    out[k] = rowOfA(v, k);
             });
         };
         std::vector<double> partial;
@@ -1253,27 +1252,8 @@ private:
             if (std::sqrt(rr) <= stop) break;
             const double pq = pass([&](size_t lo, size_t hi) { // q = A p, and p . q
                 double sum = 0;
-                if (nb6) {
-                    for (size_t k = lo; k < hi; ++k) {
-                        const int32_t* row = nb6 + k * 6;
-                        double v = diag[k] * p[k];
-                        v -= p[size_t(row[0])];
-                        v -= p[size_t(row[1])];
-                        v -= p[size_t(row[2])];
-                        v -= p[size_t(row[3])];
-                        v -= p[size_t(row[4])];
-                        v -= p[size_t(row[5])];
-                        q[k] = v;
-                        sum += p[k] * v;
-                    }
-                    return sum;
-                }
                 for (size_t k = lo; k < hi; ++k) {
-                    double v = diag[k] * p[k];
-                    for (int d = 0; d < 6; ++d) {
-                        const int32_t j = nb[k * 6 + size_t(d)];
-                        if (j >= 0) v -= p[size_t(j)];
-                    }
+                    const double v = rowOfA(p, k);
                     q[k] = v;
                     sum += p[k] * v;
                 }
