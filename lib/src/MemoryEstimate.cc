@@ -1,0 +1,673 @@
+// The memory estimate of a scene (estimateSceneMemory, checkMemoryBudget; Sculpt.h), computed before
+// any grid is built, and what a run's clay takes as it grows (clayMemoryInUse).
+//
+// What is counted. Every figure is a byte count of OpenVDB nodes as allocated (TreeBytes.h: sizeof
+// of each node plus glibc's overhead) or of the arrays of the parts that keep per-leaf or per-cell
+// lists (the automaton, the push, the global layer), each constant documented where it is defined:
+// - clay: the Int32 mass tree over the leaves the clay may reach. From the shapes' bounds (tightened
+//   to the faces that hold a voxel centre inside the shape), clay from .vdb files from the file's
+//   statistics and its walked topology (VdbCheck.h), never from its voxels. Growth: clay spreads
+//   over each group of touching clay boxes and tool sweeps, grown by a leaf; at most 27 leaves per
+//   initial leaf (a step moves clay one voxel), at most a leaf per unit of mass, and clay over Tc
+//   over its settled volume;
+// - obstacles (two masks), tools (their voxels' cells and push scratch; the compress push's Int32
+//   tree per tool), the automaton's per-leaf lists (and a lane per extra thread), the output grids
+//   writing a .vdb builds;
+// - the global layer (Scene::transport global): per cell of its domain (Transport.cc), see
+//   kTransportBytesPerCell and the domain's bound below (estimateSceneMemory).
+//
+// Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
+// within a budget of distance evaluations (kTightenBudget), leaves are counted on boxes, a file's
+// voxels are never read.
+#include "vdbclay/Sculpt.h"
+
+#include "vdbclay/IO.h"
+
+#include "ClayLeaves.h"
+#include "Format.h"
+#include "MemoryEstimate.h"
+#include "SculptTuning.h"
+#include "TreeBytes.h"
+#include "VdbCheck.h"
+
+#include <openvdb/openvdb.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <climits>
+#include <cmath>
+#include <fstream>
+#include <thread>
+#include <utility>
+#include <vector>
+
+namespace vdbclay {
+
+namespace {
+
+using tree_bytes::kMallocOverhead;
+using tree_bytes::leafBytes;
+
+using MassTreeT = openvdb::Int32Tree;
+using MaskTreeT = openvdb::MaskTree;
+using FloatTreeT = openvdb::FloatTree;
+
+/// The two internal levels (16^3 children of 8^3 leaves: 128^3 voxels; 32^3 of those: 4096^3) and
+/// the root's map entry for each upper node.
+template <typename TreeT> constexpr uint64_t lowerNodeBytes()
+{
+    return sizeof(typename TreeT::RootNodeType::ChildNodeType::ChildNodeType) + kMallocOverhead;
+}
+template <typename TreeT> constexpr uint64_t upperNodeBytes()
+{
+    return sizeof(typename TreeT::RootNodeType::ChildNodeType) + kMallocOverhead + 64;
+}
+
+/// Per clay leaf, the automaton's lists (lib/src/Automaton.cc): the leaf in hotLeaves (a Coord, 12
+/// bytes), its changed-block masks of the last two steps (two Anchors of 24 bytes), up to 10
+/// candidate contributions (the leaf's own, 8 from dilating the other phase, an edited region) and
+/// one WorkItem (40 bytes); doubled for vector growth. Plus the kernel's leaf table (Kernel.h):
+/// an entry of 264 bytes, up to 64 bytes of hash slots, 64 bytes of neighbour indices and the
+/// candidates' two 8-byte accumulators (Candidates.h, dense mode) per anchor that reaches a leaf, at
+/// most 8 anchors per leaf (isolated leaves; compact clay has ~1.3).
+constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 40) + 8 * (264 + 64 + 64 + 16);
+/// Per clay leaf and thread beyond the first: the thread's own lane of those two accumulators and their
+/// bit sets (Candidates::lanes), for up to 8 anchors.
+constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
+/// Per tool voxel: its cell in Sculptor's toolCells (12 bytes, doubled for growth) and, for clay
+/// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
+constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
+
+using sculpt_internal::growBox;
+using sculpt_internal::kReachPerContact;
+
+/// Scene::transport global: bytes per cell of the layer's domain (estimateSceneMemory says which).
+constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
+
+int64_t leafIndex(int32_t v, int log2)
+{
+    return int64_t(v) >> log2;
+} // floor division
+
+/// Number of nodes of side 2^log2 voxels that @a b touches (2D boxes are clipped to z = 0 first).
+uint64_t nodesIn(const Box& b, int log2)
+{
+    if (b.empty()) return 0;
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a)
+        n *= uint64_t(leafIndex(b.max[a], log2) - leafIndex(b.min[a], log2) + 1);
+    return n;
+}
+uint64_t voxelsIn(const Box& b)
+{
+    if (b.empty()) return 0;
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a)
+        n *= uint64_t(int64_t(b.max[a]) - int64_t(b.min[a]) + 1);
+    return n;
+}
+Box clip2D(Box b, int dims)
+{
+    if (dims == 2) {
+        b.min[2] = std::max(b.min[2], 0);
+        b.max[2] = std::min(b.max[2], 0);
+    }
+    return b;
+}
+/// @a b (a shape's bounds) without the faces that hold no voxel centre inside @a shape: bounds()
+/// may be a voxel or two larger than the voxels inside, which at leaf boundaries counts whole extra
+/// layers of leaves. Spends at most @a budget distance evaluations (shared by all calls of one
+/// estimate, so that huge or many shapes cost well under a second); a face it cannot afford stays.
+Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
+{
+    auto anyInside = [&](const Box& face) {
+        for (int x = face.min[0]; x <= face.max[0]; ++x)
+            for (int y = face.min[1]; y <= face.max[1]; ++y)
+                for (int z = face.min[2]; z <= face.max[2]; ++z) {
+                    --budget;
+                    if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) return true;
+                }
+        return false;
+    };
+    for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
+        for (int side = 0; side < 2; ++side) {
+            for (int k = 0; k < 4 && b.min[a] < b.max[a]; ++k) {
+                Box face = b;
+                if (side == 0)
+                    face.max[a] = b.min[a];
+                else
+                    face.min[a] = b.max[a];
+                if (voxelsIn(face) > budget || anyInside(face)) break;
+                if (side == 0)
+                    ++b.min[a];
+                else
+                    --b.max[a];
+            }
+        }
+    }
+    return b;
+}
+
+/// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
+constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
+
+bool touches(const Box& a, const Box& b)
+{
+    return !intersect(a, b).empty();
+}
+
+/// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
+/// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
+/// 100000 one-voxel boxes in a few leaves), else bounded by their sum and by their bounding box.
+uint64_t distinctNodes(const std::vector<Box>& boxes, int log2)
+{
+    uint64_t sum = 0;
+    Box all;
+    for (const Box& b : boxes) {
+        sum += nodesIn(b, log2);
+        all = unite(all, b);
+    }
+    if (sum > (uint64_t(1) << 20)) return std::min(sum, nodesIn(all, log2));
+    std::vector<std::array<int64_t, 3>> keys;
+    keys.reserve(size_t(sum));
+    for (const Box& b : boxes) {
+        if (b.empty()) continue;
+        for (int64_t x = leafIndex(b.min[0], log2); x <= leafIndex(b.max[0], log2); ++x)
+            for (int64_t y = leafIndex(b.min[1], log2); y <= leafIndex(b.max[1], log2); ++y)
+                for (int64_t z = leafIndex(b.min[2], log2); z <= leafIndex(b.max[2], log2); ++z)
+                    keys.push_back({{x, y, z}});
+    }
+    std::sort(keys.begin(), keys.end());
+    return uint64_t(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
+/// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
+/// internal nodes).
+/// Internal nodes are at most @a lowerCap and @a upperCap where more is known (clay from files).
+template <typename TreeT>
+uint64_t treeBytes(uint64_t leaves, const std::vector<Box>& boxes, uint64_t lowerCap = UINT64_MAX,
+                   uint64_t upperCap = UINT64_MAX)
+{
+    const uint64_t lower = std::min({distinctNodes(boxes, 7), std::max<uint64_t>(leaves, 1), lowerCap});
+    const uint64_t upper = std::min({distinctNodes(boxes, 12), std::max<uint64_t>(leaves, 1), upperCap});
+    return leaves * leafBytes<TreeT>() + lower * lowerNodeBytes<TreeT>() + upper * upperNodeBytes<TreeT>();
+}
+
+/// What a .vdb file's grid statistics (written by OpenVDB beside every grid) say about a grid,
+/// read without its voxels.
+struct FileGrid {
+    Box bounds;
+    uint64_t voxels = 0;
+    uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
+    uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
+    uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
+};
+FileGrid fileGridMetadata(const std::string& path, const std::string& gridName);
+
+/// The grid @a gridName of @a path as the estimate sees it, without reading its voxels.
+FileGrid fileGridStats(const std::string& path, const std::string& gridName)
+{
+    FileGrid out = fileGridMetadata(path, gridName);
+    // Metadata is only what the writer claimed (a forged voxel count or bounding box would shrink
+    // the estimate): the leaves come from the topology itself, walked by the layout check.
+    std::vector<io_internal::VdbGridLayout> layout;
+    try {
+        layout = io_internal::checkVdbLayout(path);
+    } catch (const Error&) {
+        (void)readClayFile(path, gridName); // throws, naming the file and what is wrong with it
+    }
+    bool found = false;
+    for (const auto& g : layout) {
+        if (g.baseName() == gridName && g.treeChecked) {
+            out.leaves = g.leaves;
+            out.lowerNodes = g.lowerNodes;
+            out.upperNodes = g.upperNodes;
+            found = true;
+        }
+    }
+    if (!found) out.leaves = std::min(nodesIn(out.bounds, 3), out.voxels);
+    return out;
+}
+
+FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
+{
+    FileGrid out;
+    openvdb::GridBase::Ptr g;
+    try {
+        openvdb::io::File file(path);
+        file.open(false);
+        g = file.readGridMetadata(gridName);
+        file.close();
+    } catch (const std::exception&) {
+        g.reset();
+    }
+    if (!g) {
+        // Let the reader say what is wrong with the file, in its words; if it can read it after
+        // all, measure the grid it read.
+        const ClayFile f = readClayFile(path, gridName);
+        const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
+        if (!bb.empty())
+            out.bounds = Box{{{bb.min().x(), bb.min().y(), bb.min().z()}},
+                             {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        out.voxels = f.mass->activeVoxelCount();
+        out.memBytes = f.mass->memUsage();
+        return out;
+    }
+    const auto lo = g->getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MIN);
+    const auto hi = g->getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MAX);
+    const auto n = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_VOXEL_COUNT);
+    const auto mem = g->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES);
+    if (lo && hi) {
+        out.bounds = Box{{{lo->value()[0], lo->value()[1], lo->value()[2]}},
+                         {{hi->value()[0], hi->value()[1], hi->value()[2]}}};
+    }
+    if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
+    if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
+    if (!lo || !hi || !n) {
+        // A file without statistics: read it (the estimate must not be a guess).
+        const ClayFile f = readClayFile(path, gridName);
+        const openvdb::CoordBBox bb = f.mass->evalActiveVoxelBoundingBox();
+        out.bounds = bb.empty() ? Box()
+                                : Box{{{bb.min().x(), bb.min().y(), bb.min().z()}},
+                                      {{bb.max().x(), bb.max().y(), bb.max().z()}}};
+        out.voxels = f.mass->activeVoxelCount();
+        out.memBytes = f.mass->memUsage();
+    }
+    return out;
+}
+
+/// Groups boxes that touch (directly or through others); returns each group's box indices.
+std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
+{
+    std::vector<size_t> parent(boxes.size());
+    for (size_t i = 0; i < parent.size(); ++i)
+        parent[i] = i;
+    auto root = [&](size_t i) {
+        while (parent[i] != i)
+            i = parent[i] = parent[parent[i]];
+        return i;
+    };
+    // Pairwise: beyond 4000 boxes (16 million pairs) they are taken as one group.
+    for (size_t i = 0; i < boxes.size(); ++i)
+        for (size_t j = i + 1; j < boxes.size(); ++j)
+            if (boxes.size() > 4000 || touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
+    std::vector<std::vector<size_t>> groups(boxes.size());
+    for (size_t i = 0; i < boxes.size(); ++i)
+        groups[root(i)].push_back(i);
+    groups.erase(
+        std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
+        groups.end());
+    return groups;
+}
+
+/// Leaves (8^3 voxels) touched by the union of @a boxes, counted exactly on the grid the boxes'
+/// leaf-aligned faces cut (at most 40 boxes; more: distinctNodes()).
+uint64_t unionLeaves(const std::vector<Box>& boxes)
+{
+    struct LeafBox {
+        int64_t lo[3], hi[3]; // half-open, in leaves
+    };
+    std::vector<LeafBox> lb;
+    Box all;
+    for (const Box& b : boxes) {
+        if (b.empty()) continue;
+        all = unite(all, b);
+        LeafBox l;
+        for (int a = 0; a < 3; ++a) {
+            l.lo[a] = leafIndex(b.min[a], 3);
+            l.hi[a] = leafIndex(b.max[a], 3) + 1;
+        }
+        lb.push_back(l);
+    }
+    if (lb.size() > 40) return distinctNodes(boxes, 3);
+    std::vector<int64_t> cuts[3];
+    for (int a = 0; a < 3; ++a) {
+        for (const LeafBox& l : lb) {
+            cuts[a].push_back(l.lo[a]);
+            cuts[a].push_back(l.hi[a]);
+        }
+        std::sort(cuts[a].begin(), cuts[a].end());
+        cuts[a].erase(std::unique(cuts[a].begin(), cuts[a].end()), cuts[a].end());
+    }
+    uint64_t n = 0;
+    for (size_t i = 0; i + 1 < cuts[0].size(); ++i)
+        for (size_t j = 0; j + 1 < cuts[1].size(); ++j)
+            for (size_t k = 0; k + 1 < cuts[2].size(); ++k) {
+                const int64_t c[3] = {cuts[0][i], cuts[1][j], cuts[2][k]};
+                const bool in = std::any_of(lb.begin(), lb.end(), [&](const LeafBox& l) {
+                    return l.lo[0] <= c[0] && c[0] < l.hi[0] && l.lo[1] <= c[1] && c[1] < l.hi[1] &&
+                           l.lo[2] <= c[2] && c[2] < l.hi[2];
+                });
+                if (in) {
+                    n += uint64_t(cuts[0][i + 1] - c[0]) * uint64_t(cuts[1][j + 1] - c[1]) *
+                         uint64_t(cuts[2][k + 1] - c[2]);
+                }
+            }
+    return n;
+}
+
+/// The bounds of @a tool over frames 0..@a frames (every frame up to 100000 of them, else 100000
+/// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
+/// Each frame's bounds are tightened while @a budget lasts (tighten()).
+std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget)
+{
+    const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
+    Box all;
+    uint64_t most = 0;
+    auto at = [&](uint64_t f) {
+        const ShapePtr s = makeTransformed(tool.shape.shape, tool.poseAt(f));
+        Box b = clip2D(s->bounds(), dims);
+        b = tighten(*s, b, dims, budget);
+        all = unite(all, b);
+        most = std::max(most, voxelsIn(b));
+    };
+    const uint64_t stride = std::max<uint64_t>(1, end / 100000);
+    for (uint64_t f = 0; f <= end; f += stride)
+        at(f);
+    if (stride > 1) {
+        uint64_t f = 0;
+        for (const PathSegment& seg : tool.path) {
+            f += seg.frames;
+            if (f <= end) at(f);
+        }
+        at(end);
+    }
+    return {all, most};
+}
+
+} // namespace
+
+uint64_t MemoryEstimate::total() const
+{
+    return clayBytes + obstacleBytes + toolBytes + automatonBytes + outputBytes + transportBytes;
+}
+
+std::string MemoryEstimate::describe() const
+{
+    return "about " + formatBytes(total()) + " (clay " + formatBytes(clayBytes) + " for up to " +
+           std::to_string(clayLeavesGrown) + " leaves of 8^3 voxels, " + std::to_string(clayLeaves) +
+           " at the start; obstacles " + formatBytes(obstacleBytes) + "; tools " + formatBytes(toolBytes) +
+           "; automaton " + formatBytes(automatonBytes) + "; output grids " + formatBytes(outputBytes) +
+           (transportBytes ? "; global transport " + formatBytes(transportBytes) : std::string()) + ")";
+}
+
+MemoryEstimate estimateSceneMemory(const Scene& scene)
+{
+    openvdb::initialize();
+    const int dims = scene.dimensions;
+    MemoryEstimate e;
+    uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
+    struct Area {
+        Box box;
+        bool clay;         ///< holds clay (else: a tool's sweep)
+        bool moves;        ///< may move: a tool, clay from a file, clay above Tc
+        bool file = false; ///< clay from a file
+    };
+    std::vector<Area> areas;
+    uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
+    uint64_t fileTreeBytes = 0;
+    uint64_t fileLower = 0, fileUpper = 0; // internal nodes of clay from files
+    std::vector<Box> clayBoxes;            // of the shapes' clay
+    uint64_t fileLeaves = 0;               // of clay from files
+    uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
+    auto addFileClay = [&](const std::string& path, const std::string& grid) {
+        const FileGrid g = fileGridStats(path, grid);
+        const Box b = clip2D(g.bounds, dims);
+        const uint64_t leaves = g.leaves;
+        fileLeaves += leaves;
+        // Its real nodes when the topology was walked; else from its bounds.
+        const uint64_t real = g.upperNodes ? leaves * leafBytes<MassTreeT>() +
+                                                 g.lowerNodes * lowerNodeBytes<MassTreeT>() +
+                                                 g.upperNodes * upperNodeBytes<MassTreeT>()
+                                           : treeBytes<MassTreeT>(leaves, {b});
+        fileTreeBytes += std::max(g.memBytes, real);
+        fileLower += g.upperNodes ? g.lowerNodes : UINT64_MAX / 4;
+        fileUpper += g.upperNodes ? g.upperNodes : UINT64_MAX / 4;
+        areas.push_back({b, true, true, true});
+        massBound = UINT64_MAX;
+    };
+    if (!scene.start.empty()) {
+        addFileClay(scene.start, "mass");
+    } else {
+        for (const ClaySpec& c : scene.clay) {
+            if (c.shape.kind == "vdb") {
+                try {
+                    addFileClay(c.shape.file, c.shape.grid);
+                } catch (const Error& e) {
+                    throw Error(scene.source + ": " + c.shape.field + ": " + e.what()); // the scene and field
+                }
+                continue;
+            }
+            const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
+            clayBoxes.push_back(b);
+            areas.push_back({b, true, c.mass > scene.rule.threshold});
+            const double m = double(c.mass) * double(voxelsIn(b));
+            if (massBound != UINT64_MAX)
+                massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
+            // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
+            const double settled =
+                c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
+            settledVoxels =
+                settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
+        }
+    }
+    e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
+    uint64_t toolLeaves = 0;
+    std::vector<Box> toolBoxes;
+    uint64_t toolMost = 0; // voxels of the largest tool's bounds at one frame
+    double toolExtent = 0; // the largest tool's diagonal
+    for (const ToolSpec& t : scene.tools) {
+        const auto sw = sweep(t, scene.frames, dims, toolBudget);
+        areas.push_back({sw.first, false, true});
+        e.toolVoxels += sw.second;
+        toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
+        toolBoxes.push_back(sw.first);
+        toolMost = std::max(toolMost, sw.second);
+        const Box b = t.shape.shape->bounds(); // its diagonal: any pose's extent
+        if (!b.empty()) {
+            double d2 = 0;
+            for (int a = 0; a < 3; ++a)
+                d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
+            toolExtent = std::max(toolExtent, std::sqrt(d2));
+        }
+    }
+    // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and leaves
+    // than their sweeps hold together.
+    if (!toolBoxes.empty()) {
+        Box all;
+        for (const Box& b : toolBoxes)
+            all = unite(all, b);
+        e.toolVoxels = std::min(e.toolVoxels, voxelsIn(all));
+        toolLeaves = std::min(toolLeaves, distinctNodes(toolBoxes, 3));
+    }
+    // Clay spreads around itself and where tools push it: over the clay's boxes and the tools'
+    // sweeps that touch clay (directly or through other such boxes), each grown by one leaf.
+    uint64_t grown = 0;
+    std::vector<Box> boxes, grownBoxes;
+    for (const Area& a : areas)
+        boxes.push_back(growBox(a.box, 8, dims));
+    for (const std::vector<size_t>& g : groupsOfTouching(boxes)) {
+        if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].clay; })) continue;
+        // Clay no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless
+        // shapes overlap and add up: it keeps its own leaves.
+        bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
+        if (!moves) { // overlaps, found by a sweep along x
+            std::vector<size_t> order(g);
+            std::sort(order.begin(), order.end(),
+                      [&](size_t a, size_t b) { return areas[a].box.min[0] < areas[b].box.min[0]; });
+            for (size_t i = 0; i < order.size() && !moves; ++i)
+                for (size_t j = i + 1;
+                     j < order.size() && areas[order[j]].box.min[0] <= areas[order[i]].box.max[0] && !moves;
+                     ++j)
+                    moves = touches(areas[order[i]].box, areas[order[j]].box);
+        }
+        if (!moves) {
+            std::vector<Box> own;
+            for (size_t i : g)
+                own.push_back(areas[i].box);
+            grown += distinctNodes(own, 3);
+            grownBoxes.insert(grownBoxes.end(), own.begin(), own.end());
+            continue;
+        }
+        std::vector<Box> members;
+        for (size_t i : g)
+            members.push_back(boxes[i]);
+        grown += unionLeaves(members);
+        grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
+    }
+    // Leaves, not boxes: settling grows clay by at most one leaf on every side of each leaf it holds
+    // (27 per leaf, a bound that counts scattered voxels for what they are, not their bounding box),
+    // and overloaded clay spreads over its settled volume (with a leaf of margin all round).
+    const uint64_t leafArea = dims == 2 ? 64 : 512; // voxels of a leaf that clay can fill
+    const uint64_t aroundLeaves = e.clayLeaves > UINT64_MAX / 27 ? UINT64_MAX : 27 * e.clayLeaves;
+    const uint64_t settledLeaves =
+        settledVoxels == UINT64_MAX ? UINT64_MAX : 2 * ((settledVoxels + leafArea - 1) / leafArea);
+    e.clayLeavesGrown = std::max(
+        {e.clayLeaves, std::min({grown, massBound, aroundLeaves}), std::min(settledLeaves, massBound)});
+    if (e.clayLeavesGrown > std::min(grown, massBound)) {
+        // Spreading past the boxes: its internal nodes, as for a cube of that many leaves.
+        const double side =
+            (dims == 2 ? std::sqrt(double(e.clayLeavesGrown)) : std::cbrt(double(e.clayLeavesGrown))) * 8;
+        Box spread;
+        for (int a = 0; a < 3; ++a) {
+            spread.min[a] = 0;
+            spread.max[a] = int32_t(std::min(side, 1e9));
+        }
+        if (dims == 2) spread.max[2] = 0;
+        grownBoxes.push_back(spread);
+    }
+    // A file's own figure (its tree's size when written) when that is more.
+    // With clay from files, the nodes grown clay needs: the files' own, twice (growth by a leaf
+    // rarely crosses into another internal node), and those of the shapes' and tools' areas.
+    uint64_t lowerCap = UINT64_MAX, upperCap = UINT64_MAX;
+    if (fileLeaves > 0 && fileLower < UINT64_MAX / 8 && fileUpper < UINT64_MAX / 8) {
+        std::vector<Box> others;
+        for (const Area& a : areas) {
+            if (!a.file) {
+                others.push_back(growBox(a.box, 8, dims));
+            }
+        }
+        lowerCap = 2 * fileLower + distinctNodes(others, 7);
+        upperCap = 2 * fileUpper + distinctNodes(others, 12);
+    }
+    e.clayBytes =
+        std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
+
+    std::vector<Box> obsBoxes;
+    for (const ShapeSpec& o : scene.obstacles) {
+        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims, budget);
+        e.obstacleLeaves += nodesIn(b, 3);
+        obsBoxes.push_back(b);
+    }
+    // The static mask, and the automaton's copy, which also holds the tools' cells.
+    e.obstacleBytes = 2 * treeBytes<MaskTreeT>(e.obstacleLeaves, obsBoxes);
+    e.toolBytes = e.toolVoxels * kToolBytesPerVoxel + treeBytes<MaskTreeT>(toolLeaves, toolBoxes);
+    // The compress push: a tool that covers the clay pools its clay over every column under it, in
+    // an Int32 tree per tool (Push.cc) that can reach every leaf of the clay.
+    if (scene.push == PushMode::Compress)
+        e.toolBytes +=
+            scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
+    const uint64_t lanes = std::max(1u, std::thread::hardware_concurrency()) - 1; // at most one per thread
+    e.automatonBytes = e.clayLeavesGrown * (kAutomatonBytesPerLeaf + lanes * kAutomatonLaneBytesPerLeaf);
+    // The global layer (lib/src/Transport.cc) holds, per cell of its domain: its coordinate,
+    // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
+    // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
+    // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
+    // work vectors, coordinates, aggregates, members over every level: ~88 bytes). Its domain is at
+    // most the clay's leaves' voxels, and (round 5) with the compress push and tools that cover no
+    // clay shape, the clay near the tools' sweeps: the over cells lie within the contact depth of a
+    // tool (the chains go as deep as the contact is wide: contact <= sqrt(the tool's voxels at a
+    // frame), 2D their number), the flood goes reach = ceil(contact) + 2 beyond them, or, where a
+    // part the reach cut has no room and the reach doubles, up to twice the distance to room, which a
+    // tool entering from the clay's surface finds within its extent, an inner seed 2 x 2 more, and
+    // the Dirichlet cells one more; counted as every voxel of the leaves meeting those boxes. The
+    // whole body otherwise: a tool that covers the clay compresses it all the way down; an obstacle
+    // near the tool may wall the clay in (the reach then doubles up to the whole body); the surface
+    // push's try may carry the overload up to kTrySteps voxels before the layer; clay over Tc or
+    // from a file may overflow anywhere, with no tool near.
+    if (scene.transport == Transport::Global) {
+        uint64_t cells = e.clayLeavesGrown * 512;
+        const bool clayMoves =
+            std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+        if (scene.push == PushMode::Compress && !toolBoxes.empty() && !clayMoves) {
+            bool covers = false;
+            for (const Box& t : toolBoxes)
+                for (const Area& a : areas) {
+                    if (!a.clay) continue;
+                    int spans = 0;
+                    for (int ax = 0; ax < 3; ++ax)
+                        spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
+                    covers |= spans >= 2; // in 2D z spans trivially: one more axis
+                }
+            if (!covers) {
+                Box extent; // where the clay can be
+                for (const Box& b : grownBoxes)
+                    extent = unite(extent, b);
+                const double contact = dims == 2 ? double(toolMost) : std::sqrt(double(toolMost));
+                const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
+                const int64_t depth = int64_t(std::ceil(contact));
+                const int64_t d = std::max(reach, 2 * int64_t(std::ceil(toolExtent))) + depth + 4 + 1;
+                uint64_t near = 0;
+                bool walled = false;
+                for (const Box& t : toolBoxes) {
+                    const Box g = growBox(t, d, 3);
+                    for (const Box& o : obsBoxes)
+                        walled |= !intersect(g, o).empty();
+                    const Box b = intersect(g, extent);
+                    near += b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+                }
+                if (!walled) cells = std::min(cells, near);
+            }
+        }
+        e.transportBytes = cells * kTransportBytesPerCell;
+    }
+    // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
+    // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
+    // over a band around the surface): counted as three float grids on the clay's leaves, plus
+    // the partial trees meshToVolume's worker threads build (each starts with its own upper nodes).
+    const uint64_t workers = std::max(1u, std::thread::hardware_concurrency());
+    e.outputBytes =
+        3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
+        workers * 2 * upperNodeBytes<FloatTreeT>() *
+            std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
+    return e;
+}
+
+uint64_t clayMemoryInUse(const MassGrid& mass)
+{
+    const uint64_t leaves = mass.tree().leafCount();
+    return uint64_t(mass.tree().memUsage()) + leaves * (kAutomatonBytesPerLeaf + 3 * leafBytes<FloatTreeT>());
+}
+
+uint64_t defaultMemoryBudget()
+{
+    uint64_t avail = uint64_t(::sysconf(_SC_PHYS_PAGES)) * uint64_t(::sysconf(_SC_PAGE_SIZE));
+    // A container's limit (cgroup v2, then v1) where it is lower than the machine's memory.
+    for (const char* f : {"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"}) {
+        std::ifstream in(f);
+        uint64_t limit = 0;
+        if (in >> limit && limit > 0) avail = std::min(avail, limit);
+    }
+    if (avail == 0) avail = uint64_t(16) << 30; // sysconf failed: assume 16 GiB
+    return avail / 4 * 3;
+}
+
+void checkMemoryBudget(const Scene& scene, const MemoryEstimate& e)
+{
+    if (scene.memoryBudget == kNoMemoryBudget) return;
+    const uint64_t budget = scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget();
+    if (e.total() <= budget) return;
+    throw Error(scene.source + ": needs " + e.describe() + ", more than the memory budget of " +
+                formatBytes(budget) +
+                (scene.memoryBudget ? "" : " (the default: 3/4 of this machine's memory)") +
+                "; shrink the scene or raise the budget (\"memory_budget\" in the scene, --memory-budget)");
+}
+
+void checkMemoryBudget(const Scene& scene)
+{
+    if (scene.memoryBudget == kNoMemoryBudget) return;
+    checkMemoryBudget(scene, estimateSceneMemory(scene));
+}
+} // namespace vdbclay
