@@ -40,18 +40,27 @@ uint64_t peakOfRun(const std::string& json, int threads)
 }
 
 /// The stroke of transport_study (a sphere tool r 6 dipped 9 into a clay sphere @a w wide at Tc,
-/// slid 2 voxels a frame for 12 frames), global + compress.
-std::string stroke(int w)
+/// slid 2 voxels a frame for 12 frames), global transport, with @a push and a step budget of
+/// @a maxSteps per frame. 2D (@a dims 2): a disc and a circle tool in the z = 0 plane.
+std::string stroke(int w, const std::string& push = "compress", uint64_t maxSteps = 1000000, int dims = 3)
 {
     const int r = w / 2;
-    return R"({"threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": "compress",
-        "clay": [{"shape": "sphere", "center": [)" +
-           std::to_string(r) + ", " + std::to_string(r) + ", " + std::to_string(r) + R"(], "radius": )" +
-           std::to_string(r) + R"(, "mass": 1000}],
+    const std::string z = dims == 2 ? "0" : std::to_string(r);
+    return R"({"dimensions": )" + std::to_string(dims) +
+           R"(, "threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": ")" + push +
+           R"(", "clay": [{"shape": "sphere", "center": [)" + std::to_string(r) + ", " + std::to_string(r) +
+           ", " + z + R"(], "radius": )" + std::to_string(r) + R"(, "mass": 1000}],
         "tools": [{"shape": "sphere", "center": [)" +
-           std::to_string(r - 12) + ", " + std::to_string(2 * r - 3) + ", " + std::to_string(r) +
+           std::to_string(r - 12) + ", " + std::to_string(2 * r - 3) + ", " + z +
            R"(], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 12}]}],
-        "settle": {"max_steps": 1000000}, "memory_budget": "none"})";
+        "settle": {"max_steps": )" +
+           std::to_string(maxSteps) + R"(}, "memory_budget": "none"})";
+}
+
+/// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body).
+uint64_t wholeBody(const MemoryEstimate& e)
+{
+    return e.clayLeavesGrown * 512 * 360;
 }
 
 } // namespace
@@ -113,4 +122,76 @@ TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
             .obstacles[0]);
     const MemoryEstimate ew = estimateSceneMemory(walled);
     EXPECT_EQ(ew.transportBytes, ew.clayLeavesGrown * 512 * 360);
+}
+
+TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHeap)
+{
+    // Round 6: the surface push's layer runs after the automaton's try, which can carry the overload
+    // as many steps as it runs; under a step budget of at most 16 a frame the try cannot run before
+    // the layer (a chunk that reaches the budget ends the frame), so the domain is bounded by the
+    // tool's reach as for the compress push. These strokes' frames settle in 0-1 steps after the layer.
+    // 3D: a 256-wide sphere (the grown sweep does not span it); 2D: a 1024-wide disc (a 2D contact is
+    // the number of voxels entered, a reach of ~170).
+    for (const std::string& json : {stroke(256, "surface", 16), stroke(1024, "surface", 16, 2)}) {
+        const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+        EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
+        EXPECT_GT(e.transportBytes, 0u);
+        for (int threads : {1, 2}) {
+            const uint64_t peak = peakOfRun(json, threads);
+            EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe() << "\n" << json;
+        }
+    }
+    // The 512-wide surface stroke: the layer's figure is a small part of the whole body's.
+    const MemoryEstimate e512 = estimateSceneMemory(parseScene(stroke(512, "surface", 16), "s.json", ""));
+    EXPECT_LT(e512.transportBytes * 20, wholeBody(e512)) << e512.describe();
+    EXPECT_LT(e512.total(), uint64_t(6) << 30) << e512.describe();
+    // Any budget up to 16 gives the same bound (no try); 17 lets the try run 16 steps first, and the
+    // scene's default budget (100000) 4096 steps: over the whole 512-wide body.
+    EXPECT_EQ(estimateSceneMemory(parseScene(stroke(512, "surface", 1), "s.json", "")).transportBytes,
+              e512.transportBytes);
+    EXPECT_GT(estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes,
+              e512.transportBytes);
+    const MemoryEstimate eDefault =
+        estimateSceneMemory(parseScene(stroke(512, "surface", 100000), "s.json", ""));
+    EXPECT_EQ(eDefault.transportBytes, wholeBody(eDefault)) << eDefault.describe();
+}
+
+TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
+{
+    for (const std::string push : {"surface", "compress"}) {
+        const Scene s = parseScene(stroke(512, push, 16), "s.json", "");
+        ASSERT_LT(estimateSceneMemory(s).transportBytes * 20, wholeBody(estimateSceneMemory(s))) << push;
+        // A plate wider than the clay covers it: its contact is the body's width.
+        Scene covered = s;
+        covered.tools[0] =
+            parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+            "tools": [{"shape": "box", "min": [-10,512,-10], "max": [522,515,522], "path": [{"translate": [0,-1,0], "frames": 12}]}]})",
+                       "t.json", "")
+                .tools[0];
+        const MemoryEstimate ec = estimateSceneMemory(covered);
+        EXPECT_EQ(ec.transportBytes, wholeBody(ec)) << push;
+        // A tool that starts inside the clay has no room near it.
+        Scene buried = s;
+        buried.tools[0] =
+            parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+            "tools": [{"shape": "sphere", "center": [200,256,256], "radius": 6, "path": [{"translate": [2,0,0], "frames": 12}]}]})",
+                       "t.json", "")
+                .tools[0];
+        const MemoryEstimate eb = estimateSceneMemory(buried);
+        EXPECT_EQ(eb.transportBytes, wholeBody(eb)) << push;
+        // An obstacle beside the tool may wall the clay in.
+        Scene walled = s;
+        walled.obstacles.push_back(
+            parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+            "obstacles": [{"shape": "box", "min": [200,520,200], "max": [300,530,300]}]})",
+                       "t.json", "")
+                .obstacles[0]);
+        const MemoryEstimate ew = estimateSceneMemory(walled);
+        EXPECT_EQ(ew.transportBytes, wholeBody(ew)) << push;
+        // Clay over Tc overflows wherever it is, with no tool near.
+        Scene over = s;
+        over.clay[0].mass = 1200;
+        const MemoryEstimate eo = estimateSceneMemory(over);
+        EXPECT_EQ(eo.transportBytes, wholeBody(eo)) << push;
+    }
 }

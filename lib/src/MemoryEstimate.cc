@@ -14,7 +14,36 @@
 //   tree per tool), the automaton's per-leaf lists (and a lane per extra thread), the output grids
 //   writing a .vdb builds;
 // - the global layer (Scene::transport global): per cell of its domain (Transport.cc), see
-//   kTransportBytesPerCell and the domain's bound below (estimateSceneMemory).
+//   kTransportBytesPerCell, over the whole body or the bound below.
+//
+// The global layer's domain (Sculpt.cc's runFrame, Transport.cc; layerMargin). A frame whose tools
+// touch clay runs the layer with reach r0 = ceil(contact) + 2 (contact: sqrt of the voxels a tool
+// entered, 2D their number; at most sqrt of the voxels of the tool's bounds at one frame) on the
+// cells over Tc within the push's region. Its unknowns are the full cells within `reach` face steps
+// of those seeds (an inner seed floods a margin of 2 x 2^k < reach), the Dirichlet cells one more;
+// where a part the reach cut has no room the reach doubles, so it ends below twice an over cell's
+// distance to room (or r0), which a tool entering the clay from its surface finds within its
+// extent E (the diagonal of its bounds: around the tool to where it sticks out, or to the cells it
+// left). So the domain lies within a tool's sweep grown by
+// - compress push (round 5): its chains (as deep as the contact is wide), max(r0, 2E), 4 for an
+//   inner seed's margin, 1 for the Dirichlet cells;
+// - surface push (round 6): its targets (within maxSearch + 2 of the tool: Push.cc's region), then
+//   the automaton's try (settleBounded), which may run S steps before the layer, which then looks
+//   for the seeds S further (a step moves clay one voxel per axis, at most three face steps, so
+//   room lies E + 3S away); max(r0, 2 (E + 3S)), 4, 1. The try runs in chunks of kTryChunk steps
+//   and gives up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no
+//   layer: S <= 4096 and S < max_steps, a multiple of kTryChunk, so S = 0 when max_steps <= 16
+//   (trySteps). The try is skipped on saturated clay (mean density near the tool >=
+//   kTrySaturated), but nothing here can know that before the run: under larger step budgets
+//   (the default 100000: S = 4096) the grown sweep spans any body under ~30000 voxels (the 512-wide
+//   stroke: the whole body, as before round 6).
+// The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
+// axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep within a
+// clay shape's box (the tool starts inside the clay: no room near it); an obstacle within the grown
+// sweep (clay walled in: the reach doubles up to the whole body); clay from a file (its largest
+// cell is not known without reading its voxels) or over Tc (it overflows anywhere, no tool near).
+// Not covered: a frame that ends unsettled (step budget, tolerance, no room) followed by a frame
+// whose tools touch no clay runs the layer with no reach over every over cell (Sculpt.cc).
 //
 // Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
 // within a budget of distance evaluations (kTightenBudget), leaves are counted on boxes, a file's
@@ -82,6 +111,8 @@ constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
 using sculpt_internal::growBox;
 using sculpt_internal::kReachPerContact;
+using sculpt_internal::kTryChunk;
+using sculpt_internal::kTrySteps;
 
 /// Scene::transport global: bytes per cell of the layer's domain (estimateSceneMemory says which).
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
@@ -377,6 +408,49 @@ std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, 
     return {all, most};
 }
 
+/// What the global layer's domain bound (file comment) depends on.
+struct LayerBound {
+    PushMode push = PushMode::Surface;
+    int dims = 3;
+    uint64_t toolMost = 0;  ///< voxels of the largest tool's bounds at one frame
+    double toolExtent = 0;  ///< the largest tool's diagonal
+    uint64_t maxSteps = 0;  ///< the scene's step budget per frame
+    bool clayMoves = false; ///< clay from a file or over Tc: it may overflow with no tool near
+    bool covers = false;    ///< a tool's sweep spans a clay shape's box on two axes
+    bool buried = false;    ///< a tool's sweep lies within a clay shape's box: it enters from inside
+};
+
+/// The most steps the automaton's try (Sculptor::Impl::settleBounded) can have run when the global
+/// layer runs after it, under a step budget of @a maxSteps per frame: its chunks of kTryChunk steps
+/// end at multiples of kTryChunk, it gives up (and the layer runs) at the first one >= kTrySteps, and
+/// a chunk that reaches @a maxSteps finishes the frame without the layer. So none when @a maxSteps
+/// <= kTryChunk.
+uint64_t trySteps(uint64_t maxSteps)
+{
+    if (maxSteps == 0) return 0;
+    const uint64_t giveUp = (kTrySteps + kTryChunk - 1) / kTryChunk * kTryChunk;
+    return std::min(giveUp, (maxSteps - 1) / kTryChunk * kTryChunk);
+}
+
+/// How far beyond a tool's sweep the global layer's domain reaches (file comment), or -1 where no
+/// bound holds (the whole body).
+int64_t layerMargin(const LayerBound& b)
+{
+    if (b.clayMoves || b.covers || b.buried) return -1;
+    const double contact = b.dims == 2 ? double(b.toolMost) : std::sqrt(double(b.toolMost));
+    const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
+    const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
+    if (b.push == PushMode::Compress) {
+        const int64_t depth = int64_t(std::ceil(contact));
+        return std::max(reach, 2 * room) + depth + 4 + 1;
+    }
+    // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
+    // try's steps, each moving clay one voxel (three face steps) at most.
+    const int64_t steps = int64_t(trySteps(b.maxSteps));
+    const int64_t region = int64_t(PushOptions().maxSearch) + 2;
+    return std::max(reach, 2 * (room + 3 * steps)) + region + steps + 4 + 1;
+}
+
 } // namespace
 
 uint64_t MemoryEstimate::total() const
@@ -576,50 +650,45 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
     // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
     // work vectors, coordinates, aggregates, members over every level: ~88 bytes). Its domain is at
-    // most the clay's leaves' voxels, and (round 5) with the compress push and tools that cover no
-    // clay shape, the clay near the tools' sweeps: the over cells lie within the contact depth of a
-    // tool (the chains go as deep as the contact is wide: contact <= sqrt(the tool's voxels at a
-    // frame), 2D their number), the flood goes reach = ceil(contact) + 2 beyond them, or, where a
-    // part the reach cut has no room and the reach doubles, up to twice the distance to room, which a
-    // tool entering from the clay's surface finds within its extent, an inner seed 2 x 2 more, and
-    // the Dirichlet cells one more; counted as every voxel of the leaves meeting those boxes. The
-    // whole body otherwise: a tool that covers the clay compresses it all the way down; an obstacle
-    // near the tool may wall the clay in (the reach then doubles up to the whole body); the surface
-    // push's try may carry the overload up to kTrySteps voxels before the layer; clay over Tc or
-    // from a file may overflow anywhere, with no tool near.
+    // most the clay's leaves' voxels, and near the tools' sweeps where the bound of the file comment
+    // (the layer's domain) holds: counted as every voxel of the leaves meeting each sweep grown by
+    // layerMargin().
     if (scene.transport == Transport::Global) {
         uint64_t cells = e.clayLeavesGrown * 512;
-        const bool clayMoves =
+        LayerBound lb;
+        lb.push = scene.push;
+        lb.dims = dims;
+        lb.toolMost = toolMost;
+        lb.toolExtent = toolExtent;
+        lb.maxSteps = scene.settle.maxSteps;
+        lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
-        if (scene.push == PushMode::Compress && !toolBoxes.empty() && !clayMoves) {
-            bool covers = false;
-            for (const Box& t : toolBoxes)
-                for (const Area& a : areas) {
-                    if (!a.clay) continue;
-                    int spans = 0;
-                    for (int ax = 0; ax < 3; ++ax)
-                        spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
-                    covers |= spans >= 2; // in 2D z spans trivially: one more axis
+        for (const Box& t : toolBoxes)
+            for (const Area& a : areas) {
+                if (!a.clay) continue;
+                int spans = 0, inside = 0;
+                for (int ax = 0; ax < 3; ++ax) {
+                    spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
+                    inside += t.min[ax] >= a.box.min[ax] && t.max[ax] <= a.box.max[ax] ? 1 : 0;
                 }
-            if (!covers) {
-                Box extent; // where the clay can be
-                for (const Box& b : grownBoxes)
-                    extent = unite(extent, b);
-                const double contact = dims == 2 ? double(toolMost) : std::sqrt(double(toolMost));
-                const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
-                const int64_t depth = int64_t(std::ceil(contact));
-                const int64_t d = std::max(reach, 2 * int64_t(std::ceil(toolExtent))) + depth + 4 + 1;
-                uint64_t near = 0;
-                bool walled = false;
-                for (const Box& t : toolBoxes) {
-                    const Box g = growBox(t, d, 3);
-                    for (const Box& o : obsBoxes)
-                        walled |= !intersect(g, o).empty();
-                    const Box b = intersect(g, extent);
-                    near += b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
-                }
-                if (!walled) cells = std::min(cells, near);
+                lb.covers |= spans >= 2;  // in 2D z spans trivially: one more axis
+                lb.buried |= inside == 3; // in 2D z lies inside trivially
             }
+        const int64_t d = layerMargin(lb);
+        if (d >= 0 && !toolBoxes.empty()) {
+            Box extent; // where the clay can be
+            for (const Box& b : grownBoxes)
+                extent = unite(extent, b);
+            uint64_t near = 0;
+            bool walled = false;
+            for (const Box& t : toolBoxes) {
+                const Box g = growBox(t, d, 3);
+                for (const Box& o : obsBoxes)
+                    walled |= !intersect(g, o).empty();
+                const Box b = intersect(g, extent);
+                near += b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+            }
+            if (!walled) cells = std::min(cells, near);
         }
         e.transportBytes = cells * kTransportBytesPerCell;
     }
