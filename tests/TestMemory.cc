@@ -195,3 +195,21 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         EXPECT_EQ(eo.transportBytes, wholeBody(eo)) << push;
     }
 }
+
+TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)
+{
+    // A plate 256 x 4 x 256 voxels (a transformed box's bounds are up to two voxels loose on every
+    // side) pressing 1 voxel a frame for 40 frames: each frame's bounds are tightened to the voxels
+    // inside (the first frame's box, moved), not only while the distance budget lasts (2^21
+    // evaluations: the first frames only; before round 6 the later ones counted 260 x 8 x 260).
+    const Scene press =
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [127,127,127], "mass": 800}],
+        "tools": [{"shape": "box", "min": [-64,128,-64], "max": [191,131,191], "path": [{"translate": [0,-1,0], "frames": 40}]}]})",
+                   "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(press).toolVoxels, 256u * 4u * 256u);
+    const Scene flat = parseScene(
+        R"({"dimensions": 2, "clay": [{"shape": "box", "min": [0,0], "max": [127,127], "mass": 800}],
+        "tools": [{"shape": "box", "min": [-64,128], "max": [191,131], "path": [{"translate": [0,-1,0], "frames": 40}]}]})",
+        "s.json", "");
+    EXPECT_EQ(estimateSceneMemory(flat).toolVoxels, 256u * 4u);
+}

@@ -151,15 +151,38 @@ Box clip2D(Box b, int dims)
 /// may be a voxel or two larger than the voxels inside, which at leaf boundaries counts whole extra
 /// layers of leaves. Spends at most @a budget distance evaluations (shared by all calls of one
 /// estimate, so that huge or many shapes cost well under a second); a face it cannot afford stays.
+/// A large face (over 4 kFaceSamples voxels) is tried first at its centre and on a coarse lattice
+/// (kFaceSamples points: a convex shape's voxels on a face lie around its middle), then voxel by
+/// voxel: the same faces dropped.
+constexpr uint64_t kFaceLattice = 8, kFaceSamples = 1 + (kFaceLattice + 1) * (kFaceLattice + 1);
 Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
 {
-    auto anyInside = [&](const Box& face) {
-        for (int x = face.min[0]; x <= face.max[0]; ++x)
-            for (int y = face.min[1]; y <= face.max[1]; ++y)
-                for (int z = face.min[2]; z <= face.max[2]; ++z) {
-                    --budget;
-                    if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) return true;
+    auto inside = [&](int64_t x, int64_t y, int64_t z) {
+        --budget;
+        return shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0;
+    };
+    auto anyInside = [&](const Box& face, bool sample) {
+        auto at = [&](int a, uint64_t i, uint64_t n) { // point i of n + 1 spread over the face's axis a
+            return int64_t(face.min[a]) + int64_t(uint64_t(int64_t(face.max[a]) - face.min[a]) * i / n);
+        };
+        if (sample) {
+            if (inside(at(0, 1, 2), at(1, 1, 2), at(2, 1, 2))) return true;
+            // The face is flat along one axis; the lattice spans the others (2D: one, z = 0 is flat too).
+            int free[2] = {-1, -1}, nFree = 0;
+            for (int a = 0; a < 3; ++a)
+                if (face.min[a] != face.max[a] && nFree < 2) free[nFree++] = a;
+            for (uint64_t i = 0; i <= kFaceLattice; ++i)
+                for (uint64_t j = 0; j <= (nFree == 2 ? kFaceLattice : 0); ++j) {
+                    int64_t c[3] = {face.min[0], face.min[1], face.min[2]};
+                    if (nFree > 0) c[free[0]] = at(free[0], i, kFaceLattice);
+                    if (nFree > 1) c[free[1]] = at(free[1], j, kFaceLattice);
+                    if (inside(c[0], c[1], c[2])) return true;
                 }
+        }
+        for (int64_t x = face.min[0]; x <= face.max[0]; ++x)
+            for (int64_t y = face.min[1]; y <= face.max[1]; ++y)
+                for (int64_t z = face.min[2]; z <= face.max[2]; ++z)
+                    if (inside(x, y, z)) return true;
         return false;
     };
     for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
@@ -170,7 +193,9 @@ Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
                     face.max[a] = b.min[a];
                 else
                     face.min[a] = b.max[a];
-                if (voxelsIn(face) > budget || anyInside(face)) break;
+                const uint64_t n = voxelsIn(face);
+                const bool sample = n > 4 * kFaceSamples;
+                if (n > budget || (sample && budget - n < kFaceSamples) || anyInside(face, sample)) break;
                 if (side == 0)
                     ++b.min[a];
                 else
@@ -379,18 +404,65 @@ uint64_t unionLeaves(const std::vector<Box>& boxes)
     return n;
 }
 
+/// Whether @a x is a multiple of 2^-20 below 2^30 in magnitude: sums and differences of such values
+/// and of voxel coordinates (below 2^31) are exact in a double.
+bool exactCoordinate(double x)
+{
+    const double s = std::ldexp(x, 20);
+    return std::abs(x) < 1073741824.0 && s == std::floor(s);
+}
+
+/// Whether pose @a b is pose @a a moved by a whole number of voxels @a d (same rotation, same pivot,
+/// exact coordinates): a shape placed at @a b then holds exactly the voxels it holds at @a a, moved by
+/// @a d (Shapes.cc: a transformed shape's distance at p is the inner shape's at R^T (p - t - c) + c,
+/// which for p + d and t + d is the same double; a pose that is the identity uses the shape itself,
+/// the same only with no rotation at all).
+bool wholeVoxelMove(const Pose& a, const Pose& b, int dims, int64_t d[3])
+{
+    const bool identity = a.isIdentity() || b.isIdentity();
+    for (int i = 0; i < 3; ++i) {
+        if (a.rotationDeg[i] != b.rotationDeg[i] || a.pivot[i] != b.pivot[i]) return false;
+        if (identity && a.rotationDeg[i] != 0.0) return false;
+        if (!exactCoordinate(a.translation[i]) || !exactCoordinate(b.translation[i]) ||
+            !exactCoordinate(a.pivot[i]))
+            return false;
+        const double diff = b.translation[i] - a.translation[i];
+        if (diff != std::floor(diff)) return false;
+        d[i] = int64_t(diff);
+    }
+    return dims == 3 || d[2] == 0;
+}
+
 /// The bounds of @a tool over frames 0..@a frames (every frame up to 100000 of them, else 100000
 /// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
-/// Each frame's bounds are tightened while @a budget lasts (tighten()).
+/// Each frame's bounds are tightened while @a budget lasts (tighten()); a frame whose pose is one
+/// tightened before moved by whole voxels (a press, a stroke: every frame) takes that box, moved.
 std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget)
 {
     const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
     Box all;
     uint64_t most = 0;
+    std::vector<std::pair<Pose, Box>> tightened; // poses tightened (at most 16: a short search)
     auto at = [&](uint64_t f) {
-        const ShapePtr s = makeTransformed(tool.shape.shape, tool.poseAt(f));
-        Box b = clip2D(s->bounds(), dims);
-        b = tighten(*s, b, dims, budget);
+        const Pose pose = tool.poseAt(f);
+        Box b;
+        bool moved = false;
+        for (const auto& pb : tightened) {
+            int64_t d[3];
+            if (!wholeVoxelMove(pb.first, pose, dims, d)) continue;
+            b = pb.second;
+            for (int a = 0; a < 3 && !b.empty(); ++a) {
+                b.min[a] = int32_t(std::max<int64_t>(INT32_MIN, int64_t(b.min[a]) + d[a]));
+                b.max[a] = int32_t(std::min<int64_t>(INT32_MAX, int64_t(b.max[a]) + d[a]));
+            }
+            moved = true;
+            break;
+        }
+        if (!moved) {
+            const ShapePtr s = makeTransformed(tool.shape.shape, pose);
+            b = tighten(*s, clip2D(s->bounds(), dims), dims, budget);
+            if (tightened.size() < 16) tightened.emplace_back(pose, b);
+        }
         all = unite(all, b);
         most = std::max(most, voxelsIn(b));
     };
