@@ -179,6 +179,15 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
                 .tools[0];
         const MemoryEstimate eb = estimateSceneMemory(buried);
         EXPECT_EQ(eb.transportBytes, wholeBody(eb)) << push;
+        // One dipped into the sphere's flank at 45 degrees (its sweep within the sphere's box, but
+        // sticking out of the sphere) enters from the surface: the bound holds.
+        Scene flank = s;
+        flank.tools[0] = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+            "tools": [{"shape": "sphere", "center": [435,435,250], "radius": 6, "path": [{"translate": [0,0,2], "frames": 12}]}]})",
+                                    "t.json", "")
+                             .tools[0];
+        const MemoryEstimate ef = estimateSceneMemory(flank);
+        EXPECT_LT(ef.transportBytes * 20, wholeBody(ef)) << push;
         // An obstacle beside the tool may wall the clay in.
         Scene walled = s;
         walled.obstacles.push_back(

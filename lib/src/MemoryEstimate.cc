@@ -35,19 +35,21 @@
 //   layer: S <= 4096 and S < max_steps, a multiple of kTryChunk, so S = 0 when max_steps <= 16
 //   (trySteps). The try is skipped on saturated clay (mean density near the tool >=
 //   kTrySaturated), but nothing here can know that before the run: under larger step budgets
-//   (the default 100000: S = 4096) the grown sweep spans any body under ~30000 voxels (the 512-wide
-//   stroke: the whole body, as before round 6).
+//   (the default 100000: S = 4096) the sweep grows by ~28,700 voxels (the 512-wide stroke's tool:
+//   the whole body, as before round 6).
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
-// axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep within a
-// clay shape's box (the tool starts inside the clay: no room near it); an obstacle within the grown
-// sweep (clay walled in: the reach doubles up to the whole body); clay from a file (its largest
-// cell is not known without reading its voxels) or over Tc (it overflows anywhere, no tool near).
+// axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
+// corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
+// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay from a file
+// (its largest cell is not known without reading its voxels) or over Tc (it overflows anywhere, no
+// tool near).
 // Not covered: a frame that ends unsettled (step budget, tolerance, no room) followed by a frame
 // whose tools touch no clay runs the layer with no reach over every over cell (Sculpt.cc).
 //
 // Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
-// within a budget of distance evaluations (kTightenBudget), leaves are counted on boxes, a file's
-// voxels are never read.
+// within a budget of distance evaluations (kTightenBudget; a large face sampled first, a tool's pose
+// moved by whole voxels from one tightened before takes that box, moved: round 6), leaves are
+// counted on boxes, a file's voxels are read only when it lacks OpenVDB's grid statistics.
 #include "vdbclay/Sculpt.h"
 
 #include "vdbclay/IO.h"
@@ -489,7 +491,7 @@ struct LayerBound {
     uint64_t maxSteps = 0;  ///< the scene's step budget per frame
     bool clayMoves = false; ///< clay from a file or over Tc: it may overflow with no tool near
     bool covers = false;    ///< a tool's sweep spans a clay shape's box on two axes
-    bool buried = false;    ///< a tool's sweep lies within a clay shape's box: it enters from inside
+    bool buried = false;    ///< no corner of a tool's sweep lies outside the clay: it starts inside
 };
 
 /// The most steps the automaton's try (Sculptor::Impl::settleBounded) can have run when the global
@@ -735,17 +737,27 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lb.maxSteps = scene.settle.maxSteps;
         lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
-        for (const Box& t : toolBoxes)
+        for (const Box& t : toolBoxes) {
             for (const Area& a : areas) {
                 if (!a.clay) continue;
-                int spans = 0, inside = 0;
-                for (int ax = 0; ax < 3; ++ax) {
+                int spans = 0;
+                for (int ax = 0; ax < 3; ++ax)
                     spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
-                    inside += t.min[ax] >= a.box.min[ax] && t.max[ax] <= a.box.max[ax] ? 1 : 0;
-                }
-                lb.covers |= spans >= 2;  // in 2D z spans trivially: one more axis
-                lb.buried |= inside == 3; // in 2D z lies inside trivially
+                lb.covers |= spans >= 2; // in 2D z spans trivially: one more axis
             }
+            // A tool that enters the clay from its surface has a corner of its sweep outside every clay
+            // shape (where it sticks out); one with none starts inside the clay.
+            bool out = false;
+            for (int corner = 0; corner < 8 && !out; ++corner) {
+                const Vec3 p{{double(corner & 1 ? t.max[0] : t.min[0]),
+                              double(corner & 2 ? t.max[1] : t.min[1]),
+                              double(corner & 4 ? t.max[2] : t.min[2])}};
+                out = std::none_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
+                    return c.shape.shape && c.shape.shape->distance(p) < 0;
+                });
+            }
+            lb.buried |= !out;
+        }
         const int64_t d = layerMargin(lb);
         if (d >= 0 && !toolBoxes.empty()) {
             Box extent; // where the clay can be
