@@ -166,21 +166,27 @@ template <typename F> void Candidates::drain(int slot, F&& f)
         return;
     }
     // A lane's entry is nonzero only where its bit is set, so the union of the bits finds them all.
+    // Only nonzero words and entries are cleared: a store to a line another thread's lane last
+    // wrote moves the line here and back at its next write, and most words and entries are zero.
     mLanesDirty[slot] = false;
     for (size_t k = 0; k < bits.size(); ++k) {
         uint64_t word = bits[k];
+        if (word) bits[k] = 0;
         for (Lane& l : mLanes) {
-            word |= l.touched[slot][k];
-            l.touched[slot][k] = 0;
+            if (const uint64_t w = l.touched[slot][k]) {
+                word |= w;
+                l.touched[slot][k] = 0;
+            }
         }
-        bits[k] = 0;
         for (uint64_t b = word; b; b &= b - 1) {
             const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
             uint64_t m = acc[e];
-            acc[e] = 0;
+            if (m) acc[e] = 0;
             for (Lane& l : mLanes) {
-                m |= l.acc[slot][e];
-                l.acc[slot][e] = 0;
+                if (const uint64_t a = l.acc[slot][e]) {
+                    m |= a;
+                    l.acc[slot][e] = 0;
+                }
             }
             f(e, m);
         }
