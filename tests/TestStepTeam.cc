@@ -82,3 +82,14 @@ TEST(StepTeam, ATasksExceptionReachesTheCallerAfterEveryTaskRan)
         EXPECT_EQ(ran.load(), 4);
     }
 }
+
+TEST(StepTeam, TooManyTasksAreRefusedBeforeAnyRuns)
+{
+    WorkerTeam team(2);
+    std::atomic<int> ran{0};
+    EXPECT_THROW(team.run(team.maxTasks() + 1, [&](size_t, int) { ran.fetch_add(1); }),
+                 std::invalid_argument);
+    EXPECT_EQ(ran.load(), 0);
+    team.run(team.maxTasks(), [&](size_t, int) { ran.fetch_add(1); });
+    EXPECT_EQ(ran.load(), int(team.maxTasks()));
+}

@@ -2,6 +2,8 @@
 #include "WorkerTeam.h"
 
 #include <chrono>
+#include <stdexcept>
+#include <string>
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
@@ -51,7 +53,9 @@ constexpr size_t tasksOf(uint64_t s)
 
 } // namespace
 
-WorkerTeam::WorkerTeam(int n) : mSize(n < 1 ? 1 : n)
+WorkerTeam::WorkerTeam(int n)
+    : mSize(n < 1 ? 1 : n), mErrors(size_t(mSize) * kTasksPerMember),
+      mSlots(new Slot[size_t(mSize) * kTasksPerMember])
 {
     mThreads.reserve(size_t(mSize - 1));
     for (int i = 1; i < mSize; ++i)
@@ -73,22 +77,19 @@ WorkerTeam::~WorkerTeam()
 void WorkerTeam::run(size_t tasks, const Body& body)
 {
     if (tasks == 0) return;
-    if (tasks > mCapacity) {
-        // No member touches the slots between jobs (a claim needs a task left in a running job).
-        std::unique_ptr<Slot[]> slots(new Slot[tasks]);
-        for (size_t t = 0; t < mCapacity; ++t) {
-            slots[t].job.store(mSlots[t].job.load());
-            slots[t].done.store(mSlots[t].done.load());
-        }
-        mSlots = std::move(slots);
-        mErrors.resize(tasks);
-        mCapacity = tasks;
+    if (tasks > maxTasks()) {
+        throw std::invalid_argument("WorkerTeam::run: " + std::to_string(tasks) + " tasks, at most " +
+                                    std::to_string(maxTasks()));
     }
-    for (size_t t = 0; t < tasks; ++t)
+    const uint32_t job = ++mJob;
+    for (size_t t = 0; t < tasks; ++t) {
         mErrors[t] = nullptr;
+        // Stamped "claimed by the job before" (a member late from that job finds nothing to claim),
+        // so a slot unused for 2^31 jobs cannot look newer than this one when the numbers wrap.
+        mSlots[t].job.store(job - 1, std::memory_order_relaxed);
+    }
     mBody = &body;
     mDone.store(0, std::memory_order_relaxed);
-    const uint32_t job = ++mJob;
     mState.store((uint64_t(job) << 32) | uint64_t(tasks)); // seq_cst: against the sleepers' count below
     if (mSize > 1 && mSleepers.load() > 0) {
         {
@@ -97,7 +98,7 @@ void WorkerTeam::run(size_t tasks, const Body& body)
         mWake.notify_all();
     }
     work(job, tasks, 0);
-    spinThenYield([&] { return mDone.load(std::memory_order_acquire) == tasks; },
+    spinThenYield([&] { return mDone.load(std::memory_order_acquire) >= tasks; },
                   std::chrono::microseconds(0));
     mBody = nullptr;
     for (size_t t = 0; t < tasks; ++t)

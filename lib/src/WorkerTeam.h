@@ -47,8 +47,13 @@ public:
     WorkerTeam(const WorkerTeam&) = delete;
     WorkerTeam& operator=(const WorkerTeam&) = delete;
 
+    /// Tasks a job may have: a fixed number per member, so the per-task slots are never moved (a
+    /// member late from an earlier job may still read them).
+    static constexpr size_t kTasksPerMember = 16;
+    size_t maxTasks() const { return size_t(mSize) * kTasksPerMember; }
     int size() const { return mSize; }
-    /// Runs body(task, member) once for every task in [0, tasks), on the members that claim them
+    /// Runs body(task, member) once for every task in [0, tasks) (at most maxTasks(); more throw
+    /// std::invalid_argument before anything runs), on the members that claim them
     /// (member 0: the calling thread; see the claiming order above); returns when every task is
     /// done. Rethrows the first task's exception. Not reentrant.
     void run(size_t tasks, const Body& body);
@@ -68,10 +73,9 @@ private:
     int mSize;
     std::vector<std::thread> mThreads;
     const Body* mBody = nullptr;
-    std::vector<std::exception_ptr> mErrors; // per task
-    std::unique_ptr<Slot[]> mSlots;          // per task
-    size_t mCapacity = 0;
-    uint32_t mJob = 0; // the caller's: the current job's number
+    std::vector<std::exception_ptr> mErrors; // per task (maxTasks())
+    std::unique_ptr<Slot[]> mSlots;          // per task (maxTasks()), never reallocated
+    uint32_t mJob = 0;                       // the caller's: the current job's number
     // job (32 bits) | task count (32 bits): the job members pick up
     alignas(64) std::atomic<uint64_t> mState{0};
     alignas(64) std::atomic<size_t> mDone{0};
