@@ -368,52 +368,6 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
     automaton_internal::passSplit() = saved;
 }
 
-TEST_F(AutomatonTest, StepTeamGivesTheSameStepsOnAnyThreadCount)
-{
-    // The step team (WorkerTeam.h, Automaton.cc runTeamStep): the gather in pieces, then the pass in
-    // chunks on the team's members. Every candidate exactly once: the same hash, and the same blocks
-    // examined, over Tc and updated (a lost or doubled item changes the counts), as one thread; and
-    // the team really ran (16-71 steps of each run: the dense steps before the lumps settle).
-    using automaton_internal::PassSplit;
-    const PassSplit saved = automaton_internal::passSplit();
-    for (Rule rule : {Rule::Prorata, Rule::Arata}) {
-        for (int dims : {2, 3}) {
-            auto runOnce = [&](int threads) {
-                Rng rng(11);
-                auto mass = newMass();
-                auto obs = openvdb::MaskGrid::create(false);
-                const int z = dims == 3 ? 20 : 0;
-                randomScene(rng, CoordBBox(Coord(-20, -12, -z), Coord(20, 12, z)), dims, 260, 3, *mass,
-                            obs.get(), nullptr);
-                Automaton a(mass, options(rule, dims, 100, threads, 3), obs);
-                StepReport r = a.run(150);
-                // An edit mid-run (the steps after it are merged, then dense again).
-                a.edit(Box{{{-3, -3, 0}}, {{3, 3, 0}}}, [](MassGrid& g) { g.tree().setValue(Coord(0, 0, 0), 900); });
-                r += a.run(150);
-                return std::vector<uint64_t>{contentHash(*mass), r.blocksVisited, r.blocksUpdated,
-                                             r.blocksOverTc, uint64_t(a.totalMass())};
-            };
-            automaton_internal::passSplit() = PassSplit();
-            const std::vector<uint64_t> expected = runOnce(1);
-            EXPECT_GT(expected[2], 1000u);
-            for (int k : {1, 2}) {
-                PassSplit p;
-                p.team = 1;
-                p.perThread = k; // (the team ignores K: one chunk per member)
-                automaton_internal::passSplit() = p;
-                for (int threads : {2, 3, 8}) {
-                    const uint64_t before = automaton_internal::teamStepsRun();
-                    EXPECT_EQ(runOnce(threads), expected)
-                        << ruleName(rule) << " " << dims << "D, step team, " << threads << " threads";
-                    EXPECT_GE(automaton_internal::teamStepsRun() - before, 10u)
-                        << ruleName(rule) << " " << dims << "D, " << threads << " threads: the team did not run";
-                }
-            }
-        }
-    }
-    automaton_internal::passSplit() = saved;
-}
-
 TEST_F(AutomatonTest, SeedChangesTheResultButNotTheMass)
 {
     auto run = [](uint64_t seed) {

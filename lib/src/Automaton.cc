@@ -49,7 +49,6 @@
 #include "Format.h"
 #include "Kernel.h"
 #include "PassSplit.h"
-#include "WorkerTeam.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -60,14 +59,12 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <sstream>
-#include <thread>
 #include <type_traits>
 #include <vector>
 
@@ -142,16 +139,6 @@ void voxelizeActiveTilesIn(MassTree& tree, const Box& region)
 
 } // namespace
 
-namespace automaton_internal {
-namespace {
-std::atomic<uint64_t> gTeamSteps{0};
-}
-uint64_t teamStepsRun()
-{
-    return gTeamSteps.load(std::memory_order_relaxed);
-}
-} // namespace automaton_internal
-
 // ---- Impl ---------------------------------------------------------------------------------------
 
 struct Automaton::Impl {
@@ -174,9 +161,7 @@ struct Automaton::Impl {
     std::vector<WorkItem> work;
     std::vector<size_t> bounds;          // runPassWeighted's chunks
     std::vector<PassTotals> chunkTotals; // and their totals
-    std::unique_ptr<WorkerTeam> team;    // the step team (teamStep), made at its first use
-    std::vector<size_t> wordBounds, itemBounds;
-    std::vector<uint64_t> blockSums;
+    std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -188,7 +173,6 @@ struct Automaton::Impl {
         if (threads < 0) throw Error("threads must be >= 0, got " + std::to_string(threads));
         opts.threads = threads;
         arena.reset();
-        team.reset();
         if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
     }
 
@@ -346,13 +330,6 @@ struct Automaton::Impl {
         candidates.detach();
     }
 
-    /// The threads a pass may use: the arena's, or TBB's default for threads = 0.
-    int passThreads() const
-    {
-        if (opts.threads == 1) return 1;
-        return arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
-    }
-
     PassInput passInput(int phase, bool dryRun)
     {
         PassInput in;
@@ -370,7 +347,9 @@ struct Automaton::Impl {
         // lane (atomic ORs into shared words cost the pass its second thread: press 128^3 1.1x, and
         // recording serially after the pass left 0.4 s of 2.2 on one core).
         if (!dryRun && in.table) {
-            in.sinkLanes = passThreads();
+            in.sinkLanes = 1;
+            if (opts.threads != 1)
+                in.sinkLanes = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
             in.sink = candidates.lanes(in.sinkLanes);
         }
         return in;
@@ -452,97 +431,6 @@ struct Automaton::Impl {
         return tot;
     }
 
-    /// Whether this step's gather and pass run on the step team (see teamStep).
-    bool teamStep() const
-    {
-        const int n = passThreads();
-        if (n <= 1 || !leafTable.valid() || !candidates.denseGatherReady() || maxBound > INT32_MAX / 8) return false;
-        const int mode = passSplit().team;
-        if (mode < 0) return unsigned(n) <= std::max(1u, std::thread::hardware_concurrency());
-        return mode == 1;
-    }
-
-    /// A dense step's gather and pass on the step team (WorkerTeam.h), instead of a serial gather
-    /// and a TBB fork/join per step. One job of 2 n tasks: task i < n drains piece i of the
-    /// candidates (splitGather: about equal items) into its place in @a work; task n + c waits for
-    /// those, then runs the pass over chunk c of the whole list: contiguous ranges of about equal
-    /// candidate blocks (the weighted split's cut), recording into the lane of the member that runs
-    /// it. Same list as gather() (the same items in the same order), every item processed exactly
-    /// once, totals joined in chunk order (sums, maxima, deferred blocks sorted later): the step's
-    /// result is that of any other partition, whichever member runs which task.
-    PassTotals runTeamStep(int phase, double& gatherSeconds)
-    {
-        const int n = passThreads();
-        if (!team || team->size() != n) team = std::make_unique<WorkerTeam>(n);
-        const size_t pieces = size_t(n), chunks = size_t(n);
-        wordBounds.resize(pieces + 1);
-        itemBounds.resize(pieces + 1);
-        const auto t0 = Clock::now();
-        candidates.splitGather(phase, is3D(), n, work, wordBounds.data(), itemBounds.data());
-        blockSums.resize(work.size());
-        chunkTotals.assign(chunks, PassTotals());
-        if (work.empty()) {
-            gatherSeconds = secondsSince(t0);
-            return PassTotals();
-        }
-        const PassInput in = passInput(phase, /*dryRun=*/false); // in.sink: lanes(n), one per member
-        std::atomic<bool> lost{false}, timed{false};
-        team->run(pieces + chunks, [&](size_t task, int member) {
-            if (task < pieces) {
-                const size_t at = itemBounds[task], want = itemBounds[task + 1] - at;
-                if (candidates.gatherPart(phase, wordBounds[task], wordBounds[task + 1], work.data() + at,
-                                          blockSums.data() + at) != want)
-                    lost = true;
-                return;
-            }
-            team->waitDone(pieces);
-            if (!timed.exchange(true)) gatherSeconds = secondsSince(t0);
-            if (lost) return;
-            const size_t c = task - pieces;
-            PassInput mine = in;
-            if (mine.sink) {
-                mine.sink += member; // this member's lane
-                mine.sinkLanes = 1;
-            }
-            processRange(mine, work.data(), teamCut(c, chunks), teamCut(c + 1, chunks), chunkTotals[c]);
-        });
-        if (lost) throw Error("internal error: the step team's gather lost candidates");
-        PassTotals tot;
-        for (const PassTotals& t : chunkTotals)
-            tot.join(t);
-        return tot;
-    }
-
-    /// Where chunk @a c of @a n starts in the team step's list (c = n: its end): after the first
-    /// item at which the candidate blocks so far reach c / n of the total. The blocks so far at item
-    /// j are its piece's prefix sum (blockSums) plus the earlier pieces' totals; monotone in c.
-    size_t teamCut(size_t c, size_t n) const
-    {
-        const size_t items = work.size(), pieces = itemBounds.size() - 1;
-        if (c == 0) return 0;
-        if (c >= n) return items;
-        auto pieceTotal = [&](size_t p) {
-            return itemBounds[p + 1] > itemBounds[p] ? blockSums[itemBounds[p + 1] - 1] : 0;
-        };
-        uint64_t total = 0;
-        for (size_t p = 0; p < pieces; ++p)
-            total += pieceTotal(p);
-        // The piece where the running sum reaches total * c / n, then the item inside it.
-        uint64_t base = 0;
-        for (size_t p = 0; p < pieces; ++p) {
-            const uint64_t t = pieceTotal(p);
-            if ((base + t) * n >= total * c && itemBounds[p + 1] > itemBounds[p]) {
-                const uint64_t* first = blockSums.data() + itemBounds[p];
-                const uint64_t* last = blockSums.data() + itemBounds[p + 1];
-                const uint64_t* it = std::lower_bound(
-                    first, last, base, [&](uint64_t v, uint64_t b0) { return (b0 + v) * n < total * c; });
-                return std::min(items, size_t(it - blockSums.data()) + 1);
-            }
-            base += t;
-        }
-        return items;
-    }
-
     [[noreturn]] void throwOverflow(const PassTotals& tot, int phase)
     {
         const Origin o = blockOrigin(work[tot.overflowItem].anchor, tot.overflowBit, phase, is3D());
@@ -578,26 +466,17 @@ struct Automaton::Impl {
         }
         if (leafTable.valid() && !candidates.attached())
             candidates.attach(leafTable.anchorIndex(), phase, is3D());
-        PassTotals tot;
-        if (teamStep()) {
-            double gatherSeconds = 0;
-            tot = runTeamStep(phase, gatherSeconds);
-            gTeamSteps.fetch_add(1, std::memory_order_relaxed);
-            rep.seconds.gather = gatherSeconds;
-            rep.seconds.repartition = buildSeconds + secondsSince(t0) - gatherSeconds;
-        } else {
-            candidates.gather(phase, is3D(), work);
-            if (!leafTable.valid()) workWithoutTable += work.size();
-            rep.seconds.gather = secondsSince(t0);
+        candidates.gather(phase, is3D(), work);
+        if (!leafTable.valid()) workWithoutTable += work.size();
+        rep.seconds.gather = secondsSince(t0);
 
-            t0 = Clock::now();
-            if (maxBound > INT32_MAX / 8) {
-                const PassTotals check = runPass(phase, /*dryRun=*/true);
-                if (check.overflow) throwOverflow(check, phase);
-            }
-            tot = runPass(phase, /*dryRun=*/false);
-            rep.seconds.repartition = buildSeconds + secondsSince(t0);
+        t0 = Clock::now();
+        if (maxBound > INT32_MAX / 8) {
+            const PassTotals check = runPass(phase, /*dryRun=*/true);
+            if (check.overflow) throwOverflow(check, phase);
         }
+        PassTotals tot = runPass(phase, /*dryRun=*/false);
+        rep.seconds.repartition = buildSeconds + secondsSince(t0);
         if (tot.overflow) throwOverflow(tot, phase); // unreachable while maxBound holds
 
         t0 = Clock::now();
@@ -722,11 +601,6 @@ PassSplit& passSplit()
 {
     static PassSplit split = [] {
         PassSplit p;
-        if (const char* t = std::getenv("VDBCLAY_STEP_TEAM")) {
-            if (std::strcmp(t, "off") == 0) p.team = 0;
-            if (std::strcmp(t, "on") == 0) p.team = 1;
-            if (std::strcmp(t, "auto") == 0) p.team = -1;
-        }
         const char* env = std::getenv("VDBCLAY_PASS_SPLIT");
         if (env && std::strcmp(env, "auto") == 0) {
             p.weighted = false;

@@ -56,9 +56,9 @@ void Candidates::endStep()
 
 void Candidates::record(std::vector<WorkItem>& work)
 {
-    // A list gathered in dense mode (gather, or splitGather's pieces) gives every item its index:
-    // not read again here (on several threads the items' cache lines then stay with the threads
-    // that gather and pass them). Other lists are checked item by item.
+    // A list gathered in dense mode gives every item its index: not read again here (on several
+    // threads the items' cache lines then stay with the threads that gather and pass them). Other
+    // lists are checked item by item.
     bool indexed = mDense;
     if (!(indexed && work.data() == mGathered.first && work.size() == mGathered.second)) {
         for (size_t i = 0; indexed && i < work.size(); ++i)
@@ -191,76 +191,6 @@ template <typename F> void Candidates::drain(int slot, F&& f)
             f(e, m);
         }
     }
-}
-
-void Candidates::splitGather(int phase, bool is3D, int parts, std::vector<WorkItem>& work, size_t* wordBounds,
-                             size_t* itemBounds)
-{
-    mPhase = phase;
-    mIs3D = is3D;
-    const std::vector<uint64_t>& bits = mTouched[phase];
-    const size_t words = bits.size();
-    mWordItems.resize(words);
-    size_t total = 0;
-    for (size_t k = 0; k < words; ++k) {
-        uint64_t word = bits[k];
-        for (const Lane& l : mLanes)
-            word |= l.touched[phase][k];
-        mWordItems[k] = uint32_t(__builtin_popcountll(word));
-        total += mWordItems[k];
-    }
-    // Cut after the word where the items reach i / parts of the total (each piece >= 0 words).
-    wordBounds[0] = 0;
-    itemBounds[0] = 0;
-    size_t acc = 0, k = 0;
-    for (int i = 1; i < parts; ++i) {
-        while (k < words && acc * size_t(parts) < total * size_t(i))
-            acc += mWordItems[k++];
-        wordBounds[i] = k;
-        itemBounds[i] = acc;
-    }
-    wordBounds[parts] = words;
-    itemBounds[parts] = total;
-    work.resize(total);
-    mGathered = {work.data(), work.size()};
-    mLanesDirty[phase] = false; // the pieces drain every lane
-}
-
-size_t Candidates::gatherPart(int phase, size_t wordBegin, size_t wordEnd, WorkItem* out, uint64_t* blocks)
-{
-    std::vector<uint64_t>& bits = mTouched[phase];
-    std::vector<uint64_t>& acc = mAcc[phase];
-    size_t n = 0;
-    uint64_t sum = 0;
-    for (size_t k = wordBegin; k < wordEnd; ++k) {
-        // Most words are empty (the candidates lie in a few layers): neither read nor written here,
-        // so their cache lines stay shared with the thread that runs the next splitGather.
-        if (mWordItems[k] == 0) continue;
-        uint64_t word = bits[k];
-        if (word) bits[k] = 0;
-        for (Lane& l : mLanes) {
-            if (const uint64_t w = l.touched[phase][k]) {
-                word |= w;
-                l.touched[phase][k] = 0;
-            }
-        }
-        for (uint64_t b = word; b; b &= b - 1) {
-            const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
-            uint64_t m = acc[e];
-            if (m) acc[e] = 0;
-            for (Lane& l : mLanes) {
-                if (const uint64_t a = l.acc[phase][e]) {
-                    m |= a;
-                    l.acc[phase][e] = 0;
-                }
-            }
-            out[n] = WorkItem{mIndex.keys[e], m, 0, e};
-            sum += uint64_t(__builtin_popcountll(m));
-            blocks[n] = sum;
-            ++n;
-        }
-    }
-    return n;
 }
 
 void Candidates::clearSlot(int slot)

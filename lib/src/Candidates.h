@@ -128,24 +128,6 @@ public:
     /// The pass did not record every item it was given a sink for: record() records them all.
     void sinkMissed() { mSunk = false; }
 
-    // ---- the dense gather in pieces, one per thread (Automaton's step team) ----
-    /// True when the next gather is a dense one (dense mode, no whole-region scan pending): it may
-    /// then run as splitGather + gatherPart instead of gather().
-    bool denseGatherReady() const { return mDense && mFullScanSteps == 0 && mPending.empty(); }
-    /// Serial part of a dense gather of a step of phase @a phase cut into @a parts pieces: sizes
-    /// @a work to the number of candidates, and sets wordBounds[0..parts] (piece i drains the bit-set
-    /// words [wordBounds[i], wordBounds[i+1])) and itemBounds[0..parts] (piece i writes its items to
-    /// work[itemBounds[i], itemBounds[i+1])), about equal items per piece. The pieces together give
-    /// exactly gather()'s list.
-    void splitGather(int phase, bool is3D, int parts, std::vector<WorkItem>& work, size_t* wordBounds,
-                     size_t* itemBounds);
-    /// One piece of the last splitGather (same phase): drains slot @a phase of every lane over the bit-set words
-    /// [wordBegin, wordEnd) into out[0..), in index order, and writes blocks[j] = the candidate blocks
-    /// of out[0..j] (inclusive prefix sums). Pieces with disjoint word ranges may run at the same
-    /// time (each writes only its words and their anchors' entries, in every lane); the pass must
-    /// wait for all of them. Returns the piece's items.
-    size_t gatherPart(int phase, size_t wordBegin, size_t wordEnd, WorkItem* out, uint64_t* blocks);
-
 private:
     struct Pending {
         Box box;
@@ -203,7 +185,6 @@ private:
     std::vector<Run> mRuns;
     std::vector<std::pair<size_t, size_t>> mSpans;
     std::pair<const WorkItem*, size_t> mGathered{nullptr, 0}; // the last list gathered in dense mode
-    std::vector<uint32_t> mWordItems; // splitGather: candidates per bit-set word (gatherPart skips empty ones)
 };
 
 } // namespace automaton_internal

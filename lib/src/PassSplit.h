@@ -24,20 +24,10 @@ struct PassSplit {
     bool weighted = true;
     int perThread = 1;      ///< K: chunks per thread
     uint64_t minBlocks = 0; ///< MIN: fewer candidate blocks than this run serially
-    /// The step team (WorkerTeam.h): a dense step on several threads gathers in pieces and runs
-    /// its pass on a team of its own instead of a serial gather and a TBB fork/join. 0 (the
-    /// default): never; 1: always; -1 (auto): when the thread count is at most the machine's cores
-    /// (members wait for each other at every step, which an oversubscribed count makes slow, never
-    /// wrong). VDBCLAY_STEP_TEAM=off|on|auto sets it (read at the first pass). Off by default: on a
-    /// shared 2-core machine it measured no faster than the TBB pass (docs/PERFORMANCE.md, round 6).
-    int team = 0;
 };
 
 /// The process's setting: VDBCLAY_PASS_SPLIT at the first call; tests may assign it.
 PassSplit& passSplit();
-
-/// Steps run on a step team so far, by every automaton of the process (tests check the team ran).
-uint64_t teamStepsRun();
 
 } // namespace automaton_internal
 } // namespace vdbclay
