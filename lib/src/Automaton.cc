@@ -82,6 +82,16 @@ using ObsTree = openvdb::MaskTree;
 using ObsLeaf = ObsTree::LeafNodeType;
 using namespace automaton_internal;
 
+/// Bits set in @a v, inline: the builtin is a library call where the build targets CPUs without
+/// POPCNT (the default x86-64), and the weighted split counts every item of every step.
+inline int popcount64(uint64_t v)
+{
+    v = v - ((v >> 1) & 0x5555555555555555ull);
+    v = (v & 0x3333333333333333ull) + ((v >> 2) & 0x3333333333333333ull);
+    v = (v + (v >> 4)) & 0x0F0F0F0F0F0F0F0Full;
+    return int((v * 0x0101010101010101ull) >> 56);
+}
+
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
 {
@@ -151,6 +161,7 @@ struct Automaton::Impl {
     std::vector<WorkItem> work;
     std::vector<size_t> bounds;          // runPassWeighted's chunks
     std::vector<PassTotals> chunkTotals; // and their totals
+    std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -377,9 +388,13 @@ struct Automaton::Impl {
     {
         const PassSplit split = passSplit();
         const size_t n = work.size();
+        // Candidate blocks per item, counted once (the cut below reads them again).
+        blockSums.resize(n);
         uint64_t total = 0;
-        for (const WorkItem& w : work)
-            total += uint64_t(__builtin_popcountll(w.mask));
+        for (size_t i = 0; i < n; ++i) {
+            total += uint64_t(popcount64(work[i].mask));
+            blockSums[i] = total;
+        }
         PassTotals tot;
         if (total < split.minBlocks) {
             PassInput one = in;
@@ -391,10 +406,9 @@ struct Automaton::Impl {
         const size_t chunks = std::min(n, size_t(std::max(threads, 1)) * size_t(split.perThread));
         bounds.clear();
         bounds.push_back(0);
-        uint64_t acc = 0;
         size_t cut = 1;
         for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
-            acc += uint64_t(__builtin_popcountll(work[i].mask));
+            const uint64_t acc = blockSums[i];
             if (acc * chunks >= total * cut) {
                 bounds.push_back(i + 1);
                 ++cut;

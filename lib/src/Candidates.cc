@@ -56,9 +56,15 @@ void Candidates::endStep()
 
 void Candidates::record(std::vector<WorkItem>& work)
 {
+    // A list gathered in dense mode gives every item its index: not read again here (on several
+    // threads the items' cache lines then stay with the threads that gather and pass them). Other
+    // lists are checked item by item.
     bool indexed = mDense;
-    for (size_t i = 0; indexed && i < work.size(); ++i) // (always, for lists gathered in dense mode)
-        indexed = work[i].entry != kNoEntry;
+    if (!(indexed && work.data() == mGathered.first && work.size() == mGathered.second)) {
+        for (size_t i = 0; indexed && i < work.size(); ++i)
+            indexed = work[i].entry != kNoEntry;
+    }
+    mGathered = {nullptr, 0};
     if (indexed) {
         // A pass that did not record its items (a range ran outside the lanes: sinkMissed) leaves
         // the recording to here (serial, plain ORs). Then, as after a pass that recorded every item
@@ -160,21 +166,27 @@ template <typename F> void Candidates::drain(int slot, F&& f)
         return;
     }
     // A lane's entry is nonzero only where its bit is set, so the union of the bits finds them all.
+    // Only nonzero words and entries are cleared: a store to a line another thread's lane last
+    // wrote moves the line here and back at its next write, and most words and entries are zero.
     mLanesDirty[slot] = false;
     for (size_t k = 0; k < bits.size(); ++k) {
         uint64_t word = bits[k];
+        if (word) bits[k] = 0;
         for (Lane& l : mLanes) {
-            word |= l.touched[slot][k];
-            l.touched[slot][k] = 0;
+            if (const uint64_t w = l.touched[slot][k]) {
+                word |= w;
+                l.touched[slot][k] = 0;
+            }
         }
-        bits[k] = 0;
         for (uint64_t b = word; b; b &= b - 1) {
             const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
             uint64_t m = acc[e];
-            acc[e] = 0;
+            if (m) acc[e] = 0;
             for (Lane& l : mLanes) {
-                m |= l.acc[slot][e];
-                l.acc[slot][e] = 0;
+                if (const uint64_t a = l.acc[slot][e]) {
+                    m |= a;
+                    l.acc[slot][e] = 0;
+                }
             }
             f(e, m);
         }
@@ -308,6 +320,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // the record() of the step after next.
         work.clear();
         drain(phase, [&](uint32_t e, uint64_t m) { work.push_back(WorkItem{mIndex.keys[e], m, 0, e}); });
+        mGathered = {work.data(), work.size()};
         return;
     }
     mRuns.clear();
@@ -400,6 +413,8 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
             if (e != kNoEntry) work.push_back(WorkItem{a->origin, a->mask, 0, e});
         }
     }
+    mGathered = mDense ? std::make_pair(static_cast<const WorkItem*>(work.data()), work.size())
+                       : std::make_pair(static_cast<const WorkItem*>(nullptr), size_t(0));
 }
 
 } // namespace automaton_internal

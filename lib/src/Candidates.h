@@ -184,6 +184,7 @@ private:
     std::vector<Anchor> mMergeBuf[2];
     std::vector<Run> mRuns;
     std::vector<std::pair<size_t, size_t>> mSpans;
+    std::pair<const WorkItem*, size_t> mGathered{nullptr, 0}; // the last list gathered in dense mode
 };
 
 } // namespace automaton_internal
