@@ -246,12 +246,14 @@ __attribute__((always_inline)) inline void loadPairs(const int32_t* c0, const in
     hi = N == 8 ? _mm_unpackhi_epi64(a01, a23) : _mm_setzero_si128(); // corners 4-7
 }
 
-/// Bit c of the result: lane c of (lo, hi) is greater than the matching lane of @a t (N lanes).
-template <int N> __attribute__((always_inline)) inline uint32_t laneMaskGt(__m128i lo, __m128i hi, __m128i t)
+/// Bit c of the result: lane c of @a a (c = 0-3) or @a b (c = 4-7; 3D only) is all ones, for
+/// lanes that are compare results (0 or -1): two packs and one byte movemask.
+template <int N> __attribute__((always_inline)) inline uint32_t laneBits(__m128i a, __m128i b)
 {
-    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(lo, t))));
-    if constexpr (N == 8) m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(hi, t)))) << 4;
-    return m;
+    if constexpr (N == 8)
+        return uint32_t(_mm_movemask_epi8(_mm_packs_epi16(_mm_packs_epi32(a, b), _mm_setzero_si128())));
+    (void)b;
+    return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(a)));
 }
 
 /// Stores the block's N corners (lo: 0-3, hi: 4-7) into @a m (16-byte aligned).
@@ -303,82 +305,102 @@ struct FirstBitsTable {
 };
 constexpr FirstBitsTable kFirstBits;
 
-/// The surplus branch of prorata and sorted (E > A: every room filled, the surplus E - A shared
-/// equally among the under cells, the remainder to the first under cells of the hash's rotation),
-/// on the block in registers, in int32 lanes. Exactly repartitionT's result (see the comment in
-/// processRangeT for why int32 cannot wrap here). Returns Done when it applied the branch, or when
-/// the block is not in that branch: Unchanged when the block has no over or no under cell (the rule
-/// would change nothing), Rule when E <= A (the caller runs the rule).
+/// What a branch in registers did: Done when it applied its branch, Unchanged when the block has no
+/// over or no under cell (the rule would change nothing), Rule when the block is in another branch
+/// (the caller runs the rule). The surplus branch (E > A: every room filled, the surplus E - A shared
+/// equally among the under cells, the remainder to the first under cells of the hash's rotation) is
+/// exactly repartitionT's result in int32 lanes (see processRangeT for why int32 cannot wrap there).
 enum class Branch { Unchanged, Done, Rule };
 struct Surplus {
     __m128i lo, hi;    // the block's new cells
-    uint32_t changed;  // cells whose value changed
+    uint32_t grow;     // cells that may go from 0 to positive: those that changed, or a superset of them
+                       // holding no other zero cell (surplusBranch: the under cells)
     int64_t overDelta; // change of the overload: -A (E before, E - A after)
     int64_t maxOut;    // the largest value written
     int64_t e, a;      // the block's excess and room (set when the result is Rule)
 };
 
-/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N.
-template <int N> inline uint32_t rotr(uint32_t x, int s)
+/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N; rotl
+/// undoes it. The mask doubled (x | x << N) makes each a shift and a mask.
+template <int N> __attribute__((always_inline)) inline uint32_t rotr(uint32_t x, int s)
 {
-    return ((x >> s) | (x << ((N - s) & (N - 1)))) & ((1u << N) - 1);
+    return ((x | (x << N)) >> s) & ((1u << N) - 1);
 }
-template <int N> inline uint32_t rotl(uint32_t x, int s)
+template <int N> __attribute__((always_inline)) inline uint32_t rotl(uint32_t x, int s)
 {
-    return ((x << s) | (x >> ((N - s) & (N - 1)))) & ((1u << N) - 1);
+    return (((x | (x << N)) << s) >> N) & ((1u << N) - 1);
 }
+
+/// The cells whose value differs between (lo, hi) and (nlo, nhi).
+template <int N> __attribute__((always_inline)) inline uint32_t changedCells(__m128i lo, __m128i hi, __m128i nlo,
+                                                                             __m128i nhi)
+{
+    return ~laneBits<N>(_mm_cmpeq_epi32(lo, nlo), _mm_cmpeq_epi32(hi, nhi)) & ((1u << N) - 1);
+}
+
+/// The surplus branch of prorata and sorted on the block in registers: (lo, hi) its cells, (gtLo,
+/// gtHi) the compare of each with Tc (lanes of -1 where over; obstacles not excluded), overCells the
+/// same as bits, valid the cells not blocked by an obstacle. E and the sum S = E - A of (m - Tc) over
+/// the valid cells come out of one reduction; E > A iff S > 0, and the surplus is S. Without
+/// obstacles the over lanes are the compare itself, and the result Tc + (share on the under lanes) +
+/// (one unit on the remainder's cells) needs no lane table but the remainder's.
 template <int N, typename Hash>
-__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, uint32_t overCells,
-                                                           uint32_t valid, int32_t tc, const Hash& hash,
-                                                           Surplus& s)
+__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, __m128i gtLo, __m128i gtHi,
+                                                           uint32_t overCells, uint32_t valid, int32_t tc,
+                                                           const Hash& hash, Surplus& s)
 {
     constexpr uint32_t kAll = (1u << N) - 1;
     const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
-    s.changed = 0;
     if (!over || !under) return Branch::Unchanged;
-    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), zero = _mm_setzero_si128();
+    const bool blocked = valid != kAll;
     const __m128i t = _mm_set1_epi32(tc);
-    // e = sum over over cells of (m - Tc), a = sum over under cells of (Tc - m).
+    __m128i vLo = _mm_setzero_si128(), vHi = vLo; // valid lanes (set only when blocked)
+    if (blocked) {
+        vLo = lanesOf(valid & 15u, vLo);
+        gtLo = _mm_and_si128(gtLo, vLo);
+        if constexpr (N == 8) {
+            vHi = lanesOf(valid >> 4, vHi);
+            gtHi = _mm_and_si128(gtHi, vHi);
+        }
+    }
+    // e = sum of (m - Tc) over the over cells, sum = the same over every valid cell (E - A).
     const __m128i xLo = _mm_sub_epi32(lo, t);
-    __m128i eV = _mm_and_si128(xLo, lanesOf(over & 15u, bitsLo));
-    __m128i aV = _mm_and_si128(_mm_sub_epi32(zero, xLo), lanesOf(under & 15u, bitsLo));
+    __m128i eV = _mm_and_si128(xLo, gtLo), sV = blocked ? _mm_and_si128(xLo, vLo) : xLo;
     if constexpr (N == 8) {
         const __m128i xHi = _mm_sub_epi32(hi, t);
-        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, lanesOf(over >> 4, bitsLo)));
-        aV = _mm_add_epi32(aV, _mm_and_si128(_mm_sub_epi32(zero, xHi), lanesOf(under >> 4, bitsLo)));
+        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, gtHi));
+        sV = _mm_add_epi32(sV, blocked ? _mm_and_si128(xHi, vHi) : xHi);
     }
-    const int64_t e = hsum(eV), a = hsum(aV);
+    // Both reductions at once: lanes (e0+e2, e1+e3, s0+s2, s1+s3), then pairs: E in lane 0, S in lane 2.
+    const __m128i p = _mm_add_epi32(_mm_unpacklo_epi64(eV, sV), _mm_unpackhi_epi64(eV, sV));
+    const __m128i q = _mm_add_epi32(p, _mm_shuffle_epi32(p, 0xB1));
+    const int64_t e = _mm_cvtsi128_si32(q), sum = _mm_cvtsi128_si32(_mm_unpackhi_epi64(q, q));
     s.e = e;
-    s.a = a;
-    if (e <= a) return Branch::Rule;
+    s.a = e - sum;
+    if (sum <= 0) return Branch::Rule;
     const int nu = rules_internal::popcount8(under);
-    const int64_t surplus = e - a;
-    const int64_t share = rules_internal::divideBySmall(surplus, nu);
-    const int64_t r = surplus - share * nu;
-    uint32_t extra = 0; // cells that get one unit of the remainder
-    if (r) {
-        const int start = int(hash() & uint64_t(N - 1));
-        const uint32_t rot = ((under >> start) | (under << ((N - start) & (N - 1)))) & kAll;
-        const uint32_t first = kFirstBits.t[rot][r]; // r < nu <= N <= 8
-        extra = ((first << start) | (first >> ((N - start) & (N - 1)))) & kAll;
-    }
+    const int64_t share = rules_internal::divideBySmall(sum, nu);
+    const int64_t r = sum - share * nu;
+    // Over lanes to Tc, the others to Tc + share (obstacle lanes put back below).
     const __m128i shareV = _mm_set1_epi32(int32_t(share));
-    auto finish = [&](__m128i m, uint32_t valid4, uint32_t under4, uint32_t extra4) {
-        const __m128i v = lanesOf(valid4, bitsLo);
-        __m128i out = _mm_or_si128(_mm_and_si128(v, t), _mm_andnot_si128(v, m));
-        out = _mm_add_epi32(out, _mm_and_si128(lanesOf(under4, bitsLo), shareV));
-        return _mm_sub_epi32(out, lanesOf(extra4, bitsLo)); // -(-1): one more unit
-    };
-    s.lo = finish(lo, valid & 15u, under & 15u, extra & 15u);
-    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.lo, lo))));
-    if constexpr (N == 8) {
-        s.hi = finish(hi, valid >> 4, under >> 4, extra >> 4);
-        same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.hi, hi)))) << 4;
-    } else {
-        s.hi = zero;
+    __m128i oLo = _mm_add_epi32(t, _mm_andnot_si128(gtLo, shareV));
+    __m128i oHi = N == 8 ? _mm_add_epi32(t, _mm_andnot_si128(gtHi, shareV)) : _mm_setzero_si128();
+    if (r) {
+        // One unit to each of the first r under cells of the rotation starting at the hash.
+        const int start = int(hash() & uint64_t(N - 1));
+        const uint32_t extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
+        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u, oLo)); // -(-1): one more unit
+        if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4, oHi));
     }
-    s.changed = ~same & kAll;
-    s.overDelta = -a;
+    if (blocked) {
+        oLo = _mm_or_si128(_mm_and_si128(vLo, oLo), _mm_andnot_si128(vLo, lo));
+        if constexpr (N == 8) oHi = _mm_or_si128(_mm_and_si128(vHi, oHi), _mm_andnot_si128(vHi, hi));
+    }
+    s.lo = oLo;
+    s.hi = oHi;
+    // Every under cell ends at Tc or more (> 0): the zero cells that change are the zero under cells.
+    s.grow = under;
+    s.overDelta = -(e - sum);
     s.maxOut = tc + share + (r ? 1 : 0);
     return Branch::Done;
 }
@@ -451,9 +473,7 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     }
     s.lo = oLo;
     s.hi = oHi;
-    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oLo, lo))));
-    if constexpr (N == 8) same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oHi, hi)))) << 4;
-    s.changed = ~same & kAll;
+    s.grow = changedCells<N>(lo, hi, oLo, oHi);
     // Shares and the first remainder pass keep every under cell at or below Tc (E <= A); the second
     // pass lifts cells at Tc to Tc + 1: the overload goes from E to the number of those cells.
     s.overDelta = -e + rules_internal::popcount8(extra2);
@@ -803,7 +823,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             alignas(16) int32_t m[8];
             uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
 #if defined(__SSE2__)
-            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128();
+            // The block in registers (every non-portable load): cells and their compare with Tc.
+            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128(), gtLo = hi, gtHi = hi;
             if (pairs && !in.portable) {
                 if (inside) {
                     const int32_t* d = ls.read[0] + off[0];
@@ -812,9 +833,10 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     loadPairs<N>(ls.read[lf[0]] + off[0], ls.read[lf[1]] + off[1], ls.read[lf[2]] + off[2],
                                  ls.read[lf[3]] + off[3], lo, hi);
                 }
-                overCells = laneMaskGt<N>(lo, hi, tcV);
+                gtLo = _mm_cmpgt_epi32(lo, tcV);
+                if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
+                overCells = laneBits<N>(gtLo, gtHi);
                 if (!overCells) continue;
-                storeCorners<N>(lo, hi, m);
             } else
 #endif
                 if (inside) {
@@ -828,9 +850,10 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     if constexpr (N == 8)
                         hi = _mm_setr_epi32(ls.read[lf[4]][off[4]], ls.read[lf[5]][off[5]],
                                             ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
-                    overCells = laneMaskGt<N>(lo, hi, tcV);
+                    gtLo = _mm_cmpgt_epi32(lo, tcV);
+                    if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
+                    overCells = laneBits<N>(gtLo, gtHi);
                     if (!overCells) continue;
-                    storeCorners<N>(lo, hi, m);
                 } else
 #endif
                 {
@@ -873,7 +896,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
 #if defined(__SSE2__)
             if (kSurplusRule && simd) {
                 Surplus sp;
-                Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
+                Branch br = surplusBranch<N>(lo, hi, gtLo, gtHi, overCells, valid, tc32, hash, sp);
                 if (br == Branch::Unchanged) continue;
                 if constexpr (R == Rule::Prorata) {
                     if (br == Branch::Rule && roomBranch<N>(lo, hi, overCells, valid, tc32, hash, sp))
@@ -881,12 +904,12 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 }
                 if (br == Branch::Done) {
                     if (P == 1 && ls.anyMissing && !inside) {
+                        const uint32_t ch = changedCells<N>(lo, hi, sp.lo, sp.hi);
                         bool missing = false;
                         for (int c = 0; c < N; ++c)
-                            if (((sp.changed >> c) & 1u) && !ls.data[lf[c]]) missing = true;
+                            if (((ch >> c) & 1u) && !ls.data[lf[c]]) missing = true;
                         if (missing) {
-                            tot.deferred.push_back(
-                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(sp.changed)});
+                            tot.deferred.push_back(PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(ch)});
                             continue;
                         }
                     }
@@ -907,7 +930,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     } else {
                         alignas(16) int32_t o32[8];
                         storeCorners<N>(sp.lo, sp.hi, o32);
-                        uint32_t ch = sp.changed;
+                        uint32_t ch = changedCells<N>(lo, hi, sp.lo, sp.hi);
                         while (ch) {
                             const int c = __builtin_ctz(ch);
                             ch &= ch - 1;
@@ -917,14 +940,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                         }
                     }
                     // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
-                    const uint32_t zero =
-                        uint32_t(
-                            _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, _mm_setzero_si128())))) |
-                        (N == 8 ? uint32_t(_mm_movemask_ps(
-                                      _mm_castsi128_ps(_mm_cmpeq_epi32(hi, _mm_setzero_si128()))))
-                                      << 4
-                                : 0u);
-                    uint32_t fresh = zero & sp.changed;
+                    const __m128i z = _mm_setzero_si128();
+                    uint32_t fresh = laneBits<N>(_mm_cmpeq_epi32(lo, z), _mm_cmpeq_epi32(hi, z)) & sp.grow;
                     while (fresh) {
                         const int c = __builtin_ctz(fresh);
                         fresh &= fresh - 1;
@@ -940,6 +957,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     continue;
                 }
             }
+            if (!in.portable) storeCorners<N>(lo, hi, m); // the rule reads the cells from memory
 #endif
             changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
             if (!changed) continue;
