@@ -332,8 +332,8 @@ template <int N> __attribute__((always_inline)) inline uint32_t rotl(uint32_t x,
 }
 
 /// The cells whose value differs between (lo, hi) and (nlo, nhi).
-template <int N> __attribute__((always_inline)) inline uint32_t changedCells(__m128i lo, __m128i hi, __m128i nlo,
-                                                                             __m128i nhi)
+template <int N>
+__attribute__((always_inline)) inline uint32_t changedCells(__m128i lo, __m128i hi, __m128i nlo, __m128i nhi)
 {
     return ~laneBits<N>(_mm_cmpeq_epi32(lo, nlo), _mm_cmpeq_epi32(hi, nhi)) & ((1u << N) - 1);
 }
@@ -389,7 +389,7 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
         // One unit to each of the first r under cells of the rotation starting at the hash.
         const int start = int(hash() & uint64_t(N - 1));
         const uint32_t extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
-        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u, oLo)); // -(-1): one more unit
+        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u, oLo)); // lanes of -1: one more unit
         if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4, oHi));
     }
     if (blocked) {
@@ -909,7 +909,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                         for (int c = 0; c < N; ++c)
                             if (((ch >> c) & 1u) && !ls.data[lf[c]]) missing = true;
                         if (missing) {
-                            tot.deferred.push_back(PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(ch)});
+                            tot.deferred.push_back(
+                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(ch)});
                             continue;
                         }
                     }
