@@ -1,9 +1,10 @@
-// The automaton's kernel (lib/src/Kernel.cc) on its own: the SIMD path and the portable path
-// (PassInput::portable) must give bit-identical grids, active masks, changed masks and totals on the
-// same input. The inputs are random grids built to reach every branch of the pass: over cells next to
-// empty ones (0 -> positive, active bits), E > A and E <= A blocks, obstacle voxels and an obstacle
-// tile, odd blocks straddling into missing leaves (deferred), 2D and 3D, every rule, small and
-// large Tc (Tc > 2^27 turns the SIMD branch off, so both paths must agree there trivially too).
+// The automaton's kernel (lib/src/Kernel.cc) on its own: the SIMD path (its AVX2 build where the CPU
+// has it, and its baseline SSE2 build, PassInput::avx2 off) and the portable path (PassInput::portable)
+// must give bit-identical grids, active masks, changed masks and totals on the same input. The inputs are
+// random grids built to reach every branch of the pass: over cells next to empty ones (0 -> positive, active
+// bits), E > A and E <= A blocks, obstacle voxels and an obstacle tile, odd blocks straddling into missing
+// leaves (deferred), 2D and 3D, every rule, small and large Tc (Tc > 2^27 turns the SIMD branch off, so both
+// paths must agree there trivially too).
 #include "Kernel.h"
 
 #include <vdbclay/Automaton.h>
@@ -99,7 +100,7 @@ struct Result {
 };
 
 Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint64_t step, bool portable,
-               bool useTable = false, OverFilter filter = OverFilter::Auto)
+               bool useTable = false, OverFilter filter = OverFilter::Auto, bool avx2 = true)
 {
     Result r;
     r.mass = std::make_shared<openvdb::Int32Tree>(*s.mass); // deep copy
@@ -120,6 +121,7 @@ Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint
     in.seed = 7;
     in.portable = portable;
     in.filter = filter;
+    in.avx2 = avx2;
     in.table = useTable ? &table : nullptr;
     // Two ranges, as two tasks would get them, joined in order.
     const size_t half = work.size() / 2;
@@ -173,6 +175,9 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                     const Scene s = makeScene(seed++, is3D, tc);
                     const uint64_t step = 100 + uint64_t(phase) + 2 * seed;
                     const Result simd = runPass(s, rule, tc, is3D, phase, step, false);
+                    const Result sse2 =
+                        runPass(s, rule, tc, is3D, phase, step, false, false, OverFilter::Auto,
+                                /*avx2=*/false);
                     const Result portable = runPass(s, rule, tc, is3D, phase, step, true);
                     const std::string what = std::string(is3D ? "3D" : "2D") + " tc " + std::to_string(tc) +
                                              " rule " + std::to_string(int(rule)) + " phase " +
@@ -184,7 +189,9 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                         EXPECT_GT(portable.tot.deferred.size(), 0u) << what;
                     }
                     expectSame(simd, portable, what);
+                    expectSame(sse2, portable, what + " (baseline build)");
                 }
+    std::printf("the pass's build on this machine: %s\n", avx2Pass() ? "AVX2" : "baseline");
 }
 
 /// The flat leaf table (PassInput::table) only replaces the accessor probes: the same passes with and
@@ -429,8 +436,8 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
             if (v) s.mass->setValueOn(xyz, v);
             if (g.range(0, 15) == 0) s.obstacles->setValueOn(xyz);
         }
-        Result r[2];
-        for (int portable = 0; portable < 2; ++portable) {
+        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
+        for (int portable = 0; portable < 3; ++portable) {
             r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
             std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
             RuleParams p;
@@ -445,11 +452,13 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
             in.step = uint64_t(trial);
             in.seed = 3;
             in.portable = portable == 1;
+            in.avx2 = portable != 2;
             processRange(in, work.data(), 0, 1, r[portable].tot);
             r[portable].changed.push_back(work[0].changed);
         }
         updated += int(r[1].tot.updated);
         expectSame(r[0], r[1], "trial " + std::to_string(trial));
+        expectSame(r[2], r[1], "trial " + std::to_string(trial) + " (baseline build)");
         if (HasFailure()) break;
     }
     EXPECT_GT(updated, 2000); // most random blocks hold an over cell and an under one
@@ -504,8 +513,8 @@ TEST_F(KernelTest, EdgeValueBlocksGiveIdenticalResults)
                 a += std::max<int64_t>(tc - v[c], 0);
             }
         }
-        Result r[2];
-        for (int portable = 0; portable < 2; ++portable) {
+        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
+        for (int portable = 0; portable < 3; ++portable) {
             r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
             std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
             RuleParams p;
@@ -520,15 +529,17 @@ TEST_F(KernelTest, EdgeValueBlocksGiveIdenticalResults)
             in.step = uint64_t(trial) * 7;
             in.seed = 11;
             in.portable = portable == 1;
+            in.avx2 = portable != 2;
             processRange(in, work.data(), 0, 1, r[portable].tot);
             r[portable].changed.push_back(work[0].changed);
         }
         updated += int(r[1].tot.updated);
         if (r[1].tot.updated && e > a) ++surplus;
         if (r[1].tot.updated && e == a) ++equal;
-        expectSame(r[0], r[1],
-                   "trial " + std::to_string(trial) + " rule " + std::to_string(int(rule)) + " tc " +
-                       std::to_string(tc) + (is3D ? " 3D" : " 2D"));
+        const std::string what = "trial " + std::to_string(trial) + " rule " + std::to_string(int(rule)) +
+                                 " tc " + std::to_string(tc) + (is3D ? " 3D" : " 2D");
+        expectSame(r[0], r[1], what);
+        expectSame(r[2], r[1], what + " (baseline build)");
         if (HasFailure()) break;
     }
     std::printf("edge-value blocks: %d updated, %d with E > A, %d with E = A\n", updated, surplus, equal);

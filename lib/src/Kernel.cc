@@ -533,6 +533,10 @@ __attribute__((always_inline)) inline void columnRows(const int32_t* const read[
 /// of the rows below the column's, in the -z neighbours.
 __attribute__((always_inline)) inline bool lowerZOver(const int32_t* const read[8], int col, int32_t tc)
 {
+    if ((col & 3) && (col >> 2)) { // the rows lie in the anchor's leaf: the cells below in the -z one
+        const int32_t* d = read[4] + kColumns.rowOffset[1][col][0] + 7;
+        return std::max(std::max(d[0], d[64]), std::max(d[8], d[72])) > tc;
+    }
     const uint16_t* off = kColumns.rowOffset[1][col];
     const uint8_t* lf = kColumns.rowLeaf[1][col];
     const int32_t a = std::max(read[lf[0] | 4][off[0] + 7], read[lf[1] | 4][off[1] + 7]);
@@ -566,7 +570,7 @@ __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], 
         const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(l))) |
                            (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(h))) << 4);
         uint64_t blocks = kColumns.zFold[P][z];
-        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -596,7 +600,7 @@ __attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t*
         }
         const __m256i any = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
         uint64_t blocks = kColumns.zFold[P][_mm256_movemask_ps(_mm256_castsi256_ps(any))];
-        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -610,8 +614,23 @@ bool cpuHasAvx2()
     }();
     return has;
 }
+
+/// Whether the CPU runs the pass's AVX2 build (kKernelTarget: AVX2 with BMI1, BMI2 and POPCNT).
+bool cpuHasKernelAvx2()
+{
+    static const bool has = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi") &&
+               __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("popcnt");
+    }();
+    return has;
+}
 #else
 bool cpuHasAvx2()
+{
+    return false;
+}
+bool cpuHasKernelAvx2()
 {
     return false;
 }
@@ -741,8 +760,15 @@ template <bool D3> struct BlockHash {
     }
 };
 
-template <Rule R, bool D3, int P>
-void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+/// The instructions a build of the pass may use: the target's baseline (SSE2 on x86-64), or AVX2 with
+/// BMI1, BMI2 and POPCNT (processRangeAvx2, chosen at run time where the CPU has them).
+enum class Isa { Base, Avx2 };
+
+/// The pass (see the top of this file). Inlined into one function per instruction set below; it
+/// calls nothing that needs more than the baseline, so the same source compiles for both.
+template <Rule R, bool D3, int P, Isa I>
+__attribute__((always_inline)) inline void processRangeBody(const PassInput& in, WorkItem* work, size_t begin,
+                                                            size_t end, PassTotals& tot)
 {
     constexpr int N = D3 ? 8 : 4;
     const BlockTables& tab = blockTables();
@@ -750,19 +776,19 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const int64_t tc = rule.threshold;
     const int32_t tc32 = int32_t(std::min<int64_t>(tc, INT32_MAX));
     const uint64_t prefix = rules_internal::stepPrefix(in.step, in.seed);
-    const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun;
+    const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun, portable = in.portable;
     const uint64_t insideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
 #if defined(__SSE2__)
     // The surplus branch in int32 lanes (surplusBranch) is exact when no sum can wrap: with no cell
     // over INT32_MAX / 8 (!mayOverflow), E < 8 * 2^28 = 2^31; with Tc <= 2^27, A <= 8 Tc <= 2^30;
     // every result is at most the block's sum. Otherwise, and on the portable path, the rule runs.
     constexpr bool kSurplusRule = R == Rule::Prorata || R == Rule::Sorted;
-    const bool simd = !in.portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
+    const bool simd = !portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
     const __m128i tcV = _mm_set1_epi32(tc32);
 #else
     const bool simd = false;
 #endif
-    const OverFilter filter = (D3 && !in.portable) ? resolveFilter(in.filter) : OverFilter::None;
+    const OverFilter filter = (D3 && !portable) ? resolveFilter(in.filter) : OverFilter::None;
     MassAcc acc(*in.tree);
     const LeafTable::Impl* table = in.table && in.table->valid() ? in.table->impl() : nullptr;
     std::optional<ObsAcc> oacc;
@@ -788,7 +814,10 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         WorkItem& w = work[wi];
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
-        examined += popcount64(w.mask);
+        if constexpr (I == Isa::Avx2)
+            examined += uint64_t(__builtin_popcountll(w.mask)); // one POPCNT
+        else
+            examined += popcount64(w.mask);
         if (P == 0 && table && w.entry != kNoEntry) {
             // Even phase from the table: one slot, no call (fetchLeaves' table branch, inlined).
             const LeafTable::Impl::Entry& e = table->entries[w.entry];
@@ -802,8 +831,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             ls.anchor = w.anchor;
             ls.fetched = 1;
         } else {
-            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable,
-                               table);
+            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !portable, table);
         }
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
@@ -825,7 +853,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
 #if defined(__SSE2__)
             // The block in registers (every non-portable load): cells and their compare with Tc.
             __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128(), gtLo = hi, gtHi = hi;
-            if (pairs && !in.portable) {
+            if (pairs && !portable) {
                 if (inside) {
                     const int32_t* d = ls.read[0] + off[0];
                     loadPairs<N>(d, d + 64, d + 8, d + 72, lo, hi);
@@ -843,7 +871,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
             } else {
 #if defined(__SSE2__)
-                if (!in.portable) {
+                if (!portable) {
                     // Straddling a z boundary: corner k and k + 4 lie in different leaves.
                     lo = _mm_setr_epi32(ls.read[lf[0]][off[0]], ls.read[lf[1]][off[1]],
                                         ls.read[lf[2]][off[2]], ls.read[lf[3]][off[3]]);
@@ -868,7 +896,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
-                if (pairs && !in.portable) {
+                if (pairs && !portable) {
                     // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
                     uint32_t blocked = 0;
                     VDBCLAY_UNROLL
@@ -958,7 +986,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     continue;
                 }
             }
-            if (!in.portable) storeCorners<N>(lo, hi, m); // the rule reads the cells from memory
+            if (!portable) storeCorners<N>(lo, hi, m); // the rule reads the cells from memory
 #endif
             changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
             if (!changed) continue;
@@ -1017,23 +1045,62 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     tot.maxWritten = std::max(tot.maxWritten, maxWritten);
 }
 
+template <Rule R, bool D3, int P>
+__attribute__((noinline)) void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end,
+                                             PassTotals& tot)
+{
+    processRangeBody<R, D3, P, Isa::Base>(in, work, begin, end, tot);
+}
+
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+// The same pass compiled for AVX2 (three-operand VEX forms: no register copies; BMI2 shifts; POPCNT).
+// The target attribute covers only this function and what is inlined into it: OpenVDB's and the
+// standard library's out-of-line functions stay baseline code, so nothing AVX2 leaks into symbols
+// other translation units share.
+template <Rule R, bool D3, int P>
+__attribute__((noinline, target("avx2,bmi,bmi2,popcnt"))) void
+processRangeAvx2(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+{
+    processRangeBody<R, D3, P, Isa::Avx2>(in, work, begin, end, tot);
+}
+#endif
+
+template <Rule R, bool D3, int P>
+void runPass(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+{
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+    if (in.avx2 && !in.portable && cpuHasKernelAvx2())
+        return processRangeAvx2<R, D3, P>(in, work, begin, end, tot);
+#endif
+    processRangeT<R, D3, P>(in, work, begin, end, tot);
+}
+
 template <Rule R>
 void dispatch(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
 {
     if (in.is3D) {
         if (in.phase)
-            processRangeT<R, true, 1>(in, work, begin, end, tot);
+            runPass<R, true, 1>(in, work, begin, end, tot);
         else
-            processRangeT<R, true, 0>(in, work, begin, end, tot);
+            runPass<R, true, 0>(in, work, begin, end, tot);
     } else {
         if (in.phase)
-            processRangeT<R, false, 1>(in, work, begin, end, tot);
+            runPass<R, false, 1>(in, work, begin, end, tot);
         else
-            processRangeT<R, false, 0>(in, work, begin, end, tot);
+            runPass<R, false, 0>(in, work, begin, end, tot);
     }
 }
 
 } // namespace
+
+bool avx2Pass()
+{
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+    return cpuHasKernelAvx2();
+#else
+    return false;
+#endif
+}
 
 OverFilter bestOverFilter()
 {
