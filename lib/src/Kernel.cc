@@ -14,14 +14,24 @@
 //
 // The surplus branch in registers (SSE2, every x86-64). A settling press spends most of its updates
 // in prorata's and sorted's E > A branch (every room filled, the surplus shared equally). There the
-// block stays in two SSE2 registers from load to store (surplusBranch): over/under masks, E and A by
-// horizontal sums, the result by lane selects, the changed mask by one compare, all 8 cells written by
-// four 8-byte stores for blocks inside one leaf; the overload delta is -A and the largest value
-// Tc + share (+1), both without a per-cell loop. No scalar store is reloaded as a vector (the
+// block stays in two SSE2 registers from load to store (surplusBranch): the compare with Tc that
+// found the over cells is the over lanes (no lane table unless an obstacle blocks a cell), E and
+// S = E - A come out of one reduction, the result is Tc + share on the under lanes (+1 on the
+// remainder's), all 8 cells written by four 8-byte stores for blocks inside one leaf; the overload
+// delta is -A and the largest value Tc + share (+1), both without a per-cell loop. The cells go to
+// memory only when the scalar rule runs; no scalar store is reloaded as a vector (the
 // store-forwarding stall that made an earlier int32 variant slower). Every other case (E <= A, the
 // other rules, a pass that may overflow, Tc > 2^27) runs the scalar rule as before; the result is
 // bit-identical either way (tests/TestKernel.cc runs both paths, PassInput::portable, on the same
 // grids; tests/TestGolden.cc pins whole runs).
+//
+// Two builds of the pass (processRangeBody, always inlined): the baseline one (processRangeT), and one
+// compiled for AVX2 + BMI1/2 + POPCNT (processRangeAvx2, a target attribute on the wrapper alone),
+// chosen at run time where the CPU has them (PassInput::avx2 turns it off; avx2Pass() says which runs).
+// The source is the same: the AVX2 build gains three-operand VEX forms (no register copies), BMI2
+// shifts and POPCNT, about 9 % of the pass's instructions. Only code inlined into the wrapper is
+// compiled for AVX2; out-of-line OpenVDB and library functions stay baseline code.
+
 #include "Kernel.h"
 
 #include "BlockMasks.h"
