@@ -12,7 +12,8 @@
 //
 // Pass: the automaton's kernel (lib/src/Kernel.h, processRange) on a 32^3 cube of random clay, every
 // block of the phase a candidate, on its SIMD path (with the over-cell filter chosen at run time, the
-// SSE2 filter, or none: PassInput::filter) and on its portable path (PassInput::portable),
+// SSE2 filter, or none: PassInput::filter; mode 4: the pass's baseline build where the CPU would run its
+// AVX2 build, PassInput::avx2 off) and on its portable path (PassInput::portable),
 // one pass per iteration on a fresh copy of the grid (the copy is not timed). items_per_second
 // counts updated blocks: 1e9 / items_per_second is the kernel's ns per updated block.
 //   surplus  cells 900-1600 (Tc 1000): most blocks have more excess than room (E > A), as in a
@@ -120,7 +121,7 @@ void BM_Pass(benchmark::State& state)
 {
     using namespace vdbclay::automaton_internal;
     // mode: 0 SIMD (filter chosen at run time), 1 SIMD with the SSE2 filter, 2 SIMD without the
-    // filter, 3 portable.
+    // filter, 3 portable, 4 SIMD in the baseline build (filter chosen at run time).
     const int mode = int(state.range(0)), kind = int(state.range(1));
     const bool portable = mode == 3;
     const int phase = int(state.range(2));
@@ -139,6 +140,7 @@ void BM_Pass(benchmark::State& state)
     in.step = uint64_t(phase);
     in.seed = 1;
     in.portable = portable;
+    in.avx2 = mode != 4;
     in.filter = mode == 1 ? OverFilter::Sse2 : mode == 2 ? OverFilter::None : OverFilter::Auto;
     uint64_t updated = 0;
     for (auto _ : state) {
@@ -153,14 +155,15 @@ void BM_Pass(benchmark::State& state)
         benchmark::DoNotOptimize(tot.overloadDelta);
     }
     state.SetItemsProcessed(int64_t(updated));
-    const OverFilter f = mode == 0 ? bestOverFilter() : in.filter;
+    const OverFilter f = (mode == 0 || mode == 4) ? bestOverFilter() : in.filter;
     const char* filter = portable                ? ""
                          : f == OverFilter::Avx2 ? "+avx2"
                          : f == OverFilter::Sse2 ? "+sse2"
                                                  : "+nofilter";
     const char* kinds[] = {"surplus", "spread", "sparse"};
-    state.SetLabel(std::string(portable ? "portable" : "simd") + filter + "/" + kinds[kind] + "/phase " +
-                   std::to_string(phase));
+    const char* build = portable ? "" : (in.avx2 && avx2Pass()) ? "[avx2 build]" : "[baseline build]";
+    state.SetLabel(std::string(portable ? "portable" : "simd") + build + filter + "/" + kinds[kind] +
+                   "/phase " + std::to_string(phase));
 }
 
 } // namespace
@@ -168,7 +171,7 @@ void BM_Pass(benchmark::State& state)
 BENCHMARK(BM_Pass)
     ->Name("processRange")
     ->ArgNames({"mode", "case", "phase"})
-    ->ArgsProduct({{0, 1, 2, 3}, {0, 1, 2}, {0, 1}});
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {0, 1, 2}, {0, 1}});
 BENCHMARK_TEMPLATE(BM_Block, false)->Name("repartitionBlock")->Apply(Args);
 BENCHMARK_TEMPLATE(BM_Block, true)->Name("rules_internal::repartition")->Apply(Args);
 

@@ -1,9 +1,10 @@
-// The automaton's kernel (lib/src/Kernel.cc) on its own: the SIMD path and the portable path
-// (PassInput::portable) must give bit-identical grids, active masks, changed masks and totals on the
-// same input. The inputs are random grids built to reach every branch of the pass: over cells next to
-// empty ones (0 -> positive, active bits), E > A and E <= A blocks, obstacle voxels and an obstacle
-// tile, odd blocks straddling into missing leaves (deferred), 2D and 3D, every rule, small and
-// large Tc (Tc > 2^27 turns the SIMD branch off, so both paths must agree there trivially too).
+// The automaton's kernel (lib/src/Kernel.cc) on its own: the SIMD path (its AVX2 build where the CPU
+// has it, and its baseline SSE2 build, PassInput::avx2 off) and the portable path (PassInput::portable)
+// must give bit-identical grids, active masks, changed masks and totals on the same input. The inputs are
+// random grids built to reach every branch of the pass: over cells next to empty ones (0 -> positive, active
+// bits), E > A and E <= A blocks, obstacle voxels and an obstacle tile, odd blocks straddling into missing
+// leaves (deferred), 2D and 3D, every rule, small and large Tc (Tc > 2^27 turns the SIMD branch off, so both
+// paths must agree there trivially too).
 #include "Kernel.h"
 
 #include <vdbclay/Automaton.h>
@@ -99,7 +100,7 @@ struct Result {
 };
 
 Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint64_t step, bool portable,
-               bool useTable = false, OverFilter filter = OverFilter::Auto)
+               bool useTable = false, OverFilter filter = OverFilter::Auto, bool avx2 = true)
 {
     Result r;
     r.mass = std::make_shared<openvdb::Int32Tree>(*s.mass); // deep copy
@@ -120,6 +121,7 @@ Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint
     in.seed = 7;
     in.portable = portable;
     in.filter = filter;
+    in.avx2 = avx2;
     in.table = useTable ? &table : nullptr;
     // Two ranges, as two tasks would get them, joined in order.
     const size_t half = work.size() / 2;
@@ -173,6 +175,9 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                     const Scene s = makeScene(seed++, is3D, tc);
                     const uint64_t step = 100 + uint64_t(phase) + 2 * seed;
                     const Result simd = runPass(s, rule, tc, is3D, phase, step, false);
+                    const Result sse2 =
+                        runPass(s, rule, tc, is3D, phase, step, false, false, OverFilter::Auto,
+                                /*avx2=*/false);
                     const Result portable = runPass(s, rule, tc, is3D, phase, step, true);
                     const std::string what = std::string(is3D ? "3D" : "2D") + " tc " + std::to_string(tc) +
                                              " rule " + std::to_string(int(rule)) + " phase " +
@@ -184,7 +189,9 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                         EXPECT_GT(portable.tot.deferred.size(), 0u) << what;
                     }
                     expectSame(simd, portable, what);
+                    expectSame(sse2, portable, what + " (baseline build)");
                 }
+    std::printf("the pass's build on this machine: %s\n", avx2Pass() ? "AVX2" : "baseline");
 }
 
 /// The flat leaf table (PassInput::table) only replaces the accessor probes: the same passes with and
@@ -429,8 +436,8 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
             if (v) s.mass->setValueOn(xyz, v);
             if (g.range(0, 15) == 0) s.obstacles->setValueOn(xyz);
         }
-        Result r[2];
-        for (int portable = 0; portable < 2; ++portable) {
+        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
+        for (int portable = 0; portable < 3; ++portable) {
             r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
             std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
             RuleParams p;
@@ -445,14 +452,100 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
             in.step = uint64_t(trial);
             in.seed = 3;
             in.portable = portable == 1;
+            in.avx2 = portable != 2;
             processRange(in, work.data(), 0, 1, r[portable].tot);
             r[portable].changed.push_back(work[0].changed);
         }
         updated += int(r[1].tot.updated);
         expectSame(r[0], r[1], "trial " + std::to_string(trial));
+        expectSame(r[2], r[1], "trial " + std::to_string(trial) + " (baseline build)");
         if (HasFailure()) break;
     }
     EXPECT_GT(updated, 2000); // most random blocks hold an over cell and an under one
+}
+
+/// The branches in registers (Kernel.cc: surplusBranch, roomBranch) against the scalar rule on single
+/// blocks built from edge values: cells at 0, 1, Tc - 1, Tc (no room), Tc + 1, 2 Tc and INT32_MAX / 8 (the
+/// largest a pass without overflow checks sees), so that blocks with every cell over, none under, no room
+/// at all (A = 0), E = A and E = A + 1, ties everywhere and empty cells that become active all occur;
+/// obstacles on random corners of either half; every rule, 2D and 3D, Tc 1, 2, 1000, 2^27 and 2^27 + 1.
+/// Each block is one pass, so its overload delta and largest value are compared alone.
+TEST_F(KernelTest, EdgeValueBlocksGiveIdenticalResults)
+{
+    vdbclay_test::Rng g(2026);
+    const Rule rules[] = {Rule::Arata, Rule::Bingham, Rule::Sorted, Rule::Prorata};
+    const int32_t tcs[] = {1, 2, 1000, 1 << 27, (1 << 27) + 1};
+    int updated = 0, surplus = 0, equal = 0;
+    for (int trial = 0; trial < 5000; ++trial) {
+        const bool is3D = trial % 2 == 0;
+        const Rule rule = rules[(trial / 2) % 4];
+        const int32_t tc = tcs[(trial / 8) % 5];
+        const int n = is3D ? 8 : 4;
+        const int32_t edge[] = {0, 1, tc - 1, tc, tc + 1, 2 * tc, INT32_MAX / 8};
+        int32_t v[8] = {};
+        const int style = g.range(0, 3); // 0: any edge values; 1: no room (under cells at Tc); 2: E = A (+1)
+        for (int c = 0; c < n; ++c)
+            v[c] = std::min<int32_t>(edge[g.range(0, 6)], INT32_MAX / 8);
+        if (style == 1) {
+            for (int c = 0; c < n; ++c)
+                if (v[c] <= tc) v[c] = tc;
+        } else if (style == 2) {
+            // One over cell holding exactly the block's room (or one unit more).
+            int64_t room = 0;
+            for (int c = 1; c < n; ++c) {
+                v[c] = std::min(v[c], tc);
+                room += tc - v[c];
+            }
+            v[0] = int32_t(std::min<int64_t>(tc + room + g.range(0, 1), INT32_MAX / 8));
+        }
+        Scene s;
+        s.mass = std::make_shared<openvdb::Int32Tree>(0);
+        s.obstacles = std::make_shared<openvdb::MaskTree>(false);
+        s.mass->touchLeaf(Coord(0, 0, 0));
+        int64_t e = 0, a = 0;
+        for (int c = 0; c < n; ++c) {
+            const Coord xyz(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            if (v[c]) s.mass->setValueOn(xyz, v[c]);
+            if (g.range(0, 9) == 0) {
+                s.obstacles->setValueOn(xyz);
+            } else {
+                e += std::max<int64_t>(v[c] - tc, 0);
+                a += std::max<int64_t>(tc - v[c], 0);
+            }
+        }
+        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
+        for (int portable = 0; portable < 3; ++portable) {
+            r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
+            std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
+            RuleParams p;
+            p.rule = rule;
+            p.threshold = tc;
+            p.alpha = 0.5;
+            PassInput in;
+            in.tree = r[portable].mass.get();
+            in.obstacles = s.obstacles.get();
+            in.rule = compileRule(p);
+            in.is3D = is3D;
+            in.step = uint64_t(trial) * 7;
+            in.seed = 11;
+            in.portable = portable == 1;
+            in.avx2 = portable != 2;
+            processRange(in, work.data(), 0, 1, r[portable].tot);
+            r[portable].changed.push_back(work[0].changed);
+        }
+        updated += int(r[1].tot.updated);
+        if (r[1].tot.updated && e > a) ++surplus;
+        if (r[1].tot.updated && e == a) ++equal;
+        const std::string what = "trial " + std::to_string(trial) + " rule " + std::to_string(int(rule)) +
+                                 " tc " + std::to_string(tc) + (is3D ? " 3D" : " 2D");
+        expectSame(r[0], r[1], what);
+        expectSame(r[2], r[1], what + " (baseline build)");
+        if (HasFailure()) break;
+    }
+    std::printf("edge-value blocks: %d updated, %d with E > A, %d with E = A\n", updated, surplus, equal);
+    EXPECT_GT(updated, 2000);
+    EXPECT_GT(surplus, 1000);
+    EXPECT_GT(equal, 100);
 }
 
 // Candidates' dense mode (per-anchor accumulators over the leaf table's anchors, filled by record()

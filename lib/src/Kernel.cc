@@ -14,14 +14,24 @@
 //
 // The surplus branch in registers (SSE2, every x86-64). A settling press spends most of its updates
 // in prorata's and sorted's E > A branch (every room filled, the surplus shared equally). There the
-// block stays in two SSE2 registers from load to store (surplusBranch): over/under masks, E and A by
-// horizontal sums, the result by lane selects, the changed mask by one compare, all 8 cells written by
-// four 8-byte stores for blocks inside one leaf; the overload delta is -A and the largest value
-// Tc + share (+1), both without a per-cell loop. No scalar store is reloaded as a vector (the
+// block stays in two SSE2 registers from load to store (surplusBranch): the compare with Tc that
+// found the over cells is the over lanes (no lane table unless an obstacle blocks a cell), E and
+// S = E - A come out of one reduction, the result is Tc + share on the under lanes (+1 on the
+// remainder's), all 8 cells written by four 8-byte stores for blocks inside one leaf; the overload
+// delta is -A and the largest value Tc + share (+1), both without a per-cell loop. The cells go to
+// memory only when the scalar rule runs; no scalar store is reloaded as a vector (the
 // store-forwarding stall that made an earlier int32 variant slower). Every other case (E <= A, the
 // other rules, a pass that may overflow, Tc > 2^27) runs the scalar rule as before; the result is
 // bit-identical either way (tests/TestKernel.cc runs both paths, PassInput::portable, on the same
 // grids; tests/TestGolden.cc pins whole runs).
+//
+// Two builds of the pass (processRangeBody, always inlined): the baseline one (processRangeT), and one
+// compiled for AVX2 + BMI1/2 + POPCNT (processRangeAvx2, a target attribute on the wrapper alone),
+// chosen at run time where the CPU has them (PassInput::avx2 turns it off; avx2Pass() says which runs).
+// The source is the same: the AVX2 build gains three-operand VEX forms (no register copies), BMI2
+// shifts and POPCNT, about 9 % of the pass's instructions. Only code inlined into the wrapper is
+// compiled for AVX2; out-of-line OpenVDB and library functions stay baseline code.
+
 #include "Kernel.h"
 
 #include "BlockMasks.h"
@@ -246,12 +256,14 @@ __attribute__((always_inline)) inline void loadPairs(const int32_t* c0, const in
     hi = N == 8 ? _mm_unpackhi_epi64(a01, a23) : _mm_setzero_si128(); // corners 4-7
 }
 
-/// Bit c of the result: lane c of (lo, hi) is greater than the matching lane of @a t (N lanes).
-template <int N> __attribute__((always_inline)) inline uint32_t laneMaskGt(__m128i lo, __m128i hi, __m128i t)
+/// Bit c of the result: lane c of @a a (c = 0-3) or @a b (c = 4-7; 3D only) is all ones, for
+/// lanes that are compare results (0 or -1): two packs and one byte movemask.
+template <int N> __attribute__((always_inline)) inline uint32_t laneBits(__m128i a, __m128i b)
 {
-    uint32_t m = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(lo, t))));
-    if constexpr (N == 8) m |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(hi, t)))) << 4;
-    return m;
+    if constexpr (N == 8)
+        return uint32_t(_mm_movemask_epi8(_mm_packs_epi16(_mm_packs_epi32(a, b), _mm_setzero_si128())));
+    (void)b;
+    return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(a)));
 }
 
 /// Stores the block's N corners (lo: 0-3, hi: 4-7) into @a m (16-byte aligned).
@@ -303,82 +315,102 @@ struct FirstBitsTable {
 };
 constexpr FirstBitsTable kFirstBits;
 
-/// The surplus branch of prorata and sorted (E > A: every room filled, the surplus E - A shared
-/// equally among the under cells, the remainder to the first under cells of the hash's rotation),
-/// on the block in registers, in int32 lanes. Exactly repartitionT's result (see the comment in
-/// processRangeT for why int32 cannot wrap here). Returns Done when it applied the branch, or when
-/// the block is not in that branch: Unchanged when the block has no over or no under cell (the rule
-/// would change nothing), Rule when E <= A (the caller runs the rule).
+/// What a branch in registers did: Done when it applied its branch, Unchanged when the block has no
+/// over or no under cell (the rule would change nothing), Rule when the block is in another branch
+/// (the caller runs the rule). The surplus branch (E > A: every room filled, the surplus E - A shared
+/// equally among the under cells, the remainder to the first under cells of the hash's rotation) is
+/// exactly repartitionT's result in int32 lanes (see processRangeT for why int32 cannot wrap there).
 enum class Branch { Unchanged, Done, Rule };
 struct Surplus {
     __m128i lo, hi;    // the block's new cells
-    uint32_t changed;  // cells whose value changed
+    uint32_t grow;     // cells that may go from 0 to positive: those that changed, or a superset of them
+                       // holding no other zero cell (surplusBranch: the under cells)
     int64_t overDelta; // change of the overload: -A (E before, E - A after)
     int64_t maxOut;    // the largest value written
     int64_t e, a;      // the block's excess and room (set when the result is Rule)
 };
 
-/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N.
-template <int N> inline uint32_t rotr(uint32_t x, int s)
+/// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N; rotl
+/// undoes it. The mask doubled (x | x << N) makes each a shift and a mask.
+template <int N> __attribute__((always_inline)) inline uint32_t rotr(uint32_t x, int s)
 {
-    return ((x >> s) | (x << ((N - s) & (N - 1)))) & ((1u << N) - 1);
+    return ((x | (x << N)) >> s) & ((1u << N) - 1);
 }
-template <int N> inline uint32_t rotl(uint32_t x, int s)
+template <int N> __attribute__((always_inline)) inline uint32_t rotl(uint32_t x, int s)
 {
-    return ((x << s) | (x >> ((N - s) & (N - 1)))) & ((1u << N) - 1);
+    return (((x | (x << N)) << s) >> N) & ((1u << N) - 1);
 }
+
+/// The cells whose value differs between (lo, hi) and (nlo, nhi).
+template <int N>
+__attribute__((always_inline)) inline uint32_t changedCells(__m128i lo, __m128i hi, __m128i nlo, __m128i nhi)
+{
+    return ~laneBits<N>(_mm_cmpeq_epi32(lo, nlo), _mm_cmpeq_epi32(hi, nhi)) & ((1u << N) - 1);
+}
+
+/// The surplus branch of prorata and sorted on the block in registers: (lo, hi) its cells, (gtLo,
+/// gtHi) the compare of each with Tc (lanes of -1 where over; obstacles not excluded), overCells the
+/// same as bits, valid the cells not blocked by an obstacle. E and the sum S = E - A of (m - Tc) over
+/// the valid cells come out of one reduction; E > A iff S > 0, and the surplus is S. Without
+/// obstacles the over lanes are the compare itself, and the result Tc + (share on the under lanes) +
+/// (one unit on the remainder's cells) needs no lane table but the remainder's.
 template <int N, typename Hash>
-__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, uint32_t overCells,
-                                                           uint32_t valid, int32_t tc, const Hash& hash,
-                                                           Surplus& s)
+__attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i hi, __m128i gtLo, __m128i gtHi,
+                                                           uint32_t overCells, uint32_t valid, int32_t tc,
+                                                           const Hash& hash, Surplus& s)
 {
     constexpr uint32_t kAll = (1u << N) - 1;
     const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
-    s.changed = 0;
     if (!over || !under) return Branch::Unchanged;
-    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), zero = _mm_setzero_si128();
+    const bool blocked = valid != kAll;
     const __m128i t = _mm_set1_epi32(tc);
-    // e = sum over over cells of (m - Tc), a = sum over under cells of (Tc - m).
+    __m128i vLo = _mm_setzero_si128(), vHi = vLo; // valid lanes (set only when blocked)
+    if (blocked) {
+        vLo = lanesOf(valid & 15u, vLo);
+        gtLo = _mm_and_si128(gtLo, vLo);
+        if constexpr (N == 8) {
+            vHi = lanesOf(valid >> 4, vHi);
+            gtHi = _mm_and_si128(gtHi, vHi);
+        }
+    }
+    // e = sum of (m - Tc) over the over cells, sum = the same over every valid cell (E - A).
     const __m128i xLo = _mm_sub_epi32(lo, t);
-    __m128i eV = _mm_and_si128(xLo, lanesOf(over & 15u, bitsLo));
-    __m128i aV = _mm_and_si128(_mm_sub_epi32(zero, xLo), lanesOf(under & 15u, bitsLo));
+    __m128i eV = _mm_and_si128(xLo, gtLo), sV = blocked ? _mm_and_si128(xLo, vLo) : xLo;
     if constexpr (N == 8) {
         const __m128i xHi = _mm_sub_epi32(hi, t);
-        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, lanesOf(over >> 4, bitsLo)));
-        aV = _mm_add_epi32(aV, _mm_and_si128(_mm_sub_epi32(zero, xHi), lanesOf(under >> 4, bitsLo)));
+        eV = _mm_add_epi32(eV, _mm_and_si128(xHi, gtHi));
+        sV = _mm_add_epi32(sV, blocked ? _mm_and_si128(xHi, vHi) : xHi);
     }
-    const int64_t e = hsum(eV), a = hsum(aV);
+    // Both reductions at once: lanes (e0+e2, e1+e3, s0+s2, s1+s3), then pairs: E in lane 0, S in lane 2.
+    const __m128i p = _mm_add_epi32(_mm_unpacklo_epi64(eV, sV), _mm_unpackhi_epi64(eV, sV));
+    const __m128i q = _mm_add_epi32(p, _mm_shuffle_epi32(p, 0xB1));
+    const int64_t e = _mm_cvtsi128_si32(q), sum = _mm_cvtsi128_si32(_mm_unpackhi_epi64(q, q));
     s.e = e;
-    s.a = a;
-    if (e <= a) return Branch::Rule;
+    s.a = e - sum;
+    if (sum <= 0) return Branch::Rule;
     const int nu = rules_internal::popcount8(under);
-    const int64_t surplus = e - a;
-    const int64_t share = rules_internal::divideBySmall(surplus, nu);
-    const int64_t r = surplus - share * nu;
-    uint32_t extra = 0; // cells that get one unit of the remainder
-    if (r) {
-        const int start = int(hash() & uint64_t(N - 1));
-        const uint32_t rot = ((under >> start) | (under << ((N - start) & (N - 1)))) & kAll;
-        const uint32_t first = kFirstBits.t[rot][r]; // r < nu <= N <= 8
-        extra = ((first << start) | (first >> ((N - start) & (N - 1)))) & kAll;
-    }
+    const int64_t share = rules_internal::divideBySmall(sum, nu);
+    const int64_t r = sum - share * nu;
+    // Over lanes to Tc, the others to Tc + share (obstacle lanes put back below).
     const __m128i shareV = _mm_set1_epi32(int32_t(share));
-    auto finish = [&](__m128i m, uint32_t valid4, uint32_t under4, uint32_t extra4) {
-        const __m128i v = lanesOf(valid4, bitsLo);
-        __m128i out = _mm_or_si128(_mm_and_si128(v, t), _mm_andnot_si128(v, m));
-        out = _mm_add_epi32(out, _mm_and_si128(lanesOf(under4, bitsLo), shareV));
-        return _mm_sub_epi32(out, lanesOf(extra4, bitsLo)); // -(-1): one more unit
-    };
-    s.lo = finish(lo, valid & 15u, under & 15u, extra & 15u);
-    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.lo, lo))));
-    if constexpr (N == 8) {
-        s.hi = finish(hi, valid >> 4, under >> 4, extra >> 4);
-        same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(s.hi, hi)))) << 4;
-    } else {
-        s.hi = zero;
+    __m128i oLo = _mm_add_epi32(t, _mm_andnot_si128(gtLo, shareV));
+    __m128i oHi = N == 8 ? _mm_add_epi32(t, _mm_andnot_si128(gtHi, shareV)) : _mm_setzero_si128();
+    if (r) {
+        // One unit to each of the first r under cells of the rotation starting at the hash.
+        const int start = int(hash() & uint64_t(N - 1));
+        const uint32_t extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
+        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u, oLo)); // lanes of -1: one more unit
+        if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4, oHi));
     }
-    s.changed = ~same & kAll;
-    s.overDelta = -a;
+    if (blocked) {
+        oLo = _mm_or_si128(_mm_and_si128(vLo, oLo), _mm_andnot_si128(vLo, lo));
+        if constexpr (N == 8) oHi = _mm_or_si128(_mm_and_si128(vHi, oHi), _mm_andnot_si128(vHi, hi));
+    }
+    s.lo = oLo;
+    s.hi = oHi;
+    // Every under cell ends at Tc or more (> 0): the zero cells that change are the zero under cells.
+    s.grow = under;
+    s.overDelta = -(e - sum);
     s.maxOut = tc + share + (r ? 1 : 0);
     return Branch::Done;
 }
@@ -451,9 +483,7 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     }
     s.lo = oLo;
     s.hi = oHi;
-    uint32_t same = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oLo, lo))));
-    if constexpr (N == 8) same |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(oHi, hi)))) << 4;
-    s.changed = ~same & kAll;
+    s.grow = changedCells<N>(lo, hi, oLo, oHi);
     // Shares and the first remainder pass keep every under cell at or below Tc (E <= A); the second
     // pass lifts cells at Tc to Tc + 1: the overload goes from E to the number of those cells.
     s.overDelta = -e + rules_internal::popcount8(extra2);
@@ -513,6 +543,10 @@ __attribute__((always_inline)) inline void columnRows(const int32_t* const read[
 /// of the rows below the column's, in the -z neighbours.
 __attribute__((always_inline)) inline bool lowerZOver(const int32_t* const read[8], int col, int32_t tc)
 {
+    if ((col & 3) && (col >> 2)) { // the rows lie in the anchor's leaf: the cells below in the -z one
+        const int32_t* d = read[4] + kColumns.rowOffset[1][col][0] + 7;
+        return std::max(std::max(d[0], d[64]), std::max(d[8], d[72])) > tc;
+    }
     const uint16_t* off = kColumns.rowOffset[1][col];
     const uint8_t* lf = kColumns.rowLeaf[1][col];
     const int32_t a = std::max(read[lf[0] | 4][off[0] + 7], read[lf[1] | 4][off[1] + 7]);
@@ -546,7 +580,7 @@ __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], 
         const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(l))) |
                            (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(h))) << 4);
         uint64_t blocks = kColumns.zFold[P][z];
-        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -576,7 +610,7 @@ __attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t*
         }
         const __m256i any = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
         uint64_t blocks = kColumns.zFold[P][_mm256_movemask_ps(_mm256_castsi256_ps(any))];
-        if (P == 1 && ((mask >> col) & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -590,8 +624,23 @@ bool cpuHasAvx2()
     }();
     return has;
 }
+
+/// Whether the CPU runs the pass's AVX2 build (kKernelTarget: AVX2 with BMI1, BMI2 and POPCNT).
+bool cpuHasKernelAvx2()
+{
+    static const bool has = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi") &&
+               __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("popcnt");
+    }();
+    return has;
+}
 #else
 bool cpuHasAvx2()
+{
+    return false;
+}
+bool cpuHasKernelAvx2()
 {
     return false;
 }
@@ -721,8 +770,15 @@ template <bool D3> struct BlockHash {
     }
 };
 
-template <Rule R, bool D3, int P>
-void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+/// The instructions a build of the pass may use: the target's baseline (SSE2 on x86-64), or AVX2 with
+/// BMI1, BMI2 and POPCNT (processRangeAvx2, chosen at run time where the CPU has them).
+enum class Isa { Base, Avx2 };
+
+/// The pass (see the top of this file). Inlined into one function per instruction set below; it
+/// calls nothing that needs more than the baseline, so the same source compiles for both.
+template <Rule R, bool D3, int P, Isa I>
+__attribute__((always_inline)) inline void processRangeBody(const PassInput& in, WorkItem* work, size_t begin,
+                                                            size_t end, PassTotals& tot)
 {
     constexpr int N = D3 ? 8 : 4;
     const BlockTables& tab = blockTables();
@@ -730,19 +786,19 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     const int64_t tc = rule.threshold;
     const int32_t tc32 = int32_t(std::min<int64_t>(tc, INT32_MAX));
     const uint64_t prefix = rules_internal::stepPrefix(in.step, in.seed);
-    const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun;
+    const bool mayOverflow = in.mayOverflow, dryRun = in.dryRun, portable = in.portable;
     const uint64_t insideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
 #if defined(__SSE2__)
     // The surplus branch in int32 lanes (surplusBranch) is exact when no sum can wrap: with no cell
     // over INT32_MAX / 8 (!mayOverflow), E < 8 * 2^28 = 2^31; with Tc <= 2^27, A <= 8 Tc <= 2^30;
     // every result is at most the block's sum. Otherwise, and on the portable path, the rule runs.
     constexpr bool kSurplusRule = R == Rule::Prorata || R == Rule::Sorted;
-    const bool simd = !in.portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
+    const bool simd = !portable && !mayOverflow && !dryRun && tc <= (int64_t(1) << 27);
     const __m128i tcV = _mm_set1_epi32(tc32);
 #else
     const bool simd = false;
 #endif
-    const OverFilter filter = (D3 && !in.portable) ? resolveFilter(in.filter) : OverFilter::None;
+    const OverFilter filter = (D3 && !portable) ? resolveFilter(in.filter) : OverFilter::None;
     MassAcc acc(*in.tree);
     const LeafTable::Impl* table = in.table && in.table->valid() ? in.table->impl() : nullptr;
     std::optional<ObsAcc> oacc;
@@ -768,7 +824,10 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
         WorkItem& w = work[wi];
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
-        examined += popcount64(w.mask);
+        if constexpr (I == Isa::Avx2)
+            examined += uint64_t(__builtin_popcountll(w.mask)); // one POPCNT
+        else
+            examined += popcount64(w.mask);
         if (P == 0 && table && w.entry != kNoEntry) {
             // Even phase from the table: one slot, no call (fetchLeaves' table branch, inlined).
             const LeafTable::Impl::Entry& e = table->entries[w.entry];
@@ -782,8 +841,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             ls.anchor = w.anchor;
             ls.fetched = 1;
         } else {
-            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !in.portable,
-                               table);
+            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !portable, table);
         }
         if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
@@ -803,8 +861,9 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             alignas(16) int32_t m[8];
             uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
 #if defined(__SSE2__)
-            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128();
-            if (pairs && !in.portable) {
+            // The block in registers (every non-portable load): cells and their compare with Tc.
+            __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128(), gtLo = hi, gtHi = hi;
+            if (pairs && !portable) {
                 if (inside) {
                     const int32_t* d = ls.read[0] + off[0];
                     loadPairs<N>(d, d + 64, d + 8, d + 72, lo, hi);
@@ -812,25 +871,27 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     loadPairs<N>(ls.read[lf[0]] + off[0], ls.read[lf[1]] + off[1], ls.read[lf[2]] + off[2],
                                  ls.read[lf[3]] + off[3], lo, hi);
                 }
-                overCells = laneMaskGt<N>(lo, hi, tcV);
+                gtLo = _mm_cmpgt_epi32(lo, tcV);
+                if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
+                overCells = laneBits<N>(gtLo, gtHi);
                 if (!overCells) continue;
-                storeCorners<N>(lo, hi, m);
             } else
 #endif
                 if (inside) {
                 if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
             } else {
 #if defined(__SSE2__)
-                if (!in.portable) {
+                if (!portable) {
                     // Straddling a z boundary: corner k and k + 4 lie in different leaves.
                     lo = _mm_setr_epi32(ls.read[lf[0]][off[0]], ls.read[lf[1]][off[1]],
                                         ls.read[lf[2]][off[2]], ls.read[lf[3]][off[3]]);
                     if constexpr (N == 8)
                         hi = _mm_setr_epi32(ls.read[lf[4]][off[4]], ls.read[lf[5]][off[5]],
                                             ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
-                    overCells = laneMaskGt<N>(lo, hi, tcV);
+                    gtLo = _mm_cmpgt_epi32(lo, tcV);
+                    if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
+                    overCells = laneBits<N>(gtLo, gtHi);
                     if (!overCells) continue;
-                    storeCorners<N>(lo, hi, m);
                 } else
 #endif
                 {
@@ -845,7 +906,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
             }
             uint32_t valid = (1u << N) - 1;
             if (ls.anyObs) {
-                if (pairs && !in.portable) {
+                if (pairs && !portable) {
                     // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
                     uint32_t blocked = 0;
                     VDBCLAY_UNROLL
@@ -873,7 +934,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
 #if defined(__SSE2__)
             if (kSurplusRule && simd) {
                 Surplus sp;
-                Branch br = surplusBranch<N>(lo, hi, overCells, valid, tc32, hash, sp);
+                Branch br = surplusBranch<N>(lo, hi, gtLo, gtHi, overCells, valid, tc32, hash, sp);
                 if (br == Branch::Unchanged) continue;
                 if constexpr (R == Rule::Prorata) {
                     if (br == Branch::Rule && roomBranch<N>(lo, hi, overCells, valid, tc32, hash, sp))
@@ -881,12 +942,13 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                 }
                 if (br == Branch::Done) {
                     if (P == 1 && ls.anyMissing && !inside) {
+                        const uint32_t ch = changedCells<N>(lo, hi, sp.lo, sp.hi);
                         bool missing = false;
                         for (int c = 0; c < N; ++c)
-                            if (((sp.changed >> c) & 1u) && !ls.data[lf[c]]) missing = true;
+                            if (((ch >> c) & 1u) && !ls.data[lf[c]]) missing = true;
                         if (missing) {
                             tot.deferred.push_back(
-                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(sp.changed)});
+                                PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(ch)});
                             continue;
                         }
                     }
@@ -907,7 +969,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     } else {
                         alignas(16) int32_t o32[8];
                         storeCorners<N>(sp.lo, sp.hi, o32);
-                        uint32_t ch = sp.changed;
+                        uint32_t ch = changedCells<N>(lo, hi, sp.lo, sp.hi);
                         while (ch) {
                             const int c = __builtin_ctz(ch);
                             ch &= ch - 1;
@@ -917,14 +979,8 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                         }
                     }
                     // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
-                    const uint32_t zero =
-                        uint32_t(
-                            _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, _mm_setzero_si128())))) |
-                        (N == 8 ? uint32_t(_mm_movemask_ps(
-                                      _mm_castsi128_ps(_mm_cmpeq_epi32(hi, _mm_setzero_si128()))))
-                                      << 4
-                                : 0u);
-                    uint32_t fresh = zero & sp.changed;
+                    const __m128i z = _mm_setzero_si128();
+                    uint32_t fresh = laneBits<N>(_mm_cmpeq_epi32(lo, z), _mm_cmpeq_epi32(hi, z)) & sp.grow;
                     while (fresh) {
                         const int c = __builtin_ctz(fresh);
                         fresh &= fresh - 1;
@@ -940,6 +996,7 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
                     continue;
                 }
             }
+            if (!portable) storeCorners<N>(lo, hi, m); // the rule reads the cells from memory
 #endif
             changed = rules_internal::repartitionT<R, N>(rule, m, valid, hash, out);
             if (!changed) continue;
@@ -998,23 +1055,62 @@ void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end
     tot.maxWritten = std::max(tot.maxWritten, maxWritten);
 }
 
+template <Rule R, bool D3, int P>
+__attribute__((noinline)) void processRangeT(const PassInput& in, WorkItem* work, size_t begin, size_t end,
+                                             PassTotals& tot)
+{
+    processRangeBody<R, D3, P, Isa::Base>(in, work, begin, end, tot);
+}
+
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+// The same pass compiled for AVX2 (three-operand VEX forms: no register copies; BMI2 shifts; POPCNT).
+// The target attribute covers only this function and what is inlined into it: OpenVDB's and the
+// standard library's out-of-line functions stay baseline code, so nothing AVX2 leaks into symbols
+// other translation units share.
+template <Rule R, bool D3, int P>
+__attribute__((noinline, target("avx2,bmi,bmi2,popcnt"))) void
+processRangeAvx2(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+{
+    processRangeBody<R, D3, P, Isa::Avx2>(in, work, begin, end, tot);
+}
+#endif
+
+template <Rule R, bool D3, int P>
+void runPass(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
+{
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+    if (in.avx2 && !in.portable && cpuHasKernelAvx2())
+        return processRangeAvx2<R, D3, P>(in, work, begin, end, tot);
+#endif
+    processRangeT<R, D3, P>(in, work, begin, end, tot);
+}
+
 template <Rule R>
 void dispatch(const PassInput& in, WorkItem* work, size_t begin, size_t end, PassTotals& tot)
 {
     if (in.is3D) {
         if (in.phase)
-            processRangeT<R, true, 1>(in, work, begin, end, tot);
+            runPass<R, true, 1>(in, work, begin, end, tot);
         else
-            processRangeT<R, true, 0>(in, work, begin, end, tot);
+            runPass<R, true, 0>(in, work, begin, end, tot);
     } else {
         if (in.phase)
-            processRangeT<R, false, 1>(in, work, begin, end, tot);
+            runPass<R, false, 1>(in, work, begin, end, tot);
         else
-            processRangeT<R, false, 0>(in, work, begin, end, tot);
+            runPass<R, false, 0>(in, work, begin, end, tot);
     }
 }
 
 } // namespace
+
+bool avx2Pass()
+{
+#if defined(VDBCLAY_HAVE_AVX2_FILTER)
+    return cpuHasKernelAvx2();
+#else
+    return false;
+#endif
+}
 
 OverFilter bestOverFilter()
 {

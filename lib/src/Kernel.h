@@ -84,6 +84,10 @@ OverFilter bestOverFilter();
 uint64_t overBlocks(const int32_t* const read[8], uint64_t mask, int32_t tc, bool is3D, int phase,
                     OverFilter f);
 
+/// Whether processRange runs its AVX2 build on this machine (with PassInput::avx2 on): the CPU has AVX2,
+/// BMI1, BMI2 and POPCNT and the build is for x86-64 with GCC or Clang. Every build gives the same result.
+bool avx2Pass();
+
 /// What a pass needs to know about the step.
 struct PassInput {
     MassTree* tree = nullptr;
@@ -95,6 +99,7 @@ struct PassInput {
     bool mayOverflow = false; // a result may exceed INT32_MAX: check every written cell
     bool dryRun = false;      // check for overflow only, write nothing
     bool portable = false;    // no SIMD: the plain C++ path (tests compare both on the same grids)
+    bool avx2 = true;         // the pass's AVX2 build where the CPU has it; false: the baseline (SSE2) build
     OverFilter filter = OverFilter::Auto; // the over-cell filter (None on the portable path)
     const LeafTable* table = nullptr;     // valid leaf table of both trees, or null: accessors
     const DenseSink* sink = nullptr; // dense candidates: record each item's changes here (not in dry runs)
