@@ -283,9 +283,9 @@ void Multigrid::factor(Level& l)
     l.dense = true;
 }
 
-inline double Multigrid::residual(const Level& l, size_t k)
+inline double Multigrid::residual(const Level& l, size_t k, double own)
 {
-    double s = l.r[k] - l.diag[k] * l.x[k];
+    double s = l.r[k] - l.diag[k] * own;
     if (l.w.empty())
         for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
             s += l.x[size_t(l.col[e])];
@@ -295,11 +295,11 @@ inline double Multigrid::residual(const Level& l, size_t k)
     return s;
 }
 
-inline double Multigrid::residual0(const Level& l, size_t k)
+inline double Multigrid::residual0(const Level& l, size_t k, double own)
 {
     const int32_t* nb = &l.nb6[k * 6];
     const double* x = l.x.data();
-    double s = l.r[k] - l.diag[k] * x[k];
+    double s = l.r[k] - l.diag[k] * own;
     s += x[nb[0]];
     s += x[nb[1]];
     s += x[nb[2]];
@@ -313,27 +313,38 @@ void Multigrid::sweep(Level& l)
 {
     forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k) {
-            l.t[k] = l.x[k] + kOmega * l.invDiag[k] * residual(l, k);
+            l.t[k] = l.x[k] + kOmega * l.invDiag[k] * residual(l, k, l.x[k]);
         }
     });
     l.x.swap(l.t);
 }
 
-void Multigrid::halfSweep(Level& l, int c)
+void Multigrid::halfSweep(Level& l, int c, bool fromZero)
 {
     const std::vector<int32_t>& rows = l.colour[c];
     const bool finest = &l == &mLevels.front();
     forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+        if (fromZero) {
+            // x_k was 0 (not yet written): x_k = +0 + D^-1 (r - A x)_k with x_k = 0 in the residual,
+            // the very operations of the update from a zero-filled x; and t_k = 0 (this colour's
+            // residual after the half-sweep) for the restriction.
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(rows[q]);
+                l.x[k] = 0.0 + l.invDiag[k] * (finest ? residual0(l, k, 0.0) : residual(l, k, 0.0));
+                l.t[k] = 0.0;
+            }
+            return;
+        }
         if (finest) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
-                l.x[k] += l.invDiag[k] * residual0(l, k);
+                l.x[k] += l.invDiag[k] * residual0(l, k, l.x[k]);
             }
             return;
         }
         for (size_t q = lo; q < hi; ++q) {
             const size_t k = size_t(rows[q]);
-            l.x[k] += l.invDiag[k] * residual(l, k);
+            l.x[k] += l.invDiag[k] * residual(l, k, l.x[k]);
         }
     });
 }
@@ -368,11 +379,8 @@ void Multigrid::cycle(size_t li)
         return;
     }
     // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
-    // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t.
-    forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
-        std::fill(&l.x[lo], &l.x[0] + hi, 0.0);
-        std::fill(&l.t[lo], &l.t[0] + hi, 0.0);
-    });
+    // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t. (Every
+    // row's x and t is written here before it is read: no zero fill, round 6.)
     {
         const std::vector<int32_t>& red = l.colour[0];
         forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
@@ -381,12 +389,12 @@ void Multigrid::cycle(size_t li)
                 l.x[k] = l.invDiag[k] * l.r[k];
             }
         });
-        halfSweep(l, 1);
+        halfSweep(l, 1, true);
         const bool finest = li == 0;
         forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(red[q]);
-                l.t[k] = finest ? residual0(l, k) : residual(l, k);
+                l.t[k] = finest ? residual0(l, k, l.x[k]) : residual(l, k, l.x[k]);
             }
         });
     }
@@ -406,8 +414,8 @@ void Multigrid::cycle(size_t li)
             if (l.agg[k] >= 0) l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
     });
     // Post-smoothing in the adjoint order (black, then red): a symmetric V-cycle.
-    halfSweep(l, 1);
-    halfSweep(l, 0);
+    halfSweep(l, 1, false);
+    halfSweep(l, 0, false);
 }
 
 } // namespace transport_internal

@@ -98,16 +98,18 @@ private:
     /// Builds the next level; false if it would not shrink the problem enough.
     bool coarsen();
     static void factor(Level& l);
-    /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels).
-    static double residual(const Level& l, size_t k);
+    /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels), with @a own
+    /// as x_k.
+    static double residual(const Level& l, size_t k, double own);
     /// residual() on the finest level, through its fixed-width rows: the same additions in the same
     /// order (a missing face adds x[n] = -0, which leaves every sum unchanged, a zero's sign too).
-    static double residual0(const Level& l, size_t k);
+    static double residual0(const Level& l, size_t k, double own);
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l);
     /// x_k = x_k + D^-1 (r - A x)_k for the rows of colour @a c: a Gauss-Seidel half-sweep (rows of
-    /// one colour do not read each other).
-    void halfSweep(Level& l, int c);
+    /// one colour do not read each other). @a fromZero: the first sweep of a V-cycle's level, whose
+    /// rows of colour @a c hold no x yet (as if 0); their t is set to 0.
+    void halfSweep(Level& l, int c, bool fromZero);
     void cycle(size_t li);
 
     bool mSerial = true;

@@ -64,6 +64,7 @@
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cstring>
 #include <cmath>
 #include <memory>
 #include <numeric>
@@ -101,6 +102,10 @@ constexpr size_t kTightChange = 1000;
 /// the reach when a part has no room).
 constexpr int64_t kInnerMargin = 2;
 
+/// The routing sorts up to this many cells by a serial radix sort, more by a parallel comparison sort
+/// when threaded (the same sequence either way).
+constexpr size_t kRadixMax = size_t(1) << 20;
+
 /// The layer's arrays, kept from one call to the next by a GlobalTransportWorkspace (cleared, never
 /// read before written: a call's result does not depend on them).
 struct Buffers {
@@ -119,6 +124,9 @@ struct Buffers {
     std::vector<double> outW, outSum;
     std::vector<uint8_t> outN;
     std::vector<int32_t> denseIndex; ///< the cell index over the flood's box (Solver::indexOf)
+    std::vector<uint64_t> sortKey, sortKeyTmp; ///< the routing's radix sort (Solver::sortByPotential)
+    std::vector<int32_t> sortTmp;
+    std::vector<size_t> sortCount;
     std::unique_ptr<Multigrid> mg;
 };
 
@@ -884,17 +892,73 @@ private:
             std::vector<double>().swap(v);
     }
 
+    /// Sorts @a order (cells) as @a higher does: decreasing p, ties by coordinate. A stable LSD radix
+    /// sort on p's bits (11 bits a pass; a pass whose digit is the same for every key is skipped), then
+    /// each run of equal p by coordinate: the same sequence as a comparison sort, in O(n) (round 6: the
+    /// comparison sort took 6.5 % of a 128-wide compress stroke's frame).
+    template <typename Higher> void sortByPotential(std::vector<int32_t>& order, const Higher& higher)
+    {
+        const size_t n = order.size();
+        if (n < 2) return;
+        std::vector<uint64_t>& key = mB.sortKey;
+        std::vector<uint64_t>& keyTmp = mB.sortKeyTmp;
+        std::vector<int32_t>& tmp = mB.sortTmp;
+        key.resize(n);
+        keyTmp.resize(n);
+        tmp.resize(n);
+        // Six digits of 11 bits (the last one of 9).
+        constexpr int kBits = 11, kDigits = 6;
+        constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
+        std::vector<size_t>& count = mB.sortCount;
+        count.assign(size_t(kDigits) << kBits, 0);
+        for (size_t u = 0; u < n; ++u) {
+            // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
+            // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
+            const double v = mP[size_t(order[u])] + 0.0;
+            uint64_t b;
+            std::memcpy(&b, &v, sizeof b);
+            b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
+            key[u] = ~b;
+            for (int d = 0; d < kDigits; ++d)
+                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
+        }
+        for (int d = 0; d < kDigits; ++d) {
+            size_t* c = &count[size_t(d) << kBits];
+            if (c[(key[0] >> (kBits * d)) & kMask] == n) continue; // one digit for all: the order stands
+            size_t sum = 0;
+            for (size_t b = 0; b <= kMask; ++b) {
+                const size_t k = c[b];
+                c[b] = sum;
+                sum += k;
+            }
+            for (size_t u = 0; u < n; ++u) {
+                const size_t at = c[(key[u] >> (kBits * d)) & kMask]++;
+                keyTmp[at] = key[u];
+                tmp[at] = order[u];
+            }
+            key.swap(keyTmp);
+            order.swap(tmp);
+        }
+        for (size_t u = 0; u < n;) {
+            size_t e = u + 1;
+            while (e < n && key[e] == key[u])
+                ++e;
+            if (e - u > 1) std::sort(order.begin() + std::ptrdiff_t(u), order.begin() + std::ptrdiff_t(e), higher);
+            u = e;
+        }
+    }
+
     void route(GlobalTransportReport& rep)
     {
         std::vector<int32_t>& order = mB.order;
         selectIndices(mCells.size(), mSerial, mCounts, order, [&](size_t i) { return mKind[i] == kUnknown; });
-        // A strict total order (ties by coordinate): the parallel sort gives the same sequence.
+        // A strict total order (ties by coordinate): every sort gives the same sequence.
         const auto higher = [&](int32_t a, int32_t b) {
             if (mP[size_t(a)] != mP[size_t(b)]) return mP[size_t(a)] > mP[size_t(b)];
             return mCells[size_t(a)] < mCells[size_t(b)];
         };
-        if (mSerial)
-            std::sort(order.begin(), order.end(), higher);
+        if (mSerial || order.size() < kRadixMax)
+            sortByPotential(order, higher);
         else
             tbb::parallel_sort(order.begin(), order.end(), higher);
         std::vector<int64_t>& cur = mB.cur;
