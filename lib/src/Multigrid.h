@@ -76,6 +76,7 @@ private:
         std::vector<uint32_t> memberStart; ///< the rows of the level above in each row (CSR)
         std::vector<int32_t> members;      ///<   in row order
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
+        const double* rhs = nullptr;       ///< the right-hand side a V-cycle reads: r, or apply()'s input
         std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
         /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
         /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
