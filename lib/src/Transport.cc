@@ -131,6 +131,7 @@ struct Buffers {
     std::vector<int32_t> denseIndex; ///< the cell index over the flood's box (Solver::indexOf)
     std::vector<uint64_t> sortKey, sortKeyTmp; ///< the routing's radix sort (Solver::sortByPotential)
     std::vector<int32_t> sortTmp;
+    std::vector<Automaton::CellMass> write; ///< the routing's changed cells and their masses
     std::vector<size_t> sortCount;
     std::unique_ptr<Multigrid> mg;
 };
@@ -1116,16 +1117,16 @@ private:
             region = unite(region, boxes[c]);
         }
         rep.region = region;
-        mA.edit(region, [&](MassGrid& grid) {
-            auto acc = grid.getAccessor();
-            for (const int32_t k : changed) {
-                const size_t i = size_t(k);
-                if (cur[i] > 0)
-                    acc.setValueOn(mCells[i], int32_t(cur[i]));
-                else
-                    acc.setValueOff(mCells[i], 0);
-            }
-        });
+        // Only the changed cells are written and read (round 6: edit() rescanned their bounds twice,
+        // 3.5 % of a compress stroke frame); the same grid, sums and woken blocks.
+        std::vector<Automaton::CellMass>& write = mB.write;
+        write.resize(changed.size());
+        for (size_t k = 0; k < changed.size(); ++k) {
+            const size_t i = size_t(changed[k]);
+            write[k].at = {{mCells[i].x(), mCells[i].y(), mCells[i].z()}};
+            write[k].mass = cur[i] > 0 ? int32_t(cur[i]) : 0;
+        }
+        mA.setMasses(region, write);
         rep.overloadAfter = mA.residualOverload();
     }
 
