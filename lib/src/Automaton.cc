@@ -756,7 +756,8 @@ void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
             if (c.at[size_t(a)] < region.min[size_t(a)] || c.at[size_t(a)] > region.max[size_t(a)])
                 throw Error("setMasses: voxel " + coordStr(at) + " lies outside the region");
         if (c.mass < 0)
-            throw Error("setMasses: voxel " + coordStr(at) + " would hold negative mass " + std::to_string(c.mass));
+            throw Error("setMasses: voxel " + coordStr(at) + " would hold negative mass " +
+                        std::to_string(c.mass));
         if (!im.is3D() && c.at[2] != 0)
             throw Error("setMasses: 2D clay must lie in the z = 0 layer, but voxel " + coordStr(at) +
                         " would hold mass " + std::to_string(c.mass));

@@ -129,10 +129,11 @@ struct Buffers {
     std::vector<double> outW, outSum;
     std::vector<uint8_t> outN;
     std::vector<int32_t> denseIndex; ///< the cell index over the flood's box (Solver::indexOf)
-    std::vector<uint64_t> sortKey, sortKeyTmp; ///< the routing's radix sort (Solver::sortByPotential)
+    /// The routing's radix sort (Solver::sortByPotential): keys, and the pass's copies and counts.
+    std::vector<uint64_t> sortKey, sortKeyTmp;
     std::vector<int32_t> sortTmp;
-    std::vector<Automaton::CellMass> write; ///< the routing's changed cells and their masses
     std::vector<size_t> sortCount;
+    std::vector<Automaton::CellMass> write; ///< the routing's changed cells and their masses
     std::unique_ptr<Multigrid> mg;
 };
 
@@ -482,7 +483,7 @@ private:
                     face[size_t(i) * 6 + size_t(d)] = kFaceRoom;
                     continue;
                 }
-                if (reach > 0 && di >= reach) { // linking below marks the cut (unless a later flood gets there)
+                if (reach > 0 && di >= reach) { // linking marks the cut (unless a later flood gets there)
                     face[size_t(i) * 6 + size_t(d)] = kFaceFull;
                     continue;
                 }
@@ -998,7 +999,8 @@ private:
             size_t e = u + 1;
             while (e < n && key[e] == key[u])
                 ++e;
-            if (e - u > 1) std::sort(order.begin() + std::ptrdiff_t(u), order.begin() + std::ptrdiff_t(e), higher);
+            if (e - u > 1)
+                std::sort(order.begin() + std::ptrdiff_t(u), order.begin() + std::ptrdiff_t(e), higher);
             u = e;
         }
     }
