@@ -134,6 +134,7 @@ struct Buffers {
     std::vector<int32_t> sortTmp;
     std::vector<size_t> sortCount;
     std::vector<Automaton::CellMass> write; ///< the routing's changed cells and their masses
+    std::vector<int32_t> micNb6;            ///< MIC(0)'s rows at a fixed width (row n: none)
     std::unique_ptr<Multigrid> mg;
 };
 
@@ -651,6 +652,13 @@ private:
             mSolveMg = &mg;
         }
         if (!multigrid) {
+            // The rows at a fixed width, a missing face pointing at row n (a sentinel), for A v and
+            // the triangular solves. Rows are in coordinate order and kDir lists -x, +x, -y, +y, -z,
+            // +z: a row's even faces are its lower neighbours, its odd faces its upper ones.
+            std::vector<int32_t>& nb6 = mB.micNb6;
+            nb6.resize(n * 6);
+            for (size_t e = 0; e < n * 6; ++e)
+                nb6[e] = nb[e] >= 0 ? nb[e] : int32_t(n);
             std::vector<double> piv(n);
             std::vector<double>& inv = mInv;
             inv.assign(n, 0.0);
@@ -686,7 +694,6 @@ private:
         Multigrid* mg = mSolveMg;
         if (mg) ++rep.multigridSolves;
         const bool multigrid = mg != nullptr;
-        const std::vector<int32_t>& nb = mSolveNb;
         const std::vector<double>& diag = mSolveDiag;
         const std::vector<double>& b = mSolveB;
         const std::vector<double>& inv = mInv;
@@ -699,60 +706,60 @@ private:
         std::vector<double>& w = mWork[5];
         for (std::vector<double>* v : {&x, &r, &z, &p, &q})
             v->resize(n);
-        w.resize(multigrid ? 0 : n);
+        w.resize(multigrid ? 0 : n + 1);
+        if (!multigrid) { // the triangular solves' sentinels: adding -0 leaves every sum as it was
+            w[n] = -0.0;
+            z.resize(n + 1);
+            z[n] = -0.0;
+        }
         forChunks(n, mSerial, [&](size_t lo, size_t hi) {
             for (size_t k = lo; k < hi; ++k)
                 x[k] = mP[size_t(mRowCell[k])];
         });
+        const int32_t* micNb6 = mg ? nullptr : mB.micNb6.data();
         auto precondition = [&](const std::vector<double>& in, std::vector<double>& out) {
             if (mg) {
                 mg->apply(in, out);
                 return;
             }
+            // The lower faces (even) in order, then the upper ones (odd), each missing face adding
+            // w[n] = out[n] = -0: the additions of a loop over the present faces, zeros' signs too.
+            const int32_t* rows = micNb6;
             for (size_t k = 0; k < n; ++k) { // (D + L) w = in
+                const int32_t* row = rows + k * 6;
                 double s = in[k];
-                for (int d = 0; d < 6; ++d) {
-                    const int32_t j = nb[k * 6 + size_t(d)];
-                    if (j >= 0 && j < int32_t(k)) s += w[size_t(j)];
-                }
+                s += w[size_t(row[0])];
+                s += w[size_t(row[2])];
+                s += w[size_t(row[4])];
                 w[k] = s * inv[k];
             }
             for (size_t k = n; k-- > 0;) { // (D + L)^T out = D w
+                const int32_t* row = rows + k * 6;
                 double s = 0;
-                for (int d = 0; d < 6; ++d) {
-                    const int32_t j = nb[k * 6 + size_t(d)];
-                    if (j > int32_t(k)) s += out[size_t(j)];
-                }
+                s += out[size_t(row[1])];
+                s += out[size_t(row[3])];
+                s += out[size_t(row[5])];
                 out[k] = w[k] + s * inv[k];
             }
         };
-        // With the multigrid, A v reads its fixed-width rows (a missing face: v[n] = +0, and v - (+0)
-        // is v, a zero's sign too: the same values as the loop over nb).
-        const int32_t* nb6 = mg ? mg->finestRows().data() : nullptr;
-        // Row k of A v (v[n] must be +0 when nb6 is used).
+        // A v reads the fixed-width rows (the multigrid's finest level's, or MIC(0)'s; a missing face:
+        // v[n] = +0, and v - (+0) is v, a zero's sign too: the same values as a loop over the faces).
+        const int32_t* nb6 = mg ? mg->finestRows().data() : micNb6;
+        // Row k of A v (v[n] must be +0).
         auto rowOfA = [&](const std::vector<double>& v, size_t k) {
+            const int32_t* row = nb6 + k * 6;
             double s = diag[k] * v[k];
-            if (nb6) {
-                const int32_t* row = nb6 + k * 6;
-                s -= v[size_t(row[0])];
-                s -= v[size_t(row[1])];
-                s -= v[size_t(row[2])];
-                s -= v[size_t(row[3])];
-                s -= v[size_t(row[4])];
-                s -= v[size_t(row[5])];
-                return s;
-            }
-            for (int d = 0; d < 6; ++d) {
-                const int32_t j = nb[k * 6 + size_t(d)];
-                if (j >= 0) s -= v[size_t(j)];
-            }
+            s -= v[size_t(row[0])];
+            s -= v[size_t(row[1])];
+            s -= v[size_t(row[2])];
+            s -= v[size_t(row[3])];
+            s -= v[size_t(row[4])];
+            s -= v[size_t(row[5])];
             return s;
         };
         auto apply = [&](std::vector<double>& v, std::vector<double>& out) {
-            if (nb6) {
-                v.resize(n + 1);
-                v[n] = 0.0;
-            }
+            v.resize(n + 1);
+            v[n] = 0.0;
             forChunks(n, mSerial, [&](size_t lo, size_t hi) {
                 for (size_t k = lo; k < hi; ++k)
                     out[k] = rowOfA(v, k);
