@@ -34,15 +34,17 @@
 //    excess ends at exactly Tc, B cells receive, mass is exact by construction, walls are never
 //    crossed. Cells with no lower neighbour (only from solver error) keep their excess for the
 //    automaton's cleanup.
-// 5. The new masses are written through Automaton::edit() over the bounding box of changed cells.
+// 5. The changed cells' new masses are written through Automaton::setMasses() (their bounding box is
+//    woken as by an edit of it; only the cells are read).
 //
 // Determinism. The flood, the cell numbering and the routing's integer split are serial and ordered
-// (the routing's sort is parallel, on a strict total order: one result; its gathering of each cell's
-// lower neighbours is parallel and exact). Every array lives in a GlobalTransportWorkspace when the
-// caller keeps one (the Sculptor does: no fresh pages each frame); none is read before written. The
-// solver's set-up and vector operations run over fixed chunks of rows; dot products add per-chunk
-// partial sums in chunk order. Every floating-point operation is therefore the same on any thread
-// count, and so is the potential, the routing and the result.
+// (the routing's sort, a radix sort or a parallel sort for many cells, is on a strict total order:
+// one result; its gathering of each cell's lower neighbours is parallel and exact). Every array lives
+// in a GlobalTransportWorkspace when the caller keeps one (the Sculptor does: no fresh pages each
+// frame); none is read before written. The solver's set-up and vector operations run over fixed
+// chunks of rows; dot products add per-chunk partial sums in chunk order. Every floating-point
+// operation is therefore the same on any thread count, and so is the potential, the routing and the
+// result.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
 // bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
