@@ -367,6 +367,52 @@ TEST_F(TransportTest, TheDenseCellIndexAndTheTreeBeyondItGiveOneResult)
         }
 }
 
+TEST_F(TransportTest, SetMassesIsAnEditOfItsRegionThatReadsOnlyTheCells)
+{
+    // Round 6: the routing writes its changed cells through Automaton::setMasses (no rescan of their
+    // bounds). Against edit() over the same region: one cell over Tc, one emptied, a whole leaf
+    // emptied (pruned), a new leaf beyond the clay; the same grid, leaves, totals, and the same
+    // steps after (the same blocks woken). Bad lists are refused and change nothing.
+    auto make = [] { return block(box(0, 0, 0, 15, 15, 15), 1000); };
+    std::vector<Automaton::CellMass> cells = {{{{3, 3, 3}}, 1500}, {{{4, 3, 3}}, 0}, {{{20, 3, 3}}, 7}};
+    for (int x = 8; x < 16; ++x)
+        for (int y = 8; y < 16; ++y)
+            for (int z = 8; z < 16; ++z)
+                cells.push_back({{{x, y, z}}, 0});
+    const Box region = box(3, 3, 3, 20, 15, 15);
+    MassGridPtr ga = make(), gb = make();
+    Automaton a(ga, opts()), b(gb, opts());
+    a.edit(region, [&](MassGrid& g) {
+        for (const Automaton::CellMass& c : cells)
+            g.tree().setValue(openvdb::Coord(c.at[0], c.at[1], c.at[2]), c.mass);
+    });
+    b.setMasses(region, cells);
+    EXPECT_EQ(contentHash(*gb), contentHash(*ga));
+    EXPECT_EQ(gb->tree().leafCount(), ga->tree().leafCount());
+    EXPECT_EQ(gb->tree().activeVoxelCount(), ga->tree().activeVoxelCount());
+    EXPECT_EQ(b.totalMass(), a.totalMass());
+    EXPECT_EQ(b.totalMass(), totalMass(*gb));
+    EXPECT_EQ(b.residualOverload(), 500);
+    EXPECT_EQ(b.residualOverload(), a.residualOverload());
+    EXPECT_FALSE(gb->tree().probeConstLeaf(openvdb::Coord(8, 8, 8))); // emptied: pruned
+    SettleOptions so;
+    so.maxSteps = 40;
+    a.settle(so);
+    b.settle(so);
+    EXPECT_EQ(b.stepCount(), a.stepCount());
+    EXPECT_EQ(contentHash(*gb), contentHash(*ga));
+
+    const uint64_t before = contentHash(*gb);
+    const int64_t mass = b.totalMass();
+    EXPECT_THROW(b.setMasses(region, {{{{5, 5, 5}}, 10}, {{{6, 5, 5}}, -1}}), Error);
+    EXPECT_THROW(b.setMasses(box(0, 0, 0, 4, 4, 4), {{{{5, 5, 5}}, 10}}), Error);
+    MassGridPtr g2 = block(box(0, 0, 0, 7, 7, 0), 1000);
+    Automaton a2(g2, opts(2));
+    EXPECT_THROW(a2.setMasses(box(0, 0, 0, 7, 7, 1), {{{{1, 1, 1}}, 10}}), Error);
+    EXPECT_EQ(contentHash(*gb), before);
+    EXPECT_EQ(b.totalMass(), mass);
+}
+
 TEST_F(TransportTest, GlobalLayerSkipsOverloadThatFitsWhereItIs)
 {
     // Compressible clay (m0 = Tc / 2) with 3000 extra in one cell: its 24 cells within two steps

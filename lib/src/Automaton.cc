@@ -761,6 +761,59 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     im.quietSteps = 0;
 }
 
+void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
+{
+    Impl& im = *mImpl;
+    for (const CellMass& c : cells) { // validate first: nothing half-written
+        const Coord at(c.at[0], c.at[1], c.at[2]);
+        for (int a = 0; a < 3; ++a)
+            if (c.at[size_t(a)] < region.min[size_t(a)] || c.at[size_t(a)] > region.max[size_t(a)])
+                throw Error("setMasses: voxel " + coordStr(at) + " lies outside the region");
+        if (c.mass < 0)
+            throw Error("setMasses: voxel " + coordStr(at) + " would hold negative mass " +
+                        std::to_string(c.mass));
+        if (!im.is3D() && c.at[2] != 0)
+            throw Error("setMasses: 2D clay must lie in the z = 0 layer, but voxel " + coordStr(at) +
+                        " would hold mass " + std::to_string(c.mass));
+    }
+    if (cells.empty()) return;
+    im.clearLeafTable(); // leaves may appear or vanish
+    const int64_t tc = im.rule.threshold;
+    const ObsTree* ot = im.obsTree();
+    std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
+    if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
+    openvdb::tree::ValueAccessor<MassTree> acc(im.tree());
+    int64_t mass = 0, overload = 0, maxValue = 0;
+    for (const CellMass& c : cells) {
+        const Coord at(c.at[0], c.at[1], c.at[2]);
+        const int64_t before = acc.getValue(at), after = c.mass;
+        if (after > 0)
+            acc.setValueOn(at, c.mass);
+        else
+            acc.setValueOff(at, 0);
+        mass += after - before;
+        maxValue = std::max(maxValue, after);
+        if (!im.obstacleAt(oacc.get(), at))
+            overload += std::max<int64_t>(0, after - tc) - std::max<int64_t>(0, before - tc);
+    }
+    im.totalMass += mass;
+    im.overload += overload;
+    im.maxBound = std::max(im.maxBound, maxValue);
+    // Prune the region's empty leaves (as edit() does), then wake the region.
+    std::vector<Coord> empty;
+    const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
+    for (int x = lo.x(); x <= region.max[0]; x += 8)
+        for (int y = lo.y(); y <= region.max[1]; y += 8)
+            for (int z = lo.z(); z <= region.max[2]; z += 8)
+                if (const MassLeaf* l = acc.probeConstLeaf(Coord(x, y, z)))
+                    if (l->isEmpty()) empty.push_back(l->origin());
+    acc.clear();
+    for (const Coord& c : empty)
+        delete im.tree().stealNode<MassLeaf>(c, 0, false);
+    im.candidates.addRegion(region);
+    im.quietSteps = 0;
+}
+
 void Automaton::editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn)
 {
     if (region.empty()) return;

@@ -25,9 +25,11 @@
 #include "vdbclay/Fwd.h"
 #include "vdbclay/Types.h"
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <vector>
 
 namespace vdbclay {
 
@@ -160,6 +162,20 @@ public:
     /// @throw Error (and restore nothing: validate before editing) if the region then holds
     ///        negative mass or, in 2D, clay outside z = 0.
     void edit(const Box& region, const std::function<void(MassGrid&)>& fn);
+    /// One cell's new mass, for setMasses().
+    struct CellMass {
+        std::array<int32_t, 3> at{{0, 0, 0}};
+        int32_t mass = 0;
+    };
+    /// Sets the masses of @a cells (each cell listed at most once), as edit() over @a region with an
+    /// fn that sets them would, but reads only those cells instead of rescanning the region: the
+    /// overload, the total mass and the bound follow from each cell's old and new mass (the grid
+    /// holds active exactly its nonzero cells, as after every edit and step). Like edit(), it wakes
+    /// every block that touches @a region and prunes the region's empty leaves. For a change list
+    /// much smaller than its bounds (the global transport's routing).
+    /// @throw Error (and change nothing) if a mass is negative, a cell lies outside @a region or,
+    ///        in 2D, outside z = 0.
+    void setMasses(const Box& region, const std::vector<CellMass>& cells);
     /// Lets @a fn change obstacles inside @a region (inclusive), e.g. to make a tool's voxels
     /// obstacles while clay settles around it. Creates an empty obstacle grid if there was none.
     /// The region is rescanned as by edit(). Clay left in a cell that becomes an obstacle stays

@@ -1,0 +1,126 @@
+// Aggregation multigrid: the preconditioner of the global transport's large solves (Transport.cc).
+//
+// Level 0 is the solve's matrix (a graph Laplacian, Dirichlet faces on the diagonal: SPD). Each
+// coarser level aggregates the face-connected rows of one 2x2x2 block of the level below (2x2 in 2D:
+// z is 0) and takes the Galerkin product P^T A P for piecewise-constant P (integer weights, exact in
+// float). One application is a symmetric V-cycle: a red-black Gauss-Seidel sweep from zero (red,
+// black), the coarse correction (times alpha: piecewise-constant transfers leave the coarse operator
+// too stiff), a sweep in the adjoint order (black, red); the coarsest level by dense Cholesky (or
+// damped Jacobi sweeps if coarsening stalls). The colours are the parity of the rows' cell (block)
+// coordinates: rows of one colour are never coupled, so a half-sweep runs in parallel, in place.
+//
+// Determinism. The smoothers and the transfers run on fixed chunks (Chunks.h) and the restriction adds
+// an aggregate's members in row order, so every floating-point operation is the same on any thread
+// count. The coarsening and the dense factor are serial.
+//
+// Data. It works on row arrays alone (6 neighbour rows per row, the diagonal, each row's cell), no
+// grids: the caller (the transport's Solver) numbers the cells. The levels' arrays are kept from one
+// build to the next (no fresh pages each frame); nothing of an earlier build is read.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace vdbclay {
+namespace transport_internal {
+
+/// A row's cell (or, on a coarse level, its block) coordinates.
+struct RowCoord {
+    int32_t x = 0, y = 0, z = 0;
+    bool operator!=(const RowCoord& o) const { return x != o.x || y != o.y || z != o.z; }
+};
+
+class Multigrid {
+public:
+    static constexpr size_t kDense = 512;
+    /// Measured on the 64^3 press (MG iterations, 10 frames, tolerance 1e-4 every round): damped
+    /// Jacobi (omega 0.8) 370, red-black Gauss-Seidel 286 (alpha 1.5; 1.0: 393, 1.3: 286, 1.8:
+    /// 310), and with roundTolerance 1e-2: 192. Round 2 (Jacobi): alpha 1.0: 583, 1.8: 574 against
+    /// 507; nu 2: 341 but no less time; omega 2/3: 592.
+    static constexpr int kCoarseSweeps = 8;
+    static constexpr double kOmega = 0.8, kAlpha = 1.5;
+
+    /// Builds the hierarchy of a matrix. @a nb: 6 per row, the neighbour row or -1; @a diag: the
+    /// diagonal; @a coord: the rows' cells. The levels' arrays of an earlier build are reused (their
+    /// capacity kept: no fresh pages each frame); nothing of the earlier build is read.
+    void build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+               const std::vector<RowCoord>& coord, bool serial);
+
+    /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
+    /// leave at the rim, < 2 % of them) without coarsening again: row k keeps the aggregate of the
+    /// old row @a oldRow[k]; a new row (-1) gets none (only the smoother corrects it). The coarse
+    /// levels keep their matrices (the old rows' couplings are unchanged: a joined neighbour adds
+    /// an off-diagonal, a leaving one removes a row, no diagonal changes); the V-cycle stays a
+    /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
+    /// still in fixed chunks and row order. Needs levels() >= 2.
+    void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                const std::vector<RowCoord>& coord, const std::vector<int32_t>& oldRow, bool serial);
+
+    /// out = M^-1 in (one V-cycle).
+    void apply(const std::vector<double>& in, std::vector<double>& out);
+
+    size_t levels() const { return mUsed; }
+    /// The finest level's rows at a fixed width: 6 per row, the neighbour row or n (none).
+    const std::vector<int32_t>& finestRows() const { return mLevels.front().nb6; }
+
+private:
+    struct Level {
+        size_t n = 0;
+        std::vector<uint32_t> start;
+        std::vector<int32_t> col;
+        std::vector<float> w; ///< off-diagonal weights (the matrix holds -w); empty: all 1 (level 0)
+        std::vector<double> diag, invDiag;
+        std::vector<RowCoord> block;       ///< the rows' coordinates on this level's grid
+        std::vector<int32_t> agg;          ///< row -> its aggregate (a row of the next level)
+        std::vector<uint32_t> memberStart; ///< the rows of the level above in each row (CSR)
+        std::vector<int32_t> members;      ///<   in row order
+        std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
+        const double* rhs = nullptr;       ///< the right-hand side a V-cycle reads: r, or apply()'s input
+        std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
+        /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
+        /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
+        std::vector<int32_t> nb6;
+        bool dense = false;
+    };
+
+    /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
+    /// @a diag: its fixed-width rows, and the CSR rows when @a csr (only coarsen() reads them).
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                   bool csr);
+    void setCsr(Level& f, size_t n, const std::vector<int32_t>& nb);
+    /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
+    /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
+    /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
+    /// Both colours in one count and one write pass (per fixed chunk: the lists of two selectIndices).
+    void colour(Level& l, const std::vector<RowCoord>& block);
+    void finish(Level& l);
+    static int32_t find(std::vector<int32_t>& parent, int32_t a);
+    /// Builds the next level; false if it would not shrink the problem enough.
+    bool coarsen();
+    static void factor(Level& l);
+    /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels), with @a own
+    /// as x_k.
+    static double residual(const Level& l, size_t k, double own);
+    /// residual() on the finest level, through its fixed-width rows: the same additions in the same
+    /// order (a missing face adds x[n] = -0, which leaves every sum unchanged, a zero's sign too).
+    static double residual0(const Level& l, size_t k, double own);
+    /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
+    void sweep(Level& l);
+    /// x_k = x_k + D^-1 (r - A x)_k for the rows of colour @a c: a Gauss-Seidel half-sweep (rows of
+    /// one colour do not read each other). @a fromZero: the first sweep of a V-cycle's level, whose
+    /// rows of colour @a c hold no x yet (as if 0); their t is set to 0.
+    void halfSweep(Level& l, int c, bool fromZero);
+    void cycle(size_t li);
+
+    bool mSerial = true;
+    std::vector<Level> mLevels; ///< the first mUsed are this build's; the rest keep their arrays for reuse
+    size_t mUsed = 0;
+    std::vector<size_t> mCounts; ///< scratch: per-chunk counts
+    std::vector<int32_t> mScratch;
+    std::vector<int32_t> mWhere;  ///< scratch of coarsen(): a coarse row's place in the row being built
+    std::vector<uint8_t> mParity; ///< scratch of colour(): each row's colour
+};
+
+} // namespace transport_internal
+} // namespace vdbclay
