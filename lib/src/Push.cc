@@ -369,10 +369,7 @@ public:
     }
 
     /// The value of @a c after the moves planned so far (pooled shares excluded).
-    int64_t planned(const Coord& c) const
-    {
-        return int64_t(mMass.getValue(c)) + mAdded.get(c);
-    }
+    int64_t planned(const Coord& c) const { return int64_t(mMass.getValue(c)) + mAdded.get(c); }
 
     void add(const Coord& c, int32_t m) { mAdded.add(c, m); }
     void reserve(size_t voxels) { mAdded.reserve(voxels); }
