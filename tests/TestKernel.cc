@@ -414,6 +414,29 @@ TEST_F(KernelTest, EditsThatAddLeavesDropTheLeafTable)
     }
 }
 
+/// The block at the origin of @a s passed once through each build: r[0] the AVX2 build (where the CPU
+/// has it), r[1] the portable path, r[2] the baseline (SSE2) build.
+void passOneBlockEveryBuild(const Scene& s, const RuleParams& p, bool is3D, uint64_t step, uint64_t seed,
+                            Result r[3])
+{
+    for (int build = 0; build < 3; ++build) {
+        r[build].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
+        std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
+        PassInput in;
+        in.tree = r[build].mass.get();
+        in.obstacles = s.obstacles.get();
+        in.rule = compileRule(p);
+        in.is3D = is3D;
+        in.phase = 0;
+        in.step = step;
+        in.seed = seed;
+        in.portable = build == 1;
+        in.avx2 = build != 2;
+        processRange(in, work.data(), 0, 1, r[build].tot);
+        r[build].changed.push_back(work[0].changed);
+    }
+}
+
 /// One block at a time, so that the totals of each block (the largest value written and the
 /// overload delta, which a whole pass sums or maxes away) are compared block by block.
 TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
@@ -436,26 +459,11 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
             if (v) s.mass->setValueOn(xyz, v);
             if (g.range(0, 15) == 0) s.obstacles->setValueOn(xyz);
         }
-        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
-        for (int portable = 0; portable < 3; ++portable) {
-            r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
-            std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
-            RuleParams p;
-            p.rule = rule;
-            p.threshold = tc;
-            PassInput in;
-            in.tree = r[portable].mass.get();
-            in.obstacles = s.obstacles.get();
-            in.rule = compileRule(p);
-            in.is3D = is3D;
-            in.phase = 0;
-            in.step = uint64_t(trial);
-            in.seed = 3;
-            in.portable = portable == 1;
-            in.avx2 = portable != 2;
-            processRange(in, work.data(), 0, 1, r[portable].tot);
-            r[portable].changed.push_back(work[0].changed);
-        }
+        RuleParams p;
+        p.rule = rule;
+        p.threshold = tc;
+        Result r[3];
+        passOneBlockEveryBuild(s, p, is3D, uint64_t(trial), 3, r);
         updated += int(r[1].tot.updated);
         expectSame(r[0], r[1], "trial " + std::to_string(trial));
         expectSame(r[2], r[1], "trial " + std::to_string(trial) + " (baseline build)");
@@ -513,26 +521,12 @@ TEST_F(KernelTest, EdgeValueBlocksGiveIdenticalResults)
                 a += std::max<int64_t>(tc - v[c], 0);
             }
         }
-        Result r[3]; // the AVX2 build (where the CPU has it), the portable path, the baseline (SSE2) build
-        for (int portable = 0; portable < 3; ++portable) {
-            r[portable].mass = std::make_shared<openvdb::Int32Tree>(*s.mass);
-            std::vector<WorkItem> work{WorkItem{Origin(0, 0, 0), 1, 0}};
-            RuleParams p;
-            p.rule = rule;
-            p.threshold = tc;
-            p.alpha = 0.5;
-            PassInput in;
-            in.tree = r[portable].mass.get();
-            in.obstacles = s.obstacles.get();
-            in.rule = compileRule(p);
-            in.is3D = is3D;
-            in.step = uint64_t(trial) * 7;
-            in.seed = 11;
-            in.portable = portable == 1;
-            in.avx2 = portable != 2;
-            processRange(in, work.data(), 0, 1, r[portable].tot);
-            r[portable].changed.push_back(work[0].changed);
-        }
+        RuleParams p;
+        p.rule = rule;
+        p.threshold = tc;
+        p.alpha = 0.5;
+        Result r[3];
+        passOneBlockEveryBuild(s, p, is3D, uint64_t(trial) * 7, 11, r);
         updated += int(r[1].tot.updated);
         if (r[1].tot.updated && e > a) ++surplus;
         if (r[1].tot.updated && e == a) ++equal;

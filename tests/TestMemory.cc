@@ -57,6 +57,17 @@ std::string stroke(int w, const std::string& push = "compress", uint64_t maxStep
            std::to_string(maxSteps) + R"(}, "memory_budget": "none"})";
 }
 
+/// @a s (a stroke()) with an obstacle box beside its tool, which may wall the clay in.
+Scene withObstacleBesideTheStroke(Scene s)
+{
+    s.obstacles.push_back(
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+        "obstacles": [{"shape": "box", "min": [200,520,200], "max": [300,530,300]}]})",
+                   "t.json", "")
+            .obstacles[0]);
+    return s;
+}
+
 /// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body).
 uint64_t wholeBody(const MemoryEstimate& e)
 {
@@ -114,13 +125,7 @@ TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
     const MemoryEstimate ec = estimateSceneMemory(covered);
     EXPECT_EQ(ec.transportBytes, ec.clayLeavesGrown * 512 * 360);
     // An obstacle beside the tool may wall the clay in (the reach then doubles up to the whole body).
-    Scene walled = s;
-    walled.obstacles.push_back(
-        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
-        "obstacles": [{"shape": "box", "min": [200,520,200], "max": [300,530,300]}]})",
-                   "t.json", "")
-            .obstacles[0]);
-    const MemoryEstimate ew = estimateSceneMemory(walled);
+    const MemoryEstimate ew = estimateSceneMemory(withObstacleBesideTheStroke(s));
     EXPECT_EQ(ew.transportBytes, ew.clayLeavesGrown * 512 * 360);
 }
 
@@ -189,13 +194,7 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         const MemoryEstimate ef = estimateSceneMemory(flank);
         EXPECT_LT(ef.transportBytes * 20, wholeBody(ef)) << push;
         // An obstacle beside the tool may wall the clay in.
-        Scene walled = s;
-        walled.obstacles.push_back(
-            parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
-            "obstacles": [{"shape": "box", "min": [200,520,200], "max": [300,530,300]}]})",
-                       "t.json", "")
-                .obstacles[0]);
-        const MemoryEstimate ew = estimateSceneMemory(walled);
+        const MemoryEstimate ew = estimateSceneMemory(withObstacleBesideTheStroke(s));
         EXPECT_EQ(ew.transportBytes, wholeBody(ew)) << push;
         // Clay over Tc overflows wherever it is, with no tool near.
         Scene over = s;
