@@ -920,7 +920,9 @@ TEST_F(TransportTest, AGlobalRunStoppedAndResumedIsIdenticalToAnUnbrokenRun)
                 ASSERT_LT(++checkpoints, 10000);
             }
             EXPECT_GT(midFrame, 0) << push << " every " << every;
-            if (surface) EXPECT_GT(insideTry, 0) << "every " << every;
+            if (surface) {
+                EXPECT_GT(insideTry, 0) << "every " << every;
+            }
         }
         std::remove(ckpt.c_str());
     }
