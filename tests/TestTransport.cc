@@ -505,16 +505,26 @@ TEST_F(TransportTest, MultigridSolvesAreExactIdenticalOnAnyThreadCountAndNeedFew
 }
 
 namespace {
-/// A block at Tc with a row of cells loaded far beyond the room of its first shell of air: the active
-/// set grows over several rounds, the later ones rebinding the first round's multigrid hierarchy.
-MassGridPtr rebindingActiveSetScene(int dims)
+/// A block at Tc (0..top on each axis; top 0: 23 in 3D, 95 in 2D) with a row of cells loaded far beyond
+/// the room of its first shell of air: the active set grows over several rounds, the later ones
+/// rebinding the first round's multigrid hierarchy.
+MassGridPtr rebindingActiveSetScene(int dims, int top = 0)
 {
-    const int top = dims == 3 ? 23 : 95;
+    if (top == 0) top = dims == 3 ? 23 : 95;
     MassGridPtr g =
         dims == 3 ? block(box(0, 0, 0, top, top, top), 1000) : block(box(0, 0, 0, top, top, 0), 1000);
     for (int x = 4; x < top - 4; x += 2)
         g->tree().setValue(openvdb::Coord(x, top / 2, dims == 3 ? top / 2 : 0), dims == 3 ? 400000 : 60000);
     return g;
+}
+
+/// One global transport of @a a's clay on @a threads, every solve by the multigrid.
+GlobalTransportReport transportByMultigrid(Automaton& a, int threads)
+{
+    GlobalTransportOptions go;
+    go.threads = threads;
+    go.multigridMin = 0;
+    return transportGlobally(a, go);
 }
 } // namespace
 
@@ -530,10 +540,7 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
             MassGridPtr g = rebindingActiveSetScene(dims);
             const int64_t m0 = totalMass(*g);
             Automaton a(g, opts(dims, threads));
-            GlobalTransportOptions go;
-            go.threads = threads;
-            go.multigridMin = 0;
-            const GlobalTransportReport r = transportGlobally(a, go);
+            const GlobalTransportReport r = transportByMultigrid(a, threads);
             EXPECT_GE(r.solves, 3u) << dims << "D";
             EXPECT_EQ(r.multigridSolves, r.solves);
             EXPECT_GE(r.multigridReused, 2u) << dims << "D, " << r.solves << " solves";
@@ -563,10 +570,7 @@ TEST_F(TransportTest, TheMultigridsFixedWidthFinestRowsGiveRoundFivesResults)
         for (int threads : {1, 3}) {
             MassGridPtr g = rebindingActiveSetScene(dims);
             Automaton a(g, opts(dims, threads));
-            GlobalTransportOptions go;
-            go.threads = threads;
-            go.multigridMin = 0;
-            const GlobalTransportReport r = transportGlobally(a, go);
+            const GlobalTransportReport r = transportByMultigrid(a, threads);
             EXPECT_GE(r.multigridReused, 2u) << dims << "D";
             EXPECT_EQ(contentHash(*g), pinnedHash[dims - 2]) << dims << "D, " << threads << " threads";
             EXPECT_EQ(r.iterations, pinnedIterations[dims - 2]) << dims << "D, " << threads << " threads";
@@ -583,14 +587,7 @@ TEST_F(TransportTest, AWorkspaceKeptAcrossCallsChangesNoResult)
         uint64_t multigridMin;
     };
     const Case cases[] = {{3, 23, 2, 0}, {2, 40, 1, 20000}, {3, 15, 3, 0}, {3, 23, 1, 0}, {2, 95, 2, 0}};
-    auto make = [](const Case& c) {
-        MassGridPtr g = c.dims == 3 ? block(box(0, 0, 0, c.top, c.top, c.top), 1000)
-                                    : block(box(0, 0, 0, c.top, c.top, 0), 1000);
-        for (int x = 4; x < c.top - 4; x += 2)
-            g->tree().setValue(openvdb::Coord(x, c.top / 2, c.dims == 3 ? c.top / 2 : 0),
-                               c.dims == 3 ? 400000 : 60000);
-        return g;
-    };
+    auto make = [](const Case& c) { return rebindingActiveSetScene(c.dims, c.top); };
     GlobalTransportWorkspace ws;
     for (const Case& c : cases) {
         GlobalTransportOptions go;

@@ -82,16 +82,6 @@ using ObsTree = openvdb::MaskTree;
 using ObsLeaf = ObsTree::LeafNodeType;
 using namespace automaton_internal;
 
-/// Bits set in @a v, inline: the builtin is a library call where the build targets CPUs without
-/// POPCNT (the default x86-64), and the weighted split counts every item of every step.
-inline int popcount64(uint64_t v)
-{
-    v = v - ((v >> 1) & 0x5555555555555555ull);
-    v = (v & 0x3333333333333333ull) + ((v >> 2) & 0x3333333333333333ull);
-    v = (v + (v >> 4)) & 0x0F0F0F0F0F0F0F0Full;
-    return int((v * 0x0101010101010101ull) >> 56);
-}
-
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
 {
@@ -330,6 +320,23 @@ struct Automaton::Impl {
         candidates.detach();
     }
 
+    /// After an edit of @a region (edit(), setMasses()): prunes the region's leaves it emptied (the grid
+    /// holds active exactly its nonzero cells), then wakes every block touching the region.
+    void pruneAndWake(const Box& region)
+    {
+        std::vector<Coord> empty;
+        const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
+        for (int x = lo.x(); x <= region.max[0]; x += 8)
+            for (int y = lo.y(); y <= region.max[1]; y += 8)
+                for (int z = lo.z(); z <= region.max[2]; z += 8)
+                    if (const MassLeaf* l = tree().probeConstLeaf(Coord(x, y, z)))
+                        if (l->isEmpty()) empty.push_back(l->origin());
+        for (const Coord& c : empty)
+            delete tree().stealNode<MassLeaf>(c, 0, false);
+        candidates.addRegion(region);
+        quietSteps = 0;
+    }
+
     PassInput passInput(int phase, bool dryRun)
     {
         PassInput in;
@@ -364,7 +371,8 @@ struct Automaton::Impl {
             processRange(in, work.data(), 0, work.size(), tot);
             return tot;
         }
-        struct Body {
+        if (passSplit().weighted) return runPassWeighted(in);
+        struct Body { // round 4's split (VDBCLAY_PASS_SPLIT=auto)
             const PassInput* in;
             WorkItem* work;
             PassTotals tot;
@@ -376,7 +384,6 @@ struct Automaton::Impl {
             }
             void join(Body& o) { tot.join(o.tot); }
         };
-        if (passSplit().weighted) return runPassWeighted(in);
         Body body(&in, work.data());
         inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
         return std::move(body.tot);
@@ -392,7 +399,7 @@ struct Automaton::Impl {
         blockSums.resize(n);
         uint64_t total = 0;
         for (size_t i = 0; i < n; ++i) {
-            total += uint64_t(popcount64(work[i].mask));
+            total += popcount64(work[i].mask);
             blockSums[i] = total;
         }
         PassTotals tot;
@@ -746,19 +753,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     im.totalMass += after.mass - before.mass;
     im.overload += after.overload - before.overload;
     im.maxBound = std::max(im.maxBound, after.maxValue);
-    // Prune leaves the edit emptied, then forget changes anchored there (they hold no clay now).
-    std::vector<Coord> empty;
-    const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
-    for (int x = lo.x(); x <= region.max[0]; x += 8)
-        for (int y = lo.y(); y <= region.max[1]; y += 8)
-            for (int z = lo.z(); z <= region.max[2]; z += 8)
-                if (const MassLeaf* l = im.tree().probeConstLeaf(Coord(x, y, z)))
-                    if (l->isEmpty()) empty.push_back(l->origin()); // scanLeaves: active == nonzero
-    for (const Coord& c : empty) {
-        delete im.tree().stealNode<MassLeaf>(c, 0, false);
-    }
-    im.candidates.addRegion(region);
-    im.quietSteps = 0;
+    im.pruneAndWake(region);
 }
 
 void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
@@ -782,36 +777,26 @@ void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
     const ObsTree* ot = im.obsTree();
     std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
     if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
-    openvdb::tree::ValueAccessor<MassTree> acc(im.tree());
     int64_t mass = 0, overload = 0, maxValue = 0;
-    for (const CellMass& c : cells) {
-        const Coord at(c.at[0], c.at[1], c.at[2]);
-        const int64_t before = acc.getValue(at), after = c.mass;
-        if (after > 0)
-            acc.setValueOn(at, c.mass);
-        else
-            acc.setValueOff(at, 0);
-        mass += after - before;
-        maxValue = std::max(maxValue, after);
-        if (!im.obstacleAt(oacc.get(), at))
-            overload += std::max<int64_t>(0, after - tc) - std::max<int64_t>(0, before - tc);
+    {
+        openvdb::tree::ValueAccessor<MassTree> acc(im.tree()); // gone before the pruning below
+        for (const CellMass& c : cells) {
+            const Coord at(c.at[0], c.at[1], c.at[2]);
+            const int64_t before = acc.getValue(at), after = c.mass;
+            if (after > 0)
+                acc.setValueOn(at, c.mass);
+            else
+                acc.setValueOff(at, 0);
+            mass += after - before;
+            maxValue = std::max(maxValue, after);
+            if (!im.obstacleAt(oacc.get(), at))
+                overload += std::max<int64_t>(0, after - tc) - std::max<int64_t>(0, before - tc);
+        }
     }
     im.totalMass += mass;
     im.overload += overload;
     im.maxBound = std::max(im.maxBound, maxValue);
-    // Prune the region's empty leaves (as edit() does), then wake the region.
-    std::vector<Coord> empty;
-    const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
-    for (int x = lo.x(); x <= region.max[0]; x += 8)
-        for (int y = lo.y(); y <= region.max[1]; y += 8)
-            for (int z = lo.z(); z <= region.max[2]; z += 8)
-                if (const MassLeaf* l = acc.probeConstLeaf(Coord(x, y, z)))
-                    if (l->isEmpty()) empty.push_back(l->origin());
-    acc.clear();
-    for (const Coord& c : empty)
-        delete im.tree().stealNode<MassLeaf>(c, 0, false);
-    im.candidates.addRegion(region);
-    im.quietSteps = 0;
+    im.pruneAndWake(region);
 }
 
 void Automaton::editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn)

@@ -237,6 +237,16 @@ struct ColumnTables {
 
 inline constexpr ColumnTables kColumns{};
 
+/// Bits set in a 64-bit mask (SWAR, inline: the builtin is a call into libgcc where the build targets
+/// no POPCNT instruction, the default x86-64; the pass and the weighted split count every item's blocks).
+inline uint64_t popcount64(uint64_t x)
+{
+    x = x - ((x >> 1) & 0x5555555555555555ull);
+    x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
+    return (x * 0x0101010101010101ull) >> 56;
+}
+
 /// The columns (col = bx + 4 by) that hold a block of @a mask.
 inline uint32_t columnsOf(uint64_t mask)
 {

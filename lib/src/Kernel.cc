@@ -228,15 +228,6 @@ constexpr int kCornerOffset[8] = {0, 64, 8, 72, 1, 65, 9, 73};
 /// Odd blocks that lie inside the anchor leaf (no local coordinate at -1): read like even blocks.
 constexpr uint64_t kInsideOdd3 = ~(kX0 | kY0 | kZ0), kInsideOdd2 = ~(kX0 | kY0) & 0xFFFFull;
 
-/// Bits set in a 64-bit mask (SWAR; the build targets no popcnt instruction).
-inline uint64_t popcount64(uint64_t x)
-{
-    x = x - ((x >> 1) & 0x5555555555555555ull);
-    x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
-    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
-    return (x * 0x0101010101010101ull) >> 56;
-}
-
 #if defined(__SSE2__)
 /// Loads the N cells of a block into @a lo (corners 0-3) and @a hi (corners 4-7; 3D only), given
 /// where corner k (k = 0-3) lies: corner k + 4 (one voxel up in z) is the next int32. True of every
@@ -286,8 +277,8 @@ struct LaneMaskTable {
 alignas(64) constexpr LaneMaskTable kLaneMasks;
 
 /// Lanes of -1 where bit c of @a mask4 is set (c = 0-3; the high register takes mask >> 4): one load
-/// from kLaneMasks (a broadcast, an and and a compare before; @a laneBits is no longer needed).
-__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4, __m128i /*laneBits*/)
+/// from kLaneMasks.
+__attribute__((always_inline)) inline __m128i lanesOf(uint32_t mask4)
 {
     return _mm_load_si128(reinterpret_cast<const __m128i*>(kLaneMasks.v[mask4 & 15u]));
 }
@@ -366,10 +357,10 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
     const __m128i t = _mm_set1_epi32(tc);
     __m128i vLo = _mm_setzero_si128(), vHi = vLo; // valid lanes (set only when blocked)
     if (blocked) {
-        vLo = lanesOf(valid & 15u, vLo);
+        vLo = lanesOf(valid & 15u);
         gtLo = _mm_and_si128(gtLo, vLo);
         if constexpr (N == 8) {
-            vHi = lanesOf(valid >> 4, vHi);
+            vHi = lanesOf(valid >> 4);
             gtHi = _mm_and_si128(gtHi, vHi);
         }
     }
@@ -399,8 +390,8 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
         // One unit to each of the first r under cells of the rotation starting at the hash.
         const int start = int(hash() & uint64_t(N - 1));
         const uint32_t extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
-        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u, oLo)); // lanes of -1: one more unit
-        if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4, oHi));
+        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u)); // lanes of -1: one more unit
+        if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4));
     }
     if (blocked) {
         oLo = _mm_or_si128(_mm_and_si128(vLo, oLo), _mm_andnot_si128(vLo, lo));
@@ -430,7 +421,7 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     if (uint64_t(e) * uint64_t(tc) > UINT32_MAX) return false;
     constexpr uint32_t kAll = (1u << N) - 1;
     const uint32_t over = overCells & valid, under = valid & ~overCells & kAll;
-    const __m128i bitsLo = _mm_setr_epi32(1, 2, 4, 8), t = _mm_set1_epi32(tc);
+    const __m128i t = _mm_set1_epi32(tc);
     const __m128d eD = _mm_set1_pd(double(e)), aD = _mm_set1_pd(double(a)),
                   inv = _mm_set1_pd(1.0 / double(a));
     const __m128d one = _mm_set1_pd(1.0);
@@ -445,9 +436,9 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     };
     // Over cells to Tc, under cells plus their share; obstacle cells as they are.
     auto fill = [&](__m128i m, uint32_t over4, uint32_t under4, __m128i& q) {
-        const __m128i room = _mm_and_si128(_mm_sub_epi32(t, m), lanesOf(under4, bitsLo));
+        const __m128i room = _mm_and_si128(_mm_sub_epi32(t, m), lanesOf(under4));
         q = _mm_unpacklo_epi64(share2(room), share2(_mm_shuffle_epi32(room, 0xEE)));
-        const __m128i ov = lanesOf(over4, bitsLo);
+        const __m128i ov = lanesOf(over4);
         return _mm_add_epi32(_mm_or_si128(_mm_and_si128(ov, t), _mm_andnot_si128(ov, m)), q);
     };
     __m128i qLo, qHi = _mm_setzero_si128();
@@ -458,8 +449,8 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     if (r > 0) {
         const int start = int(hash() & uint64_t(N - 1));
         auto addOne = [&](uint32_t cells) {
-            oLo = _mm_sub_epi32(oLo, lanesOf(cells & 15u, bitsLo));
-            if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(cells >> 4, bitsLo));
+            oLo = _mm_sub_epi32(oLo, lanesOf(cells & 15u));
+            if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(cells >> 4));
         };
         // First the under cells still below Tc, then the others (giveRemainder); r < nu <= 8.
         uint32_t below = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(t, oLo))));
@@ -686,6 +677,25 @@ struct LeafSet {
     uint32_t fetched = 0;    // which of the 8 slots were fetched (0: none yet)
 };
 
+/// The table's entry for an anchor into @a ls: its first @a kCount slots (those no block of the mask
+/// reads are harmless), the flags over the slots @a need says the mask reads.
+template <int kCount>
+__attribute__((always_inline)) inline void copyEntry(LeafSet& ls, const LeafTable::Impl::Entry& e,
+                                                     const Origin& anchor, uint32_t need)
+{
+    for (int w = 0; w < kCount; ++w) {
+        ls.leaf[w] = e.leaf[w];
+        ls.data[w] = e.data[w];
+        ls.read[w] = e.read[w];
+        ls.obs[w] = e.obs[w];
+        ls.obsTile[w] = (e.obsTile >> w) & 1u;
+    }
+    ls.anyMissing = (e.missing & need) != 0;
+    ls.anyObs = (e.obsAny & need) != 0;
+    ls.anchor = anchor;
+    ls.fetched = (1u << kCount) - 1;
+}
+
 // Out of line on purpose: inlined into the block loop it costs more than the call (register
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
 template <bool D3, int P>
@@ -701,19 +711,7 @@ __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, ui
     if (table) {
         if (const LeafTable::Impl::Entry* e =
                 entry != kNoEntry ? &table->entries[entry] : table->find(anchor)) {
-            // Every slot is copied (those no block of the mask reads are harmless); the flags cover
-            // only the slots it reads, as below.
-            for (int w = 0; w < kCount; ++w) {
-                ls.leaf[w] = e->leaf[w];
-                ls.data[w] = e->data[w];
-                ls.read[w] = e->read[w];
-                ls.obs[w] = e->obs[w];
-                ls.obsTile[w] = (e->obsTile >> w) & 1u;
-            }
-            ls.anyMissing = (e->missing & need) != 0;
-            ls.anyObs = (e->obsAny & need) != 0;
-            ls.anchor = anchor;
-            ls.fetched = (1u << kCount) - 1;
+            copyEntry<kCount>(ls, *e, anchor, need);
             return;
         }
     }
@@ -829,17 +827,7 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
         else
             examined += popcount64(w.mask);
         if (P == 0 && table && w.entry != kNoEntry) {
-            // Even phase from the table: one slot, no call (fetchLeaves' table branch, inlined).
-            const LeafTable::Impl::Entry& e = table->entries[w.entry];
-            ls.leaf[0] = e.leaf[0];
-            ls.data[0] = e.data[0];
-            ls.read[0] = e.read[0];
-            ls.obs[0] = e.obs[0];
-            ls.obsTile[0] = e.obsTile & 1u;
-            ls.anyMissing = (e.missing & 1u) != 0;
-            ls.anyObs = (e.obsAny & 1u) != 0;
-            ls.anchor = w.anchor;
-            ls.fetched = 1;
+            copyEntry<1>(ls, table->entries[w.entry], w.anchor, 1u); // even phase: one slot, no call
         } else {
             fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !portable, table);
         }

@@ -97,7 +97,7 @@ public:
     const Entries& entries() const { return mEntries; }
 
 private:
-    struct Hash {
+    struct Hash { // (std::hash<Coord>, OpenVDB's, keeps 20 bits: too few buckets for a large push)
         size_t operator()(const Coord& c) const
         {
             uint64_t h = uint64_t(uint32_t(c.x())) * 0x9E3779B97F4A7C15ull;

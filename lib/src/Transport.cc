@@ -100,7 +100,7 @@ constexpr int64_t kDenseIndexMax = int64_t(1) << 23;
 /// The active set's rounds solve to the tolerance once a round changes at most 1/kTightChange of the rows.
 constexpr size_t kTightChange = 1000;
 
-/// What the flood found at an unknown cell's face (Solver::linkFlooded): linked or a wall (an obstacle,
+/// What the flood found at an unknown cell's face (Solver::link): linked or a wall (an obstacle,
 /// or a face the dimensions leave out), a cell with room, full clay beyond the reach.
 enum FaceFound : uint8_t { kFaceDone = 0, kFaceRoom = 1, kFaceFull = 2 };
 
@@ -329,57 +329,43 @@ private:
         return i;
     }
 
-    /// Links cell @a i to its face neighbours, creating Dirichlet cells for neighbours with room.
-    /// Returns true if a full non-obstacle neighbour is not a cell (cut by the reach).
-    bool link(int32_t i)
+    /// What lies beyond a face at @a q that is not a cell of the domain: an obstacle (kFaceDone: a
+    /// wall), room (m < Tc), or full clay (its mass in @a m).
+    FaceFound faceAt(const Coord& q, int32_t& m) const
     {
-        bool cut = false;
-        const Coord c = mCells[size_t(i)];
-        for (int d = 0; d < mDirs; ++d) {
-            const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-            int32_t j = indexOf(q);
-            if (j < 0) {
-                if (isObstacle(q)) continue;
-                if (massAt(q) >= mTc) {
-                    cut = true; // beyond the reach: a wall for this solve
-                    continue;
-                }
-                j = addCell(q, kDirichlet);
-            }
-            mNb[size_t(i) * 6 + size_t(d)] = j;
-            // The link back (kDir pairs opposite directions: d ^ 1): a Dirichlet cell then knows
-            // its unknown neighbours, and its inflow is gathered in parallel. Only the unknown
-            // cells' links are read otherwise, and a cell's own link() writes the same values.
-            mNb[size_t(j) * 6 + size_t(d ^ 1)] = i;
-        }
-        mHasNb[size_t(i)] = 1;
-        return cut;
+        if (isObstacle(q)) return kFaceDone;
+        m = massAt(q);
+        return m < mTc ? kFaceRoom : kFaceFull;
     }
 
-    /// Links cell @a i's face @a d to cell @a j, and back (kDir pairs opposite directions: d ^ 1).
+    /// Links cell @a i's face @a d to cell @a j, and back (kDir pairs opposite directions: d ^ 1): a
+    /// Dirichlet cell then knows its unknown neighbours, and its inflow is gathered in parallel.
     void linkPair(int32_t i, int d, int32_t j)
     {
         mNb[size_t(i) * 6 + size_t(d)] = j;
         mNb[size_t(j) * 6 + size_t(d ^ 1)] = i;
     }
 
-    /// link() of an unknown cell of the flood, from what the flood found at its faces (mB.face): a
-    /// face to a domain cell is linked already, one to an obstacle stays a wall; a face to room gets
-    /// its Dirichlet cell (made by an earlier cell's link, or now); a face to full clay beyond the
-    /// reach is linked if a later flood reached that cell, else cut. The same links, Dirichlet cells
-    /// (in the same order) and cut as link(), without its lookups of the faces the flood saw (round 6:
-    /// the flood and link took 19 % of a compress stroke frame, half of it these second lookups).
-    bool linkFlooded(int32_t i)
+    /// Links cell @a i to its face neighbours, creating Dirichlet cells for neighbours with room.
+    /// Returns true if a full non-obstacle neighbour is not a cell (cut by the reach). @a face: what the
+    /// flood found at the cell's faces (mB.face; round 6: the flood and the links took 19 % of a
+    /// compress stroke frame, half of it looking the faces up again), or null to look them up: a face
+    /// the flood linked, or found an obstacle at, is done; one to room gets its Dirichlet cell (made by
+    /// an earlier cell's link, or now); one to full clay beyond the reach is linked if a later flood
+    /// reached that cell, else cut. The same links, Dirichlet cells (in the same order) and cut either way.
+    bool link(int32_t i, const uint8_t* face = nullptr)
     {
         bool cut = false;
         const Coord c = mCells[size_t(i)];
-        const uint8_t* face = &mB.face[size_t(i) * 6];
         for (int d = 0; d < mDirs; ++d) {
-            if (face[d] == kFaceDone) continue;
+            if (face && face[d] == kFaceDone) continue;
             const Coord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
             int32_t j = indexOf(q);
             if (j < 0) {
-                if (face[d] == kFaceFull) {
+                int32_t m = 0;
+                const FaceFound found = face ? FaceFound(face[d]) : faceAt(q, m);
+                if (found == kFaceDone) continue;
+                if (found == kFaceFull) {
                     cut = true; // beyond the reach: a wall for this solve
                     continue;
                 }
@@ -480,14 +466,13 @@ private:
                     if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
                     continue;
                 }
-                if (isObstacle(q)) continue;
-                const int32_t m = massAt(q);
-                if (m < mTc) {
-                    face[size_t(i) * 6 + size_t(d)] = kFaceRoom;
-                    continue;
-                }
-                if (reach > 0 && di >= reach) { // linking marks the cut (unless a later flood gets there)
-                    face[size_t(i) * 6 + size_t(d)] = kFaceFull;
+                int32_t m = 0;
+                const FaceFound found = faceAt(q, m);
+                if (found == kFaceDone) continue;
+                // Room, or full clay beyond the reach: link() makes the Dirichlet cell or marks the cut
+                // (unless a later flood gets there).
+                if (found == kFaceRoom || (reach > 0 && di >= reach)) {
+                    face[size_t(i) * 6 + size_t(d)] = uint8_t(found);
                     continue;
                 }
                 linkPair(i, d, addCell(q, kUnknown, m));
@@ -501,7 +486,7 @@ private:
         room.assign(parent.size(), 0);
         const size_t unknowns = mCells.size();
         for (size_t i = 0; i < unknowns; ++i) {
-            cut |= linkFlooded(int32_t(i));
+            cut |= link(int32_t(i), &face[i * 6]);
             for (int d = 0; d < mDirs; ++d) {
                 const int32_t j = mNb[i * 6 + size_t(d)];
                 if (j >= 0 && mKind[size_t(j)] == kDirichlet) {
