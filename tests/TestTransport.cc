@@ -1027,3 +1027,50 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
         EXPECT_EQ(h, first) << threads;
     }
 }
+
+TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotToTheLayer)
+{
+    // Round 7: after the automaton's try, the global layer looks for its seeds no further than the
+    // reach beyond the push's region, not as far as the try's steps can have carried the overload (up
+    // to 4096 steps: the memory estimate had to count the whole body). A 2D channel of clay at Tc
+    // 2400 long between two walls, a plunger entering it 1 voxel a frame, room (loose clay) only at its
+    // far end, and loose clay behind the upper wall near the plunger, so the clay near the tool is
+    // unsaturated on average and the try runs. In the full channel the automaton carries the overload
+    // as a front, one voxel a step: the try gives up at its work cap (~1,500 steps) with all of it far
+    // beyond the reach (contact 6: reach 8). Round 6 then seeded the layer there: every frame solved
+    // the channel up to the front (11,136 unknowns in the first frame, its reach doubled until it met the
+    // room); now the layer finds no seed and the cleanup automaton carries the front on to the room.
+    const std::string json =
+        R"({"dimensions": 2, "threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": "surface",
+        "clay": [{"shape": "box", "min": [0,0], "max": [2399,5], "mass": 1000},
+                 {"shape": "box", "min": [2400,-20], "max": [2429,25], "mass": 300},
+                 {"shape": "box", "min": [0,25], "max": [7,29], "mass": 300}],
+        "obstacles": [{"shape": "box", "min": [-10,-3], "max": [2399,-1]}, {"shape": "box", "min": [-10,6], "max": [2399,24]}],
+        "tools": [{"shape": "box", "min": [-4,0], "max": [-1,5], "path": [{"translate": [1,0,0], "frames": 4}]}],
+        "settle": {"max_steps": 100000}})";
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        Sculptor sc(parseScene(json, "t.json", ""), threads);
+        const int64_t m0 = sc.automaton().totalMass();
+        while (!sc.done()) {
+            const FrameReport r = sc.runFrame();
+            const std::string at = std::to_string(threads) + " threads, frame " + std::to_string(r.frame);
+            EXPECT_EQ(r.push.contactSize, 6.0) << at;
+            // The try gave up (the layer ran after it) having run further than the push's region (the
+            // plunger's box grown by 18) and the reach (8) together.
+            EXPECT_GT(r.trySteps, 4u + 18u + 8u) << at;
+            EXPECT_LT(r.trySteps, r.settle.steps) << at;
+            // The overload lay beyond the reach: no seed, no domain; it was all still there.
+            EXPECT_EQ(r.transport.overloadBefore, 0) << at;
+            EXPECT_EQ(r.transport.unknowns, 0u) << at;
+            EXPECT_EQ(r.transport.overloadAfter, 6000) << at;
+            // The frame still settles, mass exact.
+            EXPECT_TRUE(r.settle.settled) << at;
+            EXPECT_EQ(r.settle.residualOverload, 0) << at;
+            EXPECT_EQ(totalMass(*sc.mass()), m0) << at;
+        }
+        const uint64_t h = contentHash(*sc.mass());
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads << " threads";
+    }
+}

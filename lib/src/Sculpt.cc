@@ -701,7 +701,11 @@ FrameReport Sculptor::runFrame()
             if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
             // The automaton's try first (compressible clay settles in a few cheap steps, as with
             // local); the layer only on what it leaves, its seeds looked for as far as the try's
-            // steps can have carried the overload (a Margolus step moves clay one voxel at most).
+            // steps can have carried the overload (a Margolus step moves clay one voxel at most), but
+            // no further than the reach (round 7): the try ran only because the clay within the reach
+            // of the push is unsaturated (kTrySaturated), where the automaton settles overload
+            // cheaply; what it carried further is left to the cleanup below. So the layer's domain
+            // follows the tool under any step budget (MemoryEstimate.cc), not the try's 4096 steps.
             im.open = true;
             im.openSteps = 0;
             rep.settle =
@@ -714,7 +718,7 @@ FrameReport Sculptor::runFrame()
                 return rep;
             }
             if (rep.push.contactSize > 0)
-                go.seedRegion = growBox(go.seedRegion, int64_t(rep.settle.steps), 3);
+                go.seedRegion = growBox(go.seedRegion, std::min(int64_t(rep.settle.steps), go.reach), 3);
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         } else {
             im.open = true;
