@@ -1030,9 +1030,9 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
 
 TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotToTheLayer)
 {
-    // Round 7: after the automaton's try, the global layer looks for its seeds no further than the
-    // reach beyond the push's region, not as far as the try's steps can have carried the overload (up
-    // to 4096 steps: the memory estimate had to count the whole body). A 2D channel of clay at Tc
+    // Round 7: after the automaton's try, the global layer looks for its seeds in the push's region
+    // only, not as far as the try's steps can have carried the overload (up to 4096 steps: the memory
+    // estimate had to count the whole body). A 2D channel of clay at Tc
     // 2400 long between two walls, a plunger entering it 1 voxel a frame, room (loose clay) only at its
     // far end, and loose clay behind the upper wall near the plunger, so the clay near the tool is
     // unsaturated on average and the try runs. In the full channel the automaton carries the overload
@@ -1060,7 +1060,7 @@ TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotTo
             // plunger's box grown by 18) and the reach (8) together.
             EXPECT_GT(r.trySteps, 4u + 18u + 8u) << at;
             EXPECT_LT(r.trySteps, r.settle.steps) << at;
-            // The overload lay beyond the reach: no seed, no domain; it was all still there.
+            // The overload lay beyond the region and the reach: no seed, no domain; it was all still there.
             EXPECT_EQ(r.transport.overloadBefore, 0) << at;
             EXPECT_EQ(r.transport.unknowns, 0u) << at;
             EXPECT_EQ(r.transport.overloadAfter, 6000) << at;

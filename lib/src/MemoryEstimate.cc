@@ -28,15 +28,18 @@
 // - compress push (round 5): its chains (as deep as the contact is wide), max(r0, 2E), 4 for an
 //   inner seed's margin, 1 for the Dirichlet cells;
 // - surface push (round 6): its targets (within maxSearch + 2 of the tool: Push.cc's region), then
-//   the automaton's try (settleBounded), which may run S steps before the layer, which then looks
-//   for the seeds S further (a step moves clay one voxel per axis, at most three face steps, so
-//   room lies E + 3S away); max(r0, 2 (E + 3S)), 4, 1. The try runs in chunks of kTryChunk steps
-//   and gives up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no
-//   layer: S <= 4096 and S < max_steps, a multiple of kTryChunk, so S = 0 when max_steps <= 16
-//   (trySteps). The try is skipped on saturated clay (mean density near the tool >=
-//   kTrySaturated), but nothing here can know that before the run: under larger step budgets
-//   (the default 100000: S = 4096) the sweep grows by ~28,700 voxels (the 512-wide stroke's tool:
-//   the whole body, as before round 6).
+//   the automaton's try (settleBounded), which may run S steps before the layer, moving the
+//   overload a voxel per axis (three face steps) a step. Round 7: the layer then looks for its seeds
+//   in the push's region only (runFrame; round 6 looked S further, so S = 4096 under the default
+//   max_steps grew the sweep by ~28,700 voxels: the whole body). So a seed lies within the region,
+//   moved at most c = min(S, maxSearch + 2) voxels from its target, and room lies E + 3c face steps
+//   away: max(r0, 2 (E + 3c)), region, 4, 1. The try runs in chunks of kTryChunk steps and gives
+//   up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no layer: S <
+//   max_steps, a multiple of kTryChunk, so c = 0 when max_steps <= 16 (trySteps), 16 up to 32,
+//   then 18 whatever the budget (the 512-wide stroke under the default budget: a margin of 177
+//   voxels, a layer figure of 10.3 GiB; 72 and 928 MiB at max_steps <= 16; the whole body 50.1
+//   GiB). The try is skipped on saturated clay (mean density near the tool >= kTrySaturated), but
+//   nothing here can know that before the run.
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
 // axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
 // corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
@@ -498,7 +501,7 @@ struct LayerBound {
 /// layer runs after it, under a step budget of @a maxSteps per frame: its chunks of kTryChunk steps
 /// end at multiples of kTryChunk, it gives up (and the layer runs) at the first one >= kTrySteps, and
 /// a chunk that reaches @a maxSteps finishes the frame without the layer. So none when @a maxSteps
-/// <= kTryChunk.
+/// <= kTryChunk. (layerMargin counts no more of them than cross the push's region: round 7.)
 uint64_t trySteps(uint64_t maxSteps)
 {
     if (maxSteps == 0) return 0;
@@ -519,10 +522,12 @@ int64_t layerMargin(const LayerBound& b)
         return std::max(reach, 2 * room) + depth + 4 + 1;
     }
     // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
-    // try's steps, each moving clay one voxel (three face steps) at most.
-    const int64_t steps = int64_t(trySteps(b.maxSteps));
+    // try's steps, each moving clay one voxel (three face steps) at most; the layer's seeds stay in
+    // the region (round 7), so the try moved them at most `region` voxels from the tool, whatever its
+    // steps.
     const int64_t region = int64_t(PushOptions().maxSearch) + 2;
-    return std::max(reach, 2 * (room + 3 * steps)) + region + steps + 4 + 1;
+    const int64_t steps = std::min(int64_t(trySteps(b.maxSteps)), region);
+    return std::max(reach, 2 * (room + 3 * steps)) + region + 4 + 1;
 }
 
 } // namespace

@@ -700,12 +700,14 @@ FrameReport Sculptor::runFrame()
             // costs the tool's region, not the model's size).
             if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
             // The automaton's try first (compressible clay settles in a few cheap steps, as with
-            // local); the layer only on what it leaves, its seeds looked for as far as the try's
-            // steps can have carried the overload (a Margolus step moves clay one voxel at most), but
-            // no further than the reach (round 7): the try ran only because the clay within the reach
-            // of the push is unsaturated (kTrySaturated), where the automaton settles overload
-            // cheaply; what it carried further is left to the cleanup below. So the layer's domain
-            // follows the tool under any step budget (MemoryEstimate.cc), not the try's 4096 steps.
+            // local); the layer only on what it leaves in the push's region. Round 7: the overload
+            // the try carried out of that region (up to 4096 steps, a voxel a step) is left to the
+            // cleanup below, not looked for as far as the try's steps reach (round 6): the try ran
+            // only because the clay within the reach of the push is unsaturated (kTrySaturated), where
+            // the automaton settles overload cheaply, and a layer seeded that far would cost, and the
+            // memory estimate have to count, a region of thousands of voxels around the tool
+            // (MemoryEstimate.cc: with the seeds in the push's region the bound holds under any
+            // step budget).
             im.open = true;
             im.openSteps = 0;
             rep.settle =
@@ -717,8 +719,6 @@ FrameReport Sculptor::runFrame()
                 ++im.frame;
                 return rep;
             }
-            if (rep.push.contactSize > 0)
-                go.seedRegion = growBox(go.seedRegion, std::min(int64_t(rep.settle.steps), go.reach), 3);
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         } else {
             im.open = true;
