@@ -5,16 +5,21 @@
 // and their peak. Aligned new keeps the library's own implementation and is not counted. The figures
 // do not depend on time or load; they depend on the allocator only through the usable sizes, which
 // only make the measured peak larger (a stricter test of an upper bound).
+#include <vdbclay/IO.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
+
+#include <unistd.h>
 
 #include "AllocationCounter.h" // the byte-counting operator new and delete
 
@@ -167,6 +172,55 @@ TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHea
             << maxSteps;
     EXPECT_LT(eDefault.transportBytes * 4, wholeBody(eDefault)) << eDefault.describe();
     EXPECT_LT(eDefault.total(), uint64_t(16) << 30) << eDefault.describe();
+}
+
+TEST_F(MemoryTest, ClayFromAFileThatRecordsItsLargestCellKeepsTheReachBound)
+{
+    // Round 7: a clay file records its largest cell (vdbclay_max_mass); at most Tc, the clay cannot
+    // overflow with no tool near, so the surface stroke on clay read from a file keeps the tool's
+    // bound (before: the whole body, its largest cell unknown without reading its voxels). The estimate
+    // reads the record from the file's metadata only; it stays above the run's heap.
+    const std::string dir = "/tmp/vdbclay-memory-" + std::to_string(::getpid());
+    const std::string path = dir + "-sphere.vdb", bare = dir + "-bare.vdb", over = dir + "-over.vdb";
+    const Scene shapes = parseScene(stroke(256, "surface", 100000), "s.json", "");
+    {
+        Sculptor start(shapes, 2); // frame 0: the sphere as built
+        writeClayFile(path, *start.mass(), start.checkpointMeta());
+        // The same clay without the record (another writer), and recording a cell over Tc.
+        MassGridPtr g = openvdb::gridPtrCast<openvdb::Int32Grid>(start.mass()->deepCopyGrid());
+        g->setName("mass");
+        openvdb::io::File(bare).write({g});
+        g->insertMeta("vdbclay_max_mass", openvdb::Int64Metadata(1001));
+        openvdb::io::File(over).write({g});
+    }
+    auto fromFile = [&](const std::string& file) {
+        std::string json = stroke(256, "surface", 100000);
+        const size_t a = json.find(R"({"shape": "sphere")"), b = json.find("}]", a);
+        return json.replace(a, b + 1 - a, R"({"shape": "vdb", "file": ")" + file + R"("})");
+    };
+    const std::string json = fromFile(path);
+    const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+    EXPECT_GT(e.transportBytes, 0u);
+    EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
+    for (int threads : {1, 2}) {
+        const uint64_t peak = peakOfRun(json, threads);
+        EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe();
+    }
+    for (const std::string& file : {bare, over}) {
+        const MemoryEstimate w = estimateSceneMemory(parseScene(fromFile(file), "s.json", ""));
+        EXPECT_EQ(w.transportBytes, wholeBody(w)) << file;
+    }
+    // A tool whose sweep has no corner outside the file's bounds may start inside its clay (the
+    // file's voxels are not read to tell): the whole body.
+    Scene buried = parseScene(json, "s.json", "");
+    buried.tools[0] = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+        "tools": [{"shape": "sphere", "center": [200,200,128], "radius": 6, "path": [{"translate": [2,0,0], "frames": 12}]}]})",
+                                 "t.json", "")
+                          .tools[0];
+    const MemoryEstimate eb = estimateSceneMemory(buried);
+    EXPECT_EQ(eb.transportBytes, wholeBody(eb));
+    for (const std::string& file : {path, bare, over})
+        std::remove(file.c_str());
 }
 
 TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)

@@ -43,9 +43,11 @@
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
 // axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
 // corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
-// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay from a file
-// (its largest cell is not known without reading its voxels) or over Tc (it overflows anywhere, no
-// tool near).
+// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay over Tc (it
+// overflows anywhere, no tool near), or from a file that does not record its largest cell at most
+// Tc (vdbclay_max_mass, written by writeClayFile and the checkpoint since round 7; read from the
+// file's metadata, never its voxels; a file whose voxels exceed it is refused when the run reads
+// it). A tool's corner inside a file's bounds counts as inside its clay (its voxels are not read).
 // Not covered: a frame that ends unsettled (step budget, tolerance, no room) followed by a frame
 // whose tools touch no clay runs the layer with no reach over every over cell (Sculpt.cc).
 //
@@ -264,6 +266,9 @@ struct FileGrid {
     uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
     uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
+    /// Its largest cell as the writer recorded it (vdbclay_max_mass, IO.cc: readClayFile refuses a
+    /// file whose voxels exceed it, so a run never holds more); -1 when not recorded.
+    int64_t maxMass = -1;
 };
 FileGrid fileGridMetadata(const std::string& path, const std::string& gridName);
 
@@ -326,6 +331,8 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
     }
     if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
     if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
+    if (const auto mx = g->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass"))
+        out.maxMass = std::max<int64_t>(0, mx->value());
     if (!lo || !hi || !n) {
         // A file without statistics: read it (the estimate must not be a guess).
         const ClayFile f = readClayFile(path, gridName);
@@ -558,6 +565,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         bool moves;        ///< may move: a tool, clay from a file, clay above Tc
         bool file = false; ///< clay from a file
     };
+    std::vector<Box> fileBoxes; // of clay from files: where a tool's corner may lie inside clay
     std::vector<Area> areas;
     uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
     uint64_t fileTreeBytes = 0;
@@ -578,7 +586,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         fileTreeBytes += std::max(g.memBytes, real);
         fileLower += g.upperNodes ? g.lowerNodes : UINT64_MAX / 4;
         fileUpper += g.upperNodes ? g.upperNodes : UINT64_MAX / 4;
-        areas.push_back({b, true, true, true});
+        // It may overflow with no tool near unless it records its largest cell at most Tc (round 7).
+        areas.push_back({b, true, g.maxMass < 0 || g.maxMass > int64_t(scene.rule.threshold), true});
+        fileBoxes.push_back(b);
         massBound = UINT64_MAX;
     };
     if (!scene.start.empty()) {
@@ -758,8 +768,13 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                               double(corner & 2 ? t.max[1] : t.min[1]),
                               double(corner & 4 ? t.max[2] : t.min[2])}};
                 out = std::none_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
-                    return c.shape.shape && c.shape.shape->distance(p) < 0;
-                });
+                          return c.shape.shape && c.shape.shape->distance(p) < 0;
+                      }) &&
+                      std::none_of(fileBoxes.begin(), fileBoxes.end(), [&](const Box& f) { // its voxels unread
+                          return !intersect(f, Box{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
+                                                   {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}})
+                                      .empty();
+                      });
             }
             lb.buried |= !out;
         }
