@@ -263,6 +263,15 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         over.clay[0].mass = 1200;
         const MemoryEstimate eo = estimateSceneMemory(over);
         EXPECT_EQ(eo.transportBytes, wholeBody(eo)) << push;
+        // So does clay where two shapes overlap and add up over Tc (round 7: the scene's first frame
+        // runs the layer over every over cell even when no tool touches clay).
+        Scene overlap = s;
+        overlap.clay.push_back(
+            parseScene(R"({"clay": [{"shape": "box", "min": [100,100,100], "max": [103,103,103], "mass": 1}]})",
+                       "t.json", "")
+                .clay[0]);
+        const MemoryEstimate el = estimateSceneMemory(overlap);
+        EXPECT_EQ(el.transportBytes, wholeBody(el)) << push;
     }
 }
 

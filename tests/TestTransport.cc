@@ -1074,3 +1074,52 @@ TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotTo
         EXPECT_EQ(h, first) << threads << " threads";
     }
 }
+
+TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheOverloadToTheAutomaton)
+{
+    // Round 7: a frame whose tools touch no clay runs the layer (over every over cell, no reach) only as
+    // the scene's first frame (clay that starts over Tc); before, also after a frame that ended
+    // unsettled, over every over cell however far, which the memory estimate did not count. A plate
+    // presses a cube at Tc once, then lifts away; beside it, clay walled in a closed chamber with more
+    // than Tc per cell: every frame ends with that overload left (no room). The first frame's layer
+    // seeds it (it lies in the push's region); the later frames touch no clay and run no layer.
+    std::string json = pressScene("prorata", "compress", "global");
+    json.replace(json.find(R"("clay": [)"), 9,
+                 R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
+        {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
+    json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
+        {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
+        {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
+        {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
+    const std::string path = R"([{"translate": [0,-1,0], "frames": 4}])";
+    json.replace(json.find(path), path.size(),
+                 R"([{"translate": [0,-1,0], "frames": 1}, {"translate": [0,10,0], "frames": 3}])");
+    json.replace(json.find(R"("max_steps": 400000)"), 19, R"("max_steps": 40)");
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        Sculptor sc(parseScene(json, "t.json", ""), threads);
+        const int64_t m0 = sc.automaton().totalMass();
+        int frames = 0;
+        while (!sc.done()) {
+            const FrameReport r = sc.runFrame();
+            const std::string at = std::to_string(threads) + " threads, frame " + std::to_string(r.frame);
+            ++frames;
+            EXPECT_GT(r.settle.residualOverload, 0) << at; // the chamber's, every frame
+            if (r.frame == 1) {
+                EXPECT_GT(r.push.contactSize, 0.0) << at;
+                EXPECT_GT(r.transport.overloadBefore, 0) << at;
+                EXPECT_TRUE(r.transport.noRoom) << at;
+            } else {
+                EXPECT_EQ(r.push.contactSize, 0.0) << at;
+                EXPECT_EQ(r.transport.overloadBefore, 0) << at; // no layer
+                EXPECT_EQ(r.transport.solves, 0u) << at;
+                EXPECT_EQ(r.trySteps, 0u) << at;
+            }
+            EXPECT_EQ(totalMass(*sc.mass()), m0) << at;
+        }
+        EXPECT_EQ(frames, 4);
+        const uint64_t h = contentHash(*sc.mass());
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads << " threads";
+    }
+}

@@ -48,8 +48,10 @@
 // Tc (vdbclay_max_mass, written by writeClayFile and the checkpoint since round 7; read from the
 // file's metadata, never its voxels; a file whose voxels exceed it is refused when the run reads
 // it). A tool's corner inside a file's bounds counts as inside its clay (its voxels are not read).
-// Not covered: a frame that ends unsettled (step budget, tolerance, no room) followed by a frame
-// whose tools touch no clay runs the layer with no reach over every over cell (Sculpt.cc).
+// A frame whose tools touch no clay runs the layer with no reach (over every over cell) only as the
+// scene's first frame (round 7, runFrame; before, also after a frame that ended unsettled: a hole
+// here): its over cells are clay that starts over Tc, counted above (a shape over Tc, two shapes that
+// overlap and add up over Tc, a file that does not record its largest cell at most Tc).
 //
 // Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
 // within a budget of distance evaluations (kTightenBudget; a large face sampled first, a tool's pose
@@ -571,6 +573,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     uint64_t fileTreeBytes = 0;
     uint64_t fileLower = 0, fileUpper = 0; // internal nodes of clay from files
     std::vector<Box> clayBoxes;            // of the shapes' clay
+    std::vector<int64_t> clayMasses;       // their masses per voxel
     uint64_t fileLeaves = 0;               // of clay from files
     uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
@@ -605,6 +608,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             }
             const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
             clayBoxes.push_back(b);
+            clayMasses.push_back(c.mass);
             areas.push_back({b, true, c.mass > scene.rule.threshold});
             const double m = double(c.mass) * double(voxelsIn(b));
             if (massBound != UINT64_MAX)
@@ -752,6 +756,18 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lb.maxSteps = scene.settle.maxSteps;
         lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+        // Shapes that overlap add up: over Tc where two of them do (found by a sweep along x).
+        std::vector<size_t> order(clayBoxes.size());
+        for (size_t i = 0; i < order.size(); ++i)
+            order[i] = i;
+        std::sort(order.begin(), order.end(),
+                  [&](size_t a, size_t b) { return clayBoxes[a].min[0] < clayBoxes[b].min[0]; });
+        for (size_t i = 0; i < order.size() && !lb.clayMoves; ++i)
+            for (size_t j = i + 1; j < order.size() && clayBoxes[order[j]].min[0] <= clayBoxes[order[i]].max[0] &&
+                                   !lb.clayMoves;
+                 ++j)
+                lb.clayMoves = touches(clayBoxes[order[i]], clayBoxes[order[j]]) &&
+                               clayMasses[order[i]] + clayMasses[order[j]] > int64_t(scene.rule.threshold);
         for (const Box& t : toolBoxes) {
             for (const Area& a : areas) {
                 if (!a.clay) continue;

@@ -688,7 +688,14 @@ FrameReport Sculptor::runFrame()
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
-        if (im.scene.transport == Transport::Global) {
+        // Round 7: a frame whose tools touch no clay runs the layer (with no reach: over every over
+        // cell) only as the scene's first frame, for clay that starts over Tc; later, what a frame
+        // that ended unsettled (step budget, tolerance, no room) left is the automaton's, as with
+        // local (before, the layer then ran over every over cell, however far: the memory estimate
+        // counts the whole body only for clay that starts over Tc). By the scene's frame number, so
+        // a run resumed from a checkpoint does what the unbroken run did.
+        const bool layer = rep.push.contactSize > 0 || rep.frame == 1;
+        if (im.scene.transport == Transport::Global && layer) {
             GlobalTransportOptions go;
             go.threads = im.automaton->options().threads;
             // The plastic zone: a few contact sizes around the over cells; the whole body when no
