@@ -477,8 +477,9 @@ TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
     EXPECT_EQ(readGrid(path, "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(), 3001);
     // Empty clay records 0.
     writeClayFile(file("empty.vdb"), *openvdb::Int32Grid::create(0), sampleMeta());
-    EXPECT_EQ(readGrid(file("empty.vdb"), "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(),
-              0);
+    EXPECT_EQ(
+        readGrid(file("empty.vdb"), "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(),
+        0);
 
     // A file whose voxels exceed its record (edited by another tool): one error naming the file,
     // the voxel and both values.
@@ -497,7 +498,8 @@ TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
     g->insertMeta("vdbclay_max_mass", openvdb::StringMetadata("big"));
     openvdb::io::File(forged).write({g});
     const std::string typed = errorOf([&] { readClayFile(forged); });
-    EXPECT_TRUE(contains(typed, forged) && contains(typed, "vdbclay_max_mass") && contains(typed, "int64")) << typed;
+    EXPECT_TRUE(contains(typed, forged) && contains(typed, "vdbclay_max_mass") && contains(typed, "int64"))
+        << typed;
     // A file with no record reads as before.
     g->removeMeta("vdbclay_max_mass");
     openvdb::io::File(forged).write({g});

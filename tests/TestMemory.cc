@@ -144,7 +144,8 @@ TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHea
     // settle in 0-1 steps after the layer. 3D: a 256-wide sphere (the grown sweep does not span it);
     // 2D: a 1024-wide disc (a 2D contact is the number of voxels entered, a reach of ~170).
     for (uint64_t maxSteps : {uint64_t(16), uint64_t(100000)})
-        for (const std::string& json : {stroke(256, "surface", maxSteps), stroke(1024, "surface", maxSteps, 2)}) {
+        for (const std::string& json :
+             {stroke(256, "surface", maxSteps), stroke(1024, "surface", maxSteps, 2)}) {
             const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
             EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
             EXPECT_GT(e.transportBytes, 0u);
@@ -162,13 +163,16 @@ TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHea
     // the scene's default budget (100000; round 6: the whole 512-wide body).
     EXPECT_EQ(estimateSceneMemory(parseScene(stroke(512, "surface", 1), "s.json", "")).transportBytes,
               e512.transportBytes);
-    const uint64_t at17 = estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes;
+    const uint64_t at17 =
+        estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes;
     EXPECT_GT(at17, e512.transportBytes);
-    const MemoryEstimate eDefault = estimateSceneMemory(parseScene(stroke(512, "surface", 100000), "s.json", ""));
+    const MemoryEstimate eDefault =
+        estimateSceneMemory(parseScene(stroke(512, "surface", 100000), "s.json", ""));
     EXPECT_GT(eDefault.transportBytes, at17);
     for (uint64_t maxSteps : {uint64_t(33), uint64_t(5000000)})
-        EXPECT_EQ(estimateSceneMemory(parseScene(stroke(512, "surface", maxSteps), "s.json", "")).transportBytes,
-                  eDefault.transportBytes)
+        EXPECT_EQ(
+            estimateSceneMemory(parseScene(stroke(512, "surface", maxSteps), "s.json", "")).transportBytes,
+            eDefault.transportBytes)
             << maxSteps;
     EXPECT_LT(eDefault.transportBytes * 4, wholeBody(eDefault)) << eDefault.describe();
     EXPECT_LT(eDefault.total(), uint64_t(16) << 30) << eDefault.describe();
@@ -267,8 +271,9 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         // runs the layer over every over cell even when no tool touches clay).
         Scene overlap = s;
         overlap.clay.push_back(
-            parseScene(R"({"clay": [{"shape": "box", "min": [100,100,100], "max": [103,103,103], "mass": 1}]})",
-                       "t.json", "")
+            parseScene(
+                R"({"clay": [{"shape": "box", "min": [100,100,100], "max": [103,103,103], "mass": 1}]})",
+                "t.json", "")
                 .clay[0]);
         const MemoryEstimate el = estimateSceneMemory(overlap);
         EXPECT_EQ(el.transportBytes, wholeBody(el)) << push;

@@ -559,9 +559,10 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
                         " at voxel " + coordText(it.getCoord()));
         }
         if (*it > recordedMax) {
-            throw Error(path + ": grid \"" + gridName + "\" holds mass " + std::to_string(*it) + " at voxel " +
-                        coordText(it.getCoord()) + ", more than its largest cell recorded in metadata " +
-                        kMetaMaxMass + " (" + std::to_string(recordedMax) + ")");
+            throw Error(path + ": grid \"" + gridName + "\" holds mass " + std::to_string(*it) +
+                        " at voxel " + coordText(it.getCoord()) +
+                        ", more than its largest cell recorded in metadata " + kMetaMaxMass + " (" +
+                        std::to_string(recordedMax) + ")");
         }
     }
     normalizeClay(*out.mass, path, gridName);

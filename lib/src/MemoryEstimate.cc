@@ -763,8 +763,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         std::sort(order.begin(), order.end(),
                   [&](size_t a, size_t b) { return clayBoxes[a].min[0] < clayBoxes[b].min[0]; });
         for (size_t i = 0; i < order.size() && !lb.clayMoves; ++i)
-            for (size_t j = i + 1; j < order.size() && clayBoxes[order[j]].min[0] <= clayBoxes[order[i]].max[0] &&
-                                   !lb.clayMoves;
+            for (size_t j = i + 1; j < order.size() &&
+                                   clayBoxes[order[j]].min[0] <= clayBoxes[order[i]].max[0] && !lb.clayMoves;
                  ++j)
                 lb.clayMoves = touches(clayBoxes[order[i]], clayBoxes[order[j]]) &&
                                clayMasses[order[i]] + clayMasses[order[j]] > int64_t(scene.rule.threshold);
@@ -783,14 +783,16 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 const Vec3 p{{double(corner & 1 ? t.max[0] : t.min[0]),
                               double(corner & 2 ? t.max[1] : t.min[1]),
                               double(corner & 4 ? t.max[2] : t.min[2])}};
-                out = std::none_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
-                          return c.shape.shape && c.shape.shape->distance(p) < 0;
-                      }) &&
-                      std::none_of(fileBoxes.begin(), fileBoxes.end(), [&](const Box& f) { // its voxels unread
-                          return !intersect(f, Box{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
-                                                   {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}})
-                                      .empty();
-                      });
+                const bool inShape =
+                    std::any_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
+                        return c.shape.shape && c.shape.shape->distance(p) < 0;
+                    });
+                // Clay from a file: its voxels are not read, so a corner within its bounds may be in it.
+                const Box at{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
+                             {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}};
+                const bool inFile = std::any_of(fileBoxes.begin(), fileBoxes.end(),
+                                                [&](const Box& f) { return touches(f, at); });
+                out = !inShape && !inFile;
             }
             lb.buried |= !out;
         }
