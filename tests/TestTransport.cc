@@ -1122,4 +1122,20 @@ TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheO
         if (threads == 1) first = h;
         EXPECT_EQ(h, first) << threads << " threads";
     }
+    // Resumed after the first frame (its file records a cell over Tc), the run does what the unbroken
+    // one did: the rule goes by the scene's frame number.
+    const std::string ckpt = "/tmp/vdbclay-transport-touchnone-" + std::to_string(::getpid()) + ".vdb";
+    Scene s = parseScene(json, "t.json", "");
+    {
+        Sculptor sc(s, 2);
+        sc.runFrame();
+        writeClayFile(ckpt, *sc.mass(), sc.checkpointMeta());
+    }
+    s.start = ckpt;
+    Sculptor resumed(s, 3);
+    resumed.run(
+        0, [](const FrameReport& r) { EXPECT_EQ(r.transport.overloadBefore, 0) << "frame " << r.frame; });
+    EXPECT_EQ(resumed.frame(), 4u);
+    EXPECT_EQ(contentHash(*resumed.mass()), first);
+    std::remove(ckpt.c_str());
 }
