@@ -457,6 +457,55 @@ TEST_F(IOTest, NegativeMassIsRefused)
     EXPECT_TRUE(contains(msg, path) && contains(msg, "negative") && contains(msg, "(-4, 5, 6)")) << msg;
 }
 
+TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
+{
+    // Round 7: writeClayFile records the largest cell (vdbclay_max_mass, int64) on "mass" (and
+    // "density"), for the memory estimate, which reads it without the voxels.
+    const auto clay = sampleClay(); // its largest cell: the overloaded core, 3 Tc + 1 at x = 1
+    const std::string path = file("clay.vdb");
+    writeClayFile(path, *clay, sampleMeta());
+    for (const char* grid : {"mass", "density"}) {
+        const auto g = readGrid(path, grid);
+        const auto m = g->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass");
+        ASSERT_TRUE(m) << grid;
+        EXPECT_EQ(m->value(), 3001) << grid;
+    }
+    const ClayFile back = readClayFile(path); // round-trips, checked against the record
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*clay));
+    // Written back from what was read (a checkpoint of a resumed run): the same record.
+    writeClayFile(path, *back.mass, back.meta);
+    EXPECT_EQ(readGrid(path, "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(), 3001);
+    // Empty clay records 0.
+    writeClayFile(file("empty.vdb"), *openvdb::Int32Grid::create(0), sampleMeta());
+    EXPECT_EQ(
+        readGrid(file("empty.vdb"), "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(),
+        0);
+
+    // A file whose voxels exceed its record (edited by another tool): one error naming the file,
+    // the voxel and both values.
+    auto g = openvdb::gridPtrCast<openvdb::Int32Grid>(readGrid(path, "mass"));
+    ASSERT_TRUE(g);
+    g->tree().setValueOn(Coord(2, -3, 4), 5000);
+    const std::string forged = file("forged.vdb");
+    openvdb::io::File(forged).write({g});
+    const std::string msg = errorOf([&] { readClayFile(forged); });
+    EXPECT_TRUE(contains(msg, forged) && contains(msg, "(2, -3, 4)") && contains(msg, "5000") &&
+                contains(msg, "3001") && contains(msg, "vdbclay_max_mass"))
+        << msg;
+    // The record must be an int64.
+    g->tree().setValueOn(Coord(2, -3, 4), 1000);
+    g->removeMeta("vdbclay_max_mass");
+    g->insertMeta("vdbclay_max_mass", openvdb::StringMetadata("big"));
+    openvdb::io::File(forged).write({g});
+    const std::string typed = errorOf([&] { readClayFile(forged); });
+    EXPECT_TRUE(contains(typed, forged) && contains(typed, "vdbclay_max_mass") && contains(typed, "int64"))
+        << typed;
+    // A file with no record reads as before.
+    g->removeMeta("vdbclay_max_mass");
+    openvdb::io::File(forged).write({g});
+    EXPECT_EQ(errorOf([&] { readClayFile(forged); }), "");
+}
+
 // Found by tests/fuzz/fuzz_vdb: OpenVDB trusts a block's recorded size and copies that many bytes
 // into the node's buffer (a heap overflow), or allocates whatever a length asks for. The layout
 // check refuses both before OpenVDB reads the file.

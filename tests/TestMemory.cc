@@ -5,16 +5,21 @@
 // and their peak. Aligned new keeps the library's own implementation and is not counted. The figures
 // do not depend on time or load; they depend on the allocator only through the usable sizes, which
 // only make the measured peak larger (a stricter test of an upper bound).
+#include <vdbclay/IO.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
+
+#include <unistd.h>
 
 #include "AllocationCounter.h" // the byte-counting operator new and delete
 
@@ -131,34 +136,95 @@ TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
 
 TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHeap)
 {
-    // Round 6: the surface push's layer runs after the automaton's try, which can carry the overload
-    // as many steps as it runs; under a step budget of at most 16 a frame the try cannot run before
-    // the layer (a chunk that reaches the budget ends the frame), so the domain is bounded by the
-    // tool's reach as for the compress push. These strokes' frames settle in 0-1 steps after the layer.
-    // 3D: a 256-wide sphere (the grown sweep does not span it); 2D: a 1024-wide disc (a 2D contact is
-    // the number of voxels entered, a reach of ~170).
-    for (const std::string& json : {stroke(256, "surface", 16), stroke(1024, "surface", 16, 2)}) {
-        const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
-        EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
-        EXPECT_GT(e.transportBytes, 0u);
-        for (int threads : {1, 2}) {
-            const uint64_t peak = peakOfRun(json, threads);
-            EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe() << "\n" << json;
+    // Round 6: the surface push's layer runs after the automaton's try; under a step budget of at most
+    // 16 a frame the try cannot run before the layer (a chunk that reaches the budget ends the frame),
+    // so the domain is bounded by the tool's reach as for the compress push. Round 7: the layer's seeds
+    // stay in the push's region whatever the try did, so the bound holds under any step budget (the
+    // try can have moved them across that region, 18 voxels: a larger margin). These strokes' frames
+    // settle in 0-1 steps after the layer. 3D: a 256-wide sphere (the grown sweep does not span it);
+    // 2D: a 1024-wide disc (a 2D contact is the number of voxels entered, a reach of ~170).
+    for (uint64_t maxSteps : {uint64_t(16), uint64_t(100000)})
+        for (const std::string& json :
+             {stroke(256, "surface", maxSteps), stroke(1024, "surface", maxSteps, 2)}) {
+            const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+            EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
+            EXPECT_GT(e.transportBytes, 0u);
+            for (int threads : {1, 2}) {
+                const uint64_t peak = peakOfRun(json, threads);
+                EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe() << "\n" << json;
+            }
         }
-    }
     // The 512-wide surface stroke: the layer's figure is a small part of the whole body's.
     const MemoryEstimate e512 = estimateSceneMemory(parseScene(stroke(512, "surface", 16), "s.json", ""));
     EXPECT_LT(e512.transportBytes * 20, wholeBody(e512)) << e512.describe();
     EXPECT_LT(e512.total(), uint64_t(6) << 30) << e512.describe();
-    // Any budget up to 16 gives the same bound (no try); 17 lets the try run 16 steps first, and the
-    // scene's default budget (100000) 4096 steps: over the whole 512-wide body.
+    // Any budget up to 16 gives the same bound (no try); 17 lets the try run 16 steps first, a larger
+    // margin; from 33 on (the try's 32 steps or more can cross the push's region) one figure, that of
+    // the scene's default budget (100000; round 6: the whole 512-wide body).
     EXPECT_EQ(estimateSceneMemory(parseScene(stroke(512, "surface", 1), "s.json", "")).transportBytes,
               e512.transportBytes);
-    EXPECT_GT(estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes,
-              e512.transportBytes);
+    const uint64_t at17 =
+        estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes;
+    EXPECT_GT(at17, e512.transportBytes);
     const MemoryEstimate eDefault =
         estimateSceneMemory(parseScene(stroke(512, "surface", 100000), "s.json", ""));
-    EXPECT_EQ(eDefault.transportBytes, wholeBody(eDefault)) << eDefault.describe();
+    EXPECT_GT(eDefault.transportBytes, at17);
+    for (uint64_t maxSteps : {uint64_t(33), uint64_t(5000000)})
+        EXPECT_EQ(
+            estimateSceneMemory(parseScene(stroke(512, "surface", maxSteps), "s.json", "")).transportBytes,
+            eDefault.transportBytes)
+            << maxSteps;
+    EXPECT_LT(eDefault.transportBytes * 4, wholeBody(eDefault)) << eDefault.describe();
+    EXPECT_LT(eDefault.total(), uint64_t(16) << 30) << eDefault.describe();
+}
+
+TEST_F(MemoryTest, ClayFromAFileThatRecordsItsLargestCellKeepsTheReachBound)
+{
+    // Round 7: a clay file records its largest cell (vdbclay_max_mass); at most Tc, the clay cannot
+    // overflow with no tool near, so the surface stroke on clay read from a file keeps the tool's
+    // bound (before: the whole body, its largest cell unknown without reading its voxels). The estimate
+    // reads the record from the file's metadata only; it stays above the run's heap.
+    const std::string dir = "/tmp/vdbclay-memory-" + std::to_string(::getpid());
+    const std::string path = dir + "-sphere.vdb", bare = dir + "-bare.vdb", over = dir + "-over.vdb";
+    const Scene shapes = parseScene(stroke(256, "surface", 100000), "s.json", "");
+    {
+        Sculptor start(shapes, 2); // frame 0: the sphere as built
+        writeClayFile(path, *start.mass(), start.checkpointMeta());
+        // The same clay without the record (another writer), and recording a cell over Tc.
+        MassGridPtr g = openvdb::gridPtrCast<openvdb::Int32Grid>(start.mass()->deepCopyGrid());
+        g->setName("mass");
+        openvdb::io::File(bare).write({g});
+        g->insertMeta("vdbclay_max_mass", openvdb::Int64Metadata(1001));
+        openvdb::io::File(over).write({g});
+    }
+    auto fromFile = [&](const std::string& file) {
+        std::string json = stroke(256, "surface", 100000);
+        const size_t a = json.find(R"({"shape": "sphere")"), b = json.find("}]", a);
+        return json.replace(a, b + 1 - a, R"({"shape": "vdb", "file": ")" + file + R"("})");
+    };
+    const std::string json = fromFile(path);
+    const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+    EXPECT_GT(e.transportBytes, 0u);
+    EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
+    for (int threads : {1, 2}) {
+        const uint64_t peak = peakOfRun(json, threads);
+        EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe();
+    }
+    for (const std::string& file : {bare, over}) {
+        const MemoryEstimate w = estimateSceneMemory(parseScene(fromFile(file), "s.json", ""));
+        EXPECT_EQ(w.transportBytes, wholeBody(w)) << file;
+    }
+    // A tool whose sweep has no corner outside the file's bounds may start inside its clay (the
+    // file's voxels are not read to tell): the whole body.
+    Scene buried = parseScene(json, "s.json", "");
+    buried.tools[0] = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+        "tools": [{"shape": "sphere", "center": [200,200,128], "radius": 6, "path": [{"translate": [2,0,0], "frames": 12}]}]})",
+                                 "t.json", "")
+                          .tools[0];
+    const MemoryEstimate eb = estimateSceneMemory(buried);
+    EXPECT_EQ(eb.transportBytes, wholeBody(eb));
+    for (const std::string& file : {path, bare, over})
+        std::remove(file.c_str());
 }
 
 TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
@@ -201,6 +267,16 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         over.clay[0].mass = 1200;
         const MemoryEstimate eo = estimateSceneMemory(over);
         EXPECT_EQ(eo.transportBytes, wholeBody(eo)) << push;
+        // So does clay where two shapes overlap and add up over Tc (round 7: the scene's first frame
+        // runs the layer over every over cell even when no tool touches clay).
+        Scene overlap = s;
+        overlap.clay.push_back(
+            parseScene(
+                R"({"clay": [{"shape": "box", "min": [100,100,100], "max": [103,103,103], "mass": 1}]})",
+                "t.json", "")
+                .clay[0]);
+        const MemoryEstimate el = estimateSceneMemory(overlap);
+        EXPECT_EQ(el.transportBytes, wholeBody(el)) << push;
     }
 }
 

@@ -1027,3 +1027,115 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
         EXPECT_EQ(h, first) << threads;
     }
 }
+
+TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotToTheLayer)
+{
+    // Round 7: after the automaton's try, the global layer looks for its seeds in the push's region
+    // only, not as far as the try's steps can have carried the overload (up to 4096 steps: the memory
+    // estimate had to count the whole body). A 2D channel of clay at Tc
+    // 2400 long between two walls, a plunger entering it 1 voxel a frame, room (loose clay) only at its
+    // far end, and loose clay behind the upper wall near the plunger, so the clay near the tool is
+    // unsaturated on average and the try runs. In the full channel the automaton carries the overload
+    // as a front, one voxel a step: the try gives up at its work cap (~1,500 steps) with all of it far
+    // beyond the reach (contact 6: reach 8). Round 6 then seeded the layer there: every frame solved
+    // the channel up to the front (11,136 unknowns in the first frame, its reach doubled until it met the
+    // room); now the layer finds no seed and the cleanup automaton carries the front on to the room.
+    const std::string json =
+        R"({"dimensions": 2, "threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": "surface",
+        "clay": [{"shape": "box", "min": [0,0], "max": [2399,5], "mass": 1000},
+                 {"shape": "box", "min": [2400,-20], "max": [2429,25], "mass": 300},
+                 {"shape": "box", "min": [0,25], "max": [7,29], "mass": 300}],
+        "obstacles": [{"shape": "box", "min": [-10,-3], "max": [2399,-1]}, {"shape": "box", "min": [-10,6], "max": [2399,24]}],
+        "tools": [{"shape": "box", "min": [-4,0], "max": [-1,5], "path": [{"translate": [1,0,0], "frames": 4}]}],
+        "settle": {"max_steps": 100000}})";
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        Sculptor sc(parseScene(json, "t.json", ""), threads);
+        const int64_t m0 = sc.automaton().totalMass();
+        while (!sc.done()) {
+            const FrameReport r = sc.runFrame();
+            const std::string at = std::to_string(threads) + " threads, frame " + std::to_string(r.frame);
+            EXPECT_EQ(r.push.contactSize, 6.0) << at;
+            // The try gave up (the layer ran after it) having run further than the push's region (the
+            // plunger's box grown by 18) and the reach (8) together.
+            EXPECT_GT(r.trySteps, 4u + 18u + 8u) << at;
+            EXPECT_LT(r.trySteps, r.settle.steps) << at;
+            // The overload lay beyond the region and the reach: no seed, no domain; it was all still there.
+            EXPECT_EQ(r.transport.overloadBefore, 0) << at;
+            EXPECT_EQ(r.transport.unknowns, 0u) << at;
+            EXPECT_EQ(r.transport.overloadAfter, 6000) << at;
+            // The frame still settles, mass exact.
+            EXPECT_TRUE(r.settle.settled) << at;
+            EXPECT_EQ(r.settle.residualOverload, 0) << at;
+            EXPECT_EQ(totalMass(*sc.mass()), m0) << at;
+        }
+        const uint64_t h = contentHash(*sc.mass());
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads << " threads";
+    }
+}
+
+TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheOverloadToTheAutomaton)
+{
+    // Round 7: a frame whose tools touch no clay runs the layer (over every over cell, no reach) only as
+    // the scene's first frame (clay that starts over Tc); before, also after a frame that ended
+    // unsettled, over every over cell however far, which the memory estimate did not count. A plate
+    // presses a cube at Tc once, then lifts away; beside it, clay walled in a closed chamber with more
+    // than Tc per cell: every frame ends with that overload left (no room). The first frame's layer
+    // seeds it (it lies in the push's region); the later frames touch no clay and run no layer.
+    std::string json = pressScene("prorata", "compress", "global");
+    json.replace(json.find(R"("clay": [)"), 9,
+                 R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
+        {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
+    json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
+        {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
+        {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
+        {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
+    const std::string path = R"([{"translate": [0,-1,0], "frames": 4}])";
+    json.replace(json.find(path), path.size(),
+                 R"([{"translate": [0,-1,0], "frames": 1}, {"translate": [0,10,0], "frames": 3}])");
+    json.replace(json.find(R"("max_steps": 400000)"), 19, R"("max_steps": 40)");
+    uint64_t first = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        Sculptor sc(parseScene(json, "t.json", ""), threads);
+        const int64_t m0 = sc.automaton().totalMass();
+        int frames = 0;
+        while (!sc.done()) {
+            const FrameReport r = sc.runFrame();
+            const std::string at = std::to_string(threads) + " threads, frame " + std::to_string(r.frame);
+            ++frames;
+            EXPECT_GT(r.settle.residualOverload, 0) << at; // the chamber's, every frame
+            if (r.frame == 1) {
+                EXPECT_GT(r.push.contactSize, 0.0) << at;
+                EXPECT_GT(r.transport.overloadBefore, 0) << at;
+                EXPECT_TRUE(r.transport.noRoom) << at;
+            } else {
+                EXPECT_EQ(r.push.contactSize, 0.0) << at;
+                EXPECT_EQ(r.transport.overloadBefore, 0) << at; // no layer
+                EXPECT_EQ(r.transport.solves, 0u) << at;
+                EXPECT_EQ(r.trySteps, 0u) << at;
+            }
+            EXPECT_EQ(totalMass(*sc.mass()), m0) << at;
+        }
+        EXPECT_EQ(frames, 4);
+        const uint64_t h = contentHash(*sc.mass());
+        if (threads == 1) first = h;
+        EXPECT_EQ(h, first) << threads << " threads";
+    }
+    // Resumed after the first frame (its file records a cell over Tc), the run does what the unbroken
+    // one did: the rule goes by the scene's frame number.
+    const std::string ckpt = "/tmp/vdbclay-transport-touchnone-" + std::to_string(::getpid()) + ".vdb";
+    Scene s = parseScene(json, "t.json", "");
+    {
+        Sculptor sc(s, 2);
+        sc.runFrame();
+        writeClayFile(ckpt, *sc.mass(), sc.checkpointMeta());
+    }
+    s.start = ckpt;
+    Sculptor resumed(s, 3);
+    resumed.run(
+        0, [](const FrameReport& r) { EXPECT_EQ(r.transport.overloadBefore, 0) << "frame " << r.frame; });
+    EXPECT_EQ(resumed.frame(), 4u);
+    EXPECT_EQ(contentHash(*resumed.mass()), first);
+    std::remove(ckpt.c_str());
+}

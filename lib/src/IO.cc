@@ -1,6 +1,8 @@
 // Clay files (.vdb), surface meshes and clay from shapes.
 //
-// A clay file holds three grids: "mass" (the exact Int32 clay, with the vdbclay_* metadata),
+// A clay file holds three grids: "mass" (the exact Int32 clay, with the vdbclay_* metadata, among
+// them its largest cell, vdbclay_max_mass: the memory estimate reads it without the voxels, and a
+// file whose voxels exceed it is refused on reading; round 7),
 // "density" (m / Tc, a fog volume) and "surface" (the level set where a cell is half full), the
 // last two for other tools (Houdini, Blender, vdb_view) to look at. Every write goes to a temporary
 // file beside the target that is renamed over it (AtomicFile.h).
@@ -100,6 +102,7 @@ const char* kMetaDimensions = "vdbclay_dimensions";
 const char* kMetaVoxelSize = "vdbclay_voxel_size";
 const char* kMetaVersion = "vdbclay_version";
 const char* kMetaUp = "vdbclay_up";
+const char* kMetaMaxMass = "vdbclay_max_mass";
 
 void validateMeta(const ClayMeta& meta, const std::string& path)
 {
@@ -298,6 +301,10 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
         clayMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
     }
     clayMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
+    int32_t largest = 0; // every value, tiles included (the background is 0)
+    for (auto it = mass.tree().cbeginValueAll(); it; ++it)
+        largest = std::max(largest, *it);
+    clayMeta.insertMeta(kMetaMaxMass, openvdb::Int64Metadata(largest));
     clayMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
     clayMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));
     if (meta.up != UpAxis::Y) clayMeta.insertMeta(kMetaUp, openvdb::StringMetadata(upAxisName(meta.up)));
@@ -542,10 +549,20 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
         throw Error("grid \"" + gridName + "\" in " + path + " is a " + base->valueType() +
                     " grid, expected an Int32Grid");
     }
+    // The largest cell it records (vdbclay_max_mass; the memory estimate trusts it without reading
+    // the voxels), checked against every voxel.
+    int64_t recordedMax = INT64_MAX;
+    readMeta<int64_t, openvdb::Int64Metadata>(*out.mass, kMetaMaxMass, recordedMax, path, "int64");
     for (auto it = out.mass->tree().cbeginValueAll(); it; ++it) {
         if (*it < 0) {
             throw Error(path + ": grid \"" + gridName + "\" holds negative mass " + std::to_string(*it) +
                         " at voxel " + coordText(it.getCoord()));
+        }
+        if (*it > recordedMax) {
+            throw Error(path + ": grid \"" + gridName + "\" holds mass " + std::to_string(*it) +
+                        " at voxel " + coordText(it.getCoord()) +
+                        ", more than its largest cell recorded in metadata " + kMetaMaxMass + " (" +
+                        std::to_string(recordedMax) + ")");
         }
     }
     normalizeClay(*out.mass, path, gridName);

@@ -28,23 +28,30 @@
 // - compress push (round 5): its chains (as deep as the contact is wide), max(r0, 2E), 4 for an
 //   inner seed's margin, 1 for the Dirichlet cells;
 // - surface push (round 6): its targets (within maxSearch + 2 of the tool: Push.cc's region), then
-//   the automaton's try (settleBounded), which may run S steps before the layer, which then looks
-//   for the seeds S further (a step moves clay one voxel per axis, at most three face steps, so
-//   room lies E + 3S away); max(r0, 2 (E + 3S)), 4, 1. The try runs in chunks of kTryChunk steps
-//   and gives up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no
-//   layer: S <= 4096 and S < max_steps, a multiple of kTryChunk, so S = 0 when max_steps <= 16
-//   (trySteps). The try is skipped on saturated clay (mean density near the tool >=
-//   kTrySaturated), but nothing here can know that before the run: under larger step budgets
-//   (the default 100000: S = 4096) the sweep grows by ~28,700 voxels (the 512-wide stroke's tool:
-//   the whole body, as before round 6).
+//   the automaton's try (settleBounded), which may run S steps before the layer, moving the
+//   overload a voxel per axis (three face steps) a step. Round 7: the layer then looks for its seeds
+//   in the push's region only (runFrame; round 6 looked S further, so S = 4096 under the default
+//   max_steps grew the sweep by ~28,700 voxels: the whole body). So a seed lies within the region,
+//   moved at most c = min(S, maxSearch + 2) voxels from its target, and room lies E + 3c face steps
+//   away: max(r0, 2 (E + 3c)), region, 4, 1. The try runs in chunks of kTryChunk steps and gives
+//   up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no layer: S <
+//   max_steps, a multiple of kTryChunk, so c = 0 when max_steps <= 16 (trySteps), 16 up to 32,
+//   then 18 whatever the budget (the 512-wide stroke under the default budget: a margin of 177
+//   voxels, a layer figure of 10.3 GiB; 72 and 928 MiB at max_steps <= 16; the whole body 50.1
+//   GiB). The try is skipped on saturated clay (mean density near the tool >= kTrySaturated), but
+//   nothing here can know that before the run.
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
 // axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
 // corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
-// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay from a file
-// (its largest cell is not known without reading its voxels) or over Tc (it overflows anywhere, no
-// tool near).
-// Not covered: a frame that ends unsettled (step budget, tolerance, no room) followed by a frame
-// whose tools touch no clay runs the layer with no reach over every over cell (Sculpt.cc).
+// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay over Tc (it
+// overflows anywhere, no tool near), or from a file that does not record its largest cell at most
+// Tc (vdbclay_max_mass, written by writeClayFile and the checkpoint since round 7; read from the
+// file's metadata, never its voxels; a file whose voxels exceed it is refused when the run reads
+// it). A tool's corner inside a file's bounds counts as inside its clay (its voxels are not read).
+// A frame whose tools touch no clay runs the layer with no reach (over every over cell) only as the
+// scene's first frame (round 7, runFrame; before, also after a frame that ended unsettled: a hole
+// here): its over cells are clay that starts over Tc, counted above (a shape over Tc, two shapes that
+// overlap and add up over Tc, a file that does not record its largest cell at most Tc).
 //
 // Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
 // within a budget of distance evaluations (kTightenBudget; a large face sampled first, a tool's pose
@@ -261,6 +268,9 @@ struct FileGrid {
     uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
     uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
+    /// Its largest cell as the writer recorded it (vdbclay_max_mass, IO.cc: readClayFile refuses a
+    /// file whose voxels exceed it, so a run never holds more); -1 when not recorded.
+    int64_t maxMass = -1;
 };
 FileGrid fileGridMetadata(const std::string& path, const std::string& gridName);
 
@@ -323,6 +333,8 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
     }
     if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
     if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
+    if (const auto mx = g->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass"))
+        out.maxMass = std::max<int64_t>(0, mx->value());
     if (!lo || !hi || !n) {
         // A file without statistics: read it (the estimate must not be a guess).
         const ClayFile f = readClayFile(path, gridName);
@@ -498,7 +510,7 @@ struct LayerBound {
 /// layer runs after it, under a step budget of @a maxSteps per frame: its chunks of kTryChunk steps
 /// end at multiples of kTryChunk, it gives up (and the layer runs) at the first one >= kTrySteps, and
 /// a chunk that reaches @a maxSteps finishes the frame without the layer. So none when @a maxSteps
-/// <= kTryChunk.
+/// <= kTryChunk. (layerMargin counts no more of them than cross the push's region: round 7.)
 uint64_t trySteps(uint64_t maxSteps)
 {
     if (maxSteps == 0) return 0;
@@ -519,10 +531,12 @@ int64_t layerMargin(const LayerBound& b)
         return std::max(reach, 2 * room) + depth + 4 + 1;
     }
     // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
-    // try's steps, each moving clay one voxel (three face steps) at most.
-    const int64_t steps = int64_t(trySteps(b.maxSteps));
+    // try's steps, each moving clay one voxel (three face steps) at most; the layer's seeds stay in
+    // the region (round 7), so the try moved them at most `region` voxels from the tool, whatever its
+    // steps.
     const int64_t region = int64_t(PushOptions().maxSearch) + 2;
-    return std::max(reach, 2 * (room + 3 * steps)) + region + steps + 4 + 1;
+    const int64_t steps = std::min(int64_t(trySteps(b.maxSteps)), region);
+    return std::max(reach, 2 * (room + 3 * steps)) + region + 4 + 1;
 }
 
 } // namespace
@@ -553,11 +567,13 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         bool moves;        ///< may move: a tool, clay from a file, clay above Tc
         bool file = false; ///< clay from a file
     };
+    std::vector<Box> fileBoxes; // of clay from files: where a tool's corner may lie inside clay
     std::vector<Area> areas;
     uint64_t massBound = 0; // units of clay, an upper bound; UINT64_MAX when unknown
     uint64_t fileTreeBytes = 0;
     uint64_t fileLower = 0, fileUpper = 0; // internal nodes of clay from files
     std::vector<Box> clayBoxes;            // of the shapes' clay
+    std::vector<int64_t> clayMasses;       // their masses per voxel
     uint64_t fileLeaves = 0;               // of clay from files
     uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
@@ -573,7 +589,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         fileTreeBytes += std::max(g.memBytes, real);
         fileLower += g.upperNodes ? g.lowerNodes : UINT64_MAX / 4;
         fileUpper += g.upperNodes ? g.upperNodes : UINT64_MAX / 4;
-        areas.push_back({b, true, true, true});
+        // It may overflow with no tool near unless it records its largest cell at most Tc (round 7).
+        areas.push_back({b, true, g.maxMass < 0 || g.maxMass > int64_t(scene.rule.threshold), true});
+        fileBoxes.push_back(b);
         massBound = UINT64_MAX;
     };
     if (!scene.start.empty()) {
@@ -590,6 +608,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             }
             const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
             clayBoxes.push_back(b);
+            clayMasses.push_back(c.mass);
             areas.push_back({b, true, c.mass > scene.rule.threshold});
             const double m = double(c.mass) * double(voxelsIn(b));
             if (massBound != UINT64_MAX)
@@ -737,6 +756,18 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lb.maxSteps = scene.settle.maxSteps;
         lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+        // Shapes that overlap add up: over Tc where two of them do (found by a sweep along x).
+        std::vector<size_t> order(clayBoxes.size());
+        for (size_t i = 0; i < order.size(); ++i)
+            order[i] = i;
+        std::sort(order.begin(), order.end(),
+                  [&](size_t a, size_t b) { return clayBoxes[a].min[0] < clayBoxes[b].min[0]; });
+        for (size_t i = 0; i < order.size() && !lb.clayMoves; ++i)
+            for (size_t j = i + 1; j < order.size() &&
+                                   clayBoxes[order[j]].min[0] <= clayBoxes[order[i]].max[0] && !lb.clayMoves;
+                 ++j)
+                lb.clayMoves = touches(clayBoxes[order[i]], clayBoxes[order[j]]) &&
+                               clayMasses[order[i]] + clayMasses[order[j]] > int64_t(scene.rule.threshold);
         for (const Box& t : toolBoxes) {
             for (const Area& a : areas) {
                 if (!a.clay) continue;
@@ -752,9 +783,16 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 const Vec3 p{{double(corner & 1 ? t.max[0] : t.min[0]),
                               double(corner & 2 ? t.max[1] : t.min[1]),
                               double(corner & 4 ? t.max[2] : t.min[2])}};
-                out = std::none_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
-                    return c.shape.shape && c.shape.shape->distance(p) < 0;
-                });
+                const bool inShape =
+                    std::any_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
+                        return c.shape.shape && c.shape.shape->distance(p) < 0;
+                    });
+                // Clay from a file: its voxels are not read, so a corner within its bounds may be in it.
+                const Box at{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
+                             {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}};
+                const bool inFile = std::any_of(fileBoxes.begin(), fileBoxes.end(),
+                                                [&](const Box& f) { return touches(f, at); });
+                out = !inShape && !inFile;
             }
             lb.buried |= !out;
         }

@@ -688,7 +688,14 @@ FrameReport Sculptor::runFrame()
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
-        if (im.scene.transport == Transport::Global) {
+        // Round 7: a frame whose tools touch no clay runs the layer (with no reach: over every over
+        // cell) only as the scene's first frame, for clay that starts over Tc; later, what a frame
+        // that ended unsettled (step budget, tolerance, no room) left is the automaton's, as with
+        // local (before, the layer then ran over every over cell, however far: the memory estimate
+        // counts the whole body only for clay that starts over Tc). By the scene's frame number, so
+        // a run resumed from a checkpoint does what the unbroken run did.
+        const bool layer = rep.push.contactSize > 0 || rep.frame == 1;
+        if (im.scene.transport == Transport::Global && layer) {
             GlobalTransportOptions go;
             go.threads = im.automaton->options().threads;
             // The plastic zone: a few contact sizes around the over cells; the whole body when no
@@ -700,8 +707,14 @@ FrameReport Sculptor::runFrame()
             // costs the tool's region, not the model's size).
             if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
             // The automaton's try first (compressible clay settles in a few cheap steps, as with
-            // local); the layer only on what it leaves, its seeds looked for as far as the try's
-            // steps can have carried the overload (a Margolus step moves clay one voxel at most).
+            // local); the layer only on what it leaves in the push's region. Round 7: the overload
+            // the try carried out of that region (up to 4096 steps, a voxel a step) is left to the
+            // cleanup below, not looked for as far as the try's steps reach (round 6): the try ran
+            // only because the clay within the reach of the push is unsaturated (kTrySaturated), where
+            // the automaton settles overload cheaply, and a layer seeded that far would cost, and the
+            // memory estimate have to count, a region of thousands of voxels around the tool
+            // (MemoryEstimate.cc: with the seeds in the push's region the bound holds under any
+            // step budget).
             im.open = true;
             im.openSteps = 0;
             rep.settle =
@@ -713,8 +726,6 @@ FrameReport Sculptor::runFrame()
                 ++im.frame;
                 return rep;
             }
-            if (rep.push.contactSize > 0)
-                go.seedRegion = growBox(go.seedRegion, int64_t(rep.settle.steps), 3);
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         } else {
             im.open = true;
