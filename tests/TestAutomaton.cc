@@ -3,13 +3,16 @@
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
+#include "Candidates.h"
 #include "PassSplit.h"
 
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <climits>
+#include <cstdio>
 #include <string>
 #include <vector>
 #include "TestRng.h"
@@ -363,9 +366,150 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
                             << threads << " threads";
                 }
             }
+            // Chunk 0 with a smaller share (FIRST), and without the predrain (Candidates::predrain).
+            for (int first : {100, 40}) {
+                for (bool predrain : {false, true}) {
+                    PassSplit p;
+                    p.firstShare = first;
+                    p.predrain = predrain;
+                    automaton_internal::passSplit() = p;
+                    for (int threads : {2, 3, 8})
+                        EXPECT_EQ(runOnce(threads), expected)
+                            << ruleName(rule) << " " << dims << "D, FIRST " << first << ", predrain "
+                            << predrain << ", " << threads << " threads";
+                }
+            }
         }
     }
     automaton_internal::passSplit() = saved;
+}
+
+TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
+{
+    // Candidates::predrain, as the weighted pass calls it: the items below a cut recorded (random
+    // lanes), then the next step's slot drained below the reach of the items after the cut, then
+    // those recorded. Against a twin without predrain: the same work lists, step after step, with
+    // edits, quiet steps, detach/attach and missed sinks (predrain undone) among them. A predrain
+    // that drained an entry a later item still writes, or lost or repeated one, changes a list.
+    using namespace automaton_internal;
+    uint64_t predrainedAll = 0;
+    uint64_t undone = 0; // steps whose predrain was undone or dropped (the next gather not dense)
+    for (int is3D = 0; is3D < 2; ++is3D) {
+        for (uint64_t seed = 1; seed <= 8; ++seed) {
+            Rng g(seed * 17 + uint64_t(is3D));
+            const int side = is3D ? 9 : 20, nz = is3D ? side : 1;
+            std::vector<Origin> keys; // leaves (some missing) and their upper neighbours, as LeafTable
+            for (int x = 0; x < side; ++x)
+                for (int y = 0; y < side; ++y)
+                    for (int z = 0; z < nz; ++z) {
+                        if (g.range(0, 3) == 0) continue;
+                        for (int d = 0; d < (is3D ? 8 : 4); ++d)
+                            keys.push_back(Origin(8 * x + ((d & 1) ? 8 : 0), 8 * y + ((d & 2) ? 8 : 0),
+                                                  8 * z + ((d & 4) ? 8 : 0)));
+                    }
+            auto less = [](const Origin& a, const Origin& b) { return layerLess(a, b); };
+            std::sort(keys.begin(), keys.end(), less);
+            keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+            std::vector<uint32_t> up(8 * keys.size(), kNoEntry), down(8 * keys.size(), kNoEntry);
+            AnchorIndex index;
+            index.keys = keys.data();
+            index.size = keys.size();
+            for (size_t k = 0; k < keys.size(); ++k)
+                for (int sh = 0; sh < (is3D ? 8 : 4); ++sh) {
+                    const int dx = (sh & 1) ? 8 : 0, dy = (sh & 2) ? 8 : 0, dz = (sh & 4) ? 8 : 0;
+                    const Origin& a = keys[k];
+                    up[8 * k + sh] = index.find(Origin(a.x() + dx, a.y() + dy, a.z() + dz));
+                    down[8 * k + sh] = index.find(Origin(a.x() - dx, a.y() - dy, a.z() - dz));
+                }
+            index.up = up.data();
+            index.down = down.data();
+            std::vector<Origin> hot;
+            for (int i = 0; i < 40; ++i)
+                hot.push_back(keys[size_t(g.range(0, int(keys.size()) - 1))]);
+            std::sort(hot.begin(), hot.end(), less);
+            hot.erase(std::unique(hot.begin(), hot.end()), hot.end());
+            Candidates ref, pre;
+            ref.reset(hot);
+            pre.reset(hot);
+            ref.attach(index, 0, is3D);
+            pre.attach(index, 0, is3D);
+            uint64_t predrained = 0;
+            for (int t = 0; t < 80; ++t) {
+                const int phase = t & 1;
+                const int event = g.range(0, 19);
+                if (event == 0) {
+                    const Box b{{g.range(0, 8 * side), g.range(0, 8 * side), is3D ? g.range(0, 8 * side) : 0},
+                                {0, 0, 0}};
+                    const Box e{b.min, {b.min[0] + 9, b.min[1] + 9, is3D ? b.min[2] + 9 : 0}};
+                    ref.addRegion(e);
+                    pre.addRegion(e);
+                    undone += pre.predrained() > 0;
+                } else if (event == 1) {
+                    undone += pre.predrained() > 0;
+                    ref.detach();
+                    pre.detach();
+                    ref.attach(index, phase, is3D);
+                    pre.attach(index, phase, is3D);
+                }
+                std::vector<WorkItem> wr, wp;
+                ref.gather(phase, is3D, wr);
+                pre.gather(phase, is3D, wp);
+                ASSERT_EQ(wp.size(), wr.size()) << "seed " << seed << " step " << t;
+                for (size_t i = 0; i < wr.size(); ++i) {
+                    ASSERT_EQ(wp[i].anchor, wr[i].anchor)
+                        << "seed " << seed << " step " << t << " item " << i;
+                    ASSERT_EQ(wp[i].mask, wr[i].mask) << "seed " << seed << " step " << t << " item " << i;
+                    ASSERT_EQ(wp[i].entry, wr[i].entry) << "seed " << seed << " step " << t << " item " << i;
+                }
+                if (event == 2) { // no over cell
+                    undone += pre.predrained() > 0;
+                    ref.clearChanges();
+                    pre.clearChanges();
+                    ref.endStep();
+                    pre.endStep();
+                    continue;
+                }
+                for (size_t i = 0; i < wr.size(); ++i)
+                    wr[i].changed = wp[i].changed = wr[i].mask & g.next() & (g.next() | g.next());
+                auto sinkOne = [&](const DenseSink& s, const WorkItem& w) {
+                    if (!w.changed || w.entry == kNoEntry) return;
+                    if (is3D)
+                        phase ? sinkChanges<1, true>(s, w.entry, w.changed)
+                              : sinkChanges<0, true>(s, w.entry, w.changed);
+                    else
+                        phase ? sinkChanges<1, false>(s, w.entry, w.changed)
+                              : sinkChanges<0, false>(s, w.entry, w.changed);
+                };
+                const DenseSink* sr = ref.lanes(2);
+                const DenseSink* sp = pre.lanes(2);
+                ASSERT_TRUE(sr && sp);
+                for (const WorkItem& w : wr)
+                    sinkOne(sr[g.range(0, 1)], w);
+                const size_t cut = size_t(g.range(0, int(wp.size())));
+                for (size_t i = 0; i < cut; ++i)
+                    sinkOne(sp[g.range(0, 1)], wp[i]);
+                if (cut < wp.size()) pre.predrain(phase, wp[cut].entry);
+                predrained += pre.predrained() > 0;
+                for (size_t i = cut; i < wp.size(); ++i)
+                    sinkOne(sp[g.range(0, 1)], wp[i]);
+                if (event == 3) { // a range ran outside the lanes: record() records every item
+                    undone += pre.predrained() > 0;
+                    ref.sinkMissed();
+                    pre.sinkMissed();
+                }
+                ref.record(wr);
+                pre.record(wp);
+                ref.endStep();
+                pre.endStep();
+            }
+            EXPECT_GT(predrained, 0u) << "seed " << seed;
+            predrainedAll += predrained;
+        }
+    }
+    std::printf("steps predrained %llu, undone %llu\n", (unsigned long long)predrainedAll,
+                (unsigned long long)undone);
+    EXPECT_GT(predrainedAll, 100u);
+    EXPECT_GT(undone, 10u);
 }
 
 TEST_F(AutomatonTest, SeedChangesTheResultButNotTheMass)

@@ -16,7 +16,8 @@
 // Stages of step(), each timed into StageSeconds:
 //   gather       Candidates::gather: one entry per anchor, in order of anchor (y, z, x): a sequence
 //                of horizontal layers, y up, as in the paper's p layers. (Dense mode: a scan of the
-//                anchors marked by the last passes.)
+//                anchors marked by the last passes; on several threads the part of it below the
+//                other chunks' reach was already drained by the last pass's chunk 0: predrain.)
 //   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks), each
 //                range through processRange (Kernel.h: what a task may write and why it is safe);
 //                in dense mode the pass also ORs its items' changes into the candidates of the
@@ -411,12 +412,14 @@ struct Automaton::Impl {
         }
         const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
         const size_t chunks = std::min(n, size_t(std::max(threads, 1)) * size_t(split.perThread));
+        // Chunk 0 gets firstShare % of an even share (it also predrains), the others the rest evenly.
+        const uint64_t first = std::min(total, total * uint64_t(split.firstShare) / (100 * chunks));
         bounds.clear();
         bounds.push_back(0);
         size_t cut = 1;
         for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
             const uint64_t acc = blockSums[i];
-            if (acc * chunks >= total * cut) {
+            if (acc >= first + (total - first) * (cut - 1) / (chunks - 1)) {
                 bounds.push_back(i + 1);
                 ++cut;
             }
@@ -424,12 +427,18 @@ struct Automaton::Impl {
         bounds.push_back(n);
         const size_t m = bounds.size() - 1;
         chunkTotals.assign(m, PassTotals());
+        // Chunk 0, once done, drains the next step's candidates that the later chunks cannot reach
+        // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
+        const uint32_t firstOfRest =
+            split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
         inArena([&] {
             tbb::parallel_for(
                 tbb::blocked_range<size_t>(0, m, 1),
                 [&](const tbb::blocked_range<size_t>& r) {
-                    for (size_t c = r.begin(); c != r.end(); ++c)
+                    for (size_t c = r.begin(); c != r.end(); ++c) {
                         processRange(in, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+                        if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+                    }
                 },
                 tbb::simple_partitioner());
         });
@@ -613,11 +622,15 @@ PassSplit& passSplit()
             p.weighted = false;
             return p;
         }
+        const char* pre = std::getenv("VDBCLAY_PASS_PREDRAIN");
+        if (pre && std::strcmp(pre, "0") == 0) p.predrain = false;
         if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
-        int k = 1;
+        int k = 1, first = p.firstShare;
         unsigned long long m = 0;
-        if (std::sscanf(env, "weighted:%d:%llu", &k, &m) >= 1 && k >= 1 && k <= 64) p.perThread = k;
+        const int got = std::sscanf(env, "weighted:%d:%llu:%d", &k, &m, &first);
+        if (got >= 1 && k >= 1 && k <= 64) p.perThread = k;
         p.minBlocks = m;
+        if (got >= 3 && first >= 1 && first <= 100) p.firstShare = first;
         return p;
     }();
     return split;

@@ -65,6 +65,7 @@ void Candidates::record(std::vector<WorkItem>& work)
             indexed = work[i].entry != kNoEntry;
     }
     mGathered = {nullptr, 0};
+    if (!(indexed && mSunk)) undoPredrain(); // the masks go back before anything is added to the slot
     if (indexed) {
         // A pass that did not record its items (a range ran outside the lanes: sinkMissed) leaves
         // the recording to here (serial, plain ORs). Then, as after a pass that recorded every item
@@ -150,12 +151,13 @@ void Candidates::addDenseDilated(int slot, uint32_t e, const Anchor& a, int from
     }
 }
 
-template <typename F> void Candidates::drain(int slot, F&& f)
+template <typename F> void Candidates::drain(int slot, F&& f, size_t fromWord, size_t toWord)
 {
     std::vector<uint64_t>& bits = mTouched[slot];
     std::vector<uint64_t>& acc = mAcc[slot];
+    toWord = std::min(toWord, bits.size());
     if (!mLanesDirty[slot]) { // one lane (every pass on one thread)
-        for (size_t k = 0; k < bits.size(); ++k) {
+        for (size_t k = fromWord; k < toWord; ++k) {
             for (uint64_t b = bits[k]; b; b &= b - 1) {
                 const uint32_t e = uint32_t(64 * k) + uint32_t(__builtin_ctzll(b));
                 f(e, acc[e]);
@@ -168,8 +170,8 @@ template <typename F> void Candidates::drain(int slot, F&& f)
     // A lane's entry is nonzero only where its bit is set, so the union of the bits finds them all.
     // Only nonzero words and entries are cleared: a store to a line another thread's lane last
     // wrote moves the line here and back at its next write, and most words and entries are zero.
-    mLanesDirty[slot] = false;
-    for (size_t k = 0; k < bits.size(); ++k) {
+    if (toWord == bits.size()) mLanesDirty[slot] = false; // (a predrain leaves the rest to the gather)
+    for (size_t k = fromWord; k < toWord; ++k) {
         uint64_t word = bits[k];
         if (word) bits[k] = 0;
         for (Lane& l : mLanes) {
@@ -195,7 +197,54 @@ template <typename F> void Candidates::drain(int slot, F&& f)
 
 void Candidates::clearSlot(int slot)
 {
+    if (mPreSlot == slot) undoPredrain(/*keep=*/false);
     drain(slot, [](uint32_t, uint64_t) {});
+}
+
+// The pass of a step of phase P writes the next step's slot (1 - P) only through sinkChanges's
+// dilation, into the neighbours of its items: for P = 0 the upper ones (+8 on some axes: later in
+// layer order, so at entries >= the item's), for P = 1 the lower ones (-8 on some axes: y at least
+// the item's y - 8). Items from entry `first` on thus never write below the first anchor with y >=
+// y(first) - 8 (P = 1) or below `first` (P = 0); the words wholly below that bound hold their final
+// masks once the items before `first` are done, and are drained here while later chunks still run
+// (no element is read here and written there: other threads touch only words and entries at or
+// above the bound). Same masks, same order as the gather's drain: the work list does not change.
+void Candidates::predrain(int passPhase, uint32_t first)
+{
+    // (Nothing is predrained now: the last one was taken or undone before this pass. Not undone
+    // here: that would write lane 0, which another chunk's thread may own.)
+    if (mPreSlot >= 0 || !mDense || first == kNoEntry || first >= mIndex.size) return;
+    uint32_t bound = first;
+    if (passPhase == 1) {
+        const int64_t y = int64_t(mIndex.keys[first].y()) - 8;
+        bound = uint32_t(std::partition_point(mIndex.keys, mIndex.keys + first,
+                                              [&](const Origin& o) { return int64_t(o.y()) < y; }) -
+                         mIndex.keys);
+    }
+    const int slot = 1 - passPhase;
+    const size_t words = bound / 64;
+    if (words == 0) return;
+    mPre.clear();
+    drain(
+        slot,
+        [&](uint32_t e, uint64_t m) {
+            mPre.push_back(WorkItem{mIndex.keys[e], m, 0, e});
+        },
+        0, words);
+    mPreSlot = slot;
+    mPreWords = words;
+}
+
+void Candidates::undoPredrain(bool keep)
+{
+    if (mPreSlot < 0) return;
+    if (keep) {
+        for (const WorkItem& w : mPre)
+            addDense(mPreSlot, w.entry, w.mask);
+    }
+    mPre.clear();
+    mPreSlot = -1;
+    mPreWords = 0;
 }
 
 void Candidates::attach(const AnchorIndex& index, int phase, bool is3D)
@@ -258,6 +307,7 @@ const DenseSink* Candidates::lanes(int n)
 
 void Candidates::detach()
 {
+    undoPredrain(/*keep=*/false); // the accumulators go; the kept work lists hold every change
     mSunk = false;
     if (!mDense) return;
     materialize();
@@ -319,10 +369,23 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // The accumulated candidates, in index order (= layer order); the slot is left empty for
         // the record() of the step after next.
         work.clear();
-        drain(phase, [&](uint32_t e, uint64_t m) { work.push_back(WorkItem{mIndex.keys[e], m, 0, e}); });
+        size_t from = 0;
+        if (mPreSlot == phase) { // the part predrained during the last pass comes first
+            work.swap(mPre);
+            from = mPreWords;
+            mPreSlot = -1;
+            mPreWords = 0;
+        }
+        drain(
+            phase,
+            [&](uint32_t e, uint64_t m) {
+                work.push_back(WorkItem{mIndex.keys[e], m, 0, e});
+            },
+            from);
         mGathered = {work.data(), work.size()};
         return;
     }
+    undoPredrain();
     mRuns.clear();
     for (auto& st : mStreams)
         st.clear();

@@ -34,6 +34,7 @@
 
 #include "vdbclay/Types.h"
 
+#include <cstddef>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -127,6 +128,14 @@ public:
     const DenseSink* lanes(int n);
     /// The pass did not record every item it was given a sink for: record() records them all.
     void sinkMissed() { mSunk = false; }
+    /// During the pass of a step of phase @a passPhase (dense mode, lanes given), once every item
+    /// below entry @a first is done and recorded and the items from @a first on may still be running
+    /// on other threads: drains the next step's slot over the anchors those items cannot reach (see
+    /// Candidates.cc), ahead of the next gather, which takes them first. Undone (the masks put back)
+    /// if the next step does not gather densely.
+    void predrain(int passPhase, uint32_t first);
+    /// The anchors predrain() holds for the next gather (tests).
+    size_t predrained() const { return mPre.size(); }
 
 private:
     struct Pending {
@@ -140,7 +149,9 @@ private:
     void sinkAll(const std::vector<WorkItem>& work);
     /// Empties dense slot @a slot of every lane, calling f(entry, mask) for each nonzero entry in
     /// index order (the masks of all lanes ORed).
-    template <typename F> void drain(int slot, F&& f);
+    template <typename F> void drain(int slot, F&& f, size_t fromWord = 0, size_t toWord = SIZE_MAX);
+    /// Puts predrain()'s masks back into their slot (lane 0), or drops them when @a keep is false.
+    void undoPredrain(bool keep = true);
     void addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D);
     void addPending(const Pending& p, int phase, bool is3D);
     void addDense(int slot, uint32_t e, uint64_t mask);
@@ -185,6 +196,9 @@ private:
     std::vector<Run> mRuns;
     std::vector<std::pair<size_t, size_t>> mSpans;
     std::pair<const WorkItem*, size_t> mGathered{nullptr, 0}; // the last list gathered in dense mode
+    std::vector<WorkItem> mPre; // predrain(): slot mPreSlot's words below mPreWords, drained
+    int mPreSlot = -1;          // -1: nothing predrained
+    size_t mPreWords = 0;
 };
 
 } // namespace automaton_internal

@@ -10,6 +10,11 @@
 // quiet 2-core machine the weighted split ran the 128^3 compressible press on 2 threads in 1.80-1.92 s
 // (median 1.82; user CPU 3.16-3.39 s) against 1.82-1.88 s (median 1.865; 3.26-3.36 s), six runs of
 // each alternated (docs/PERFORMANCE.md, "Round 5, merged"): a small gain, within the noise of one run.
+// Round 7: chunk 0, once done, predrains the next step's candidates out of the other chunks' reach
+// (Candidates::predrain: part of the serial gather done while the other threads still run), so it
+// gets FIRST = 92 % of an even share of the candidate blocks (VDBCLAY_PASS_SPLIT=weighted:K:MIN:FIRST;
+// VDBCLAY_PASS_PREDRAIN=0 turns the predrain off). Shared 2-core machine, 2 threads, medians of 6-7
+// alternated runs: 2.14-2.26 s against 2.21-2.37 s without (docs/PERFORMANCE.md, "Round 7").
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
@@ -24,6 +29,8 @@ struct PassSplit {
     bool weighted = true;
     int perThread = 1;      ///< K: chunks per thread
     uint64_t minBlocks = 0; ///< MIN: fewer candidate blocks than this run serially
+    int firstShare = 92;    ///< FIRST: chunk 0's candidate blocks, in percent of an even share
+    bool predrain = true;   ///< chunk 0 then drains the next step's candidates out of the others' reach
 };
 
 /// The process's setting: VDBCLAY_PASS_SPLIT at the first call; tests may assign it.
