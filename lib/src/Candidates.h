@@ -85,20 +85,11 @@ template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e
     uint64_t out[8];
     dilateAll<P, D3>(changed, out);
     const uint32_t* nb = s.nb + 8 * size_t(e);
-    uint64_t* acc = s.acc[1 - P];
-    uint64_t* touched = s.touched[1 - P];
     for (int k = 0; k < (D3 ? 8 : 4); ++k) {
-        // Without a branch (which neighbours a change reaches is data: a branch here mispredicted
-        // ~0.3 times per update): a neighbour that gets nothing, or has no entry (no leaf within
-        // reach, cannot change), becomes anchor e's own word (always written: the dilation keeps
-        // a nonzero mask in the anchor itself) with nothing ORed in. A touched bit is set whenever
-        // its word is nonzero, so setting it again changes nothing.
         const uint32_t t = nb[k];
-        const uint32_t live = uint32_t(out[k] != 0) & uint32_t(t != kNoEntry); // (masks, not ?: or &&,
-        const uint32_t m = 0u - live;                                          // which GCC compiles to
-        const uint32_t u = (t & m) | (e & ~m);                                 // branches)
-        acc[u] |= out[k] & (uint64_t(0) - live);
-        touched[u >> 6] |= uint64_t(live) << (u & 63);
+        if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
+        if (std::exchange(s.acc[1 - P][t], s.acc[1 - P][t] | out[k]) == 0)
+            s.touched[1 - P][t >> 6] |= uint64_t(1) << (t & 63);
     }
 }
 

@@ -508,8 +508,7 @@ __attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, in
 // a column at a time (BlockMasks.h, ColumnTables: the 4 blocks with the same bx, by lie in 4 z-rows of
 // 8 consecutive cells): 4 row compares against Tc ORed, one movemask, one fold table lookup give the
 // column's blocks holding an over cell; on the odd phase the cells z = -1 of the block bz = 0 come
-// from the -z neighbours (4 scalar loads, without a branch: where that block is no candidate or holds
-// an over cell already they read kZeroLeaf instead, lowerZBlock). The result is exact
+// from the -z neighbours (4 scalar loads, only when that block is a candidate). The result is exact
 // (a block is kept iff one of its cells is over Tc, obstacles not excluded, as the block loop tests),
 // so the loop skips exactly the blocks it skipped before; blocksVisited still counts every candidate.
 // AVX2 (one row per register) where the CPU has it, chosen at run time; SSE2 (two registers a row)
@@ -520,15 +519,14 @@ __attribute__((always_inline)) inline bool loadInsideScalar(const int32_t* d, in
 // left out of the load (AVX2: a masked load, whose masked lane is not accessed; SSE2: z = 4-6 loaded
 // as 8 + 4 bytes), and of the -z rows only the z = 7 cells are read.
 
-/// The 4 z-rows of column @a col (phase P) in @a r. On the even phase every column lies in the
-/// anchor's leaf at constant offsets; on the odd phase the rows go through the tables (also for the
-/// columns with bx, by >= 1, which lie in the anchor's leaf too: one path, no data-dependent branch).
+/// The 4 z-rows of column @a col (phase P) in @a r. Columns with bx, by >= 1 lie in the anchor's leaf
+/// at constant offsets (every column on the even phase); the others go through the tables.
 template <int P>
 __attribute__((always_inline)) inline void columnRows(const int32_t* const read[8], int col,
                                                       const int32_t* r[4])
 {
-    if (P == 0) {
-        const int32_t* d = read[0] + kColumns.rowOffset[0][col][0];
+    if (P == 0 || ((col & 3) && (col >> 2))) {
+        const int32_t* d = read[0] + kColumns.rowOffset[P][col][0];
         r[0] = d, r[1] = d + 64, r[2] = d + 8, r[3] = d + 72;
     } else {
         for (int k = 0; k < 4; ++k)
@@ -536,30 +534,20 @@ __attribute__((always_inline)) inline void columnRows(const int32_t* const read[
     }
 }
 
-/// Odd phase: 1 when block bz = 0 of column @a col is in @a mask, not in @a blocks (no own cell over
-/// Tc) and a cell z = -1 below it is over @a tc (the z = 7 cells of the rows below the column's, in
-/// the -z neighbours), else 0. Without a branch: low[1][j] is read[j | 4] (the -z leaves), low[0][j]
-/// kZeroLeaf (always cached), read instead when the test is not needed.
-__attribute__((always_inline)) inline uint64_t lowerZBlock(const int32_t* const low[2][4], int col, uint64_t mask,
-                                                           uint64_t blocks, int32_t tc)
+/// Whether a cell z = -1 of block bz = 0 of column @a col (odd phase) is over @a tc: the z = 7 cells
+/// of the rows below the column's, in the -z neighbours.
+__attribute__((always_inline)) inline bool lowerZOver(const int32_t* const read[8], int col, int32_t tc)
 {
-    const uint64_t need = (mask >> col) & ~blocks & 1u;
-    const int32_t* const* src = low[need];
+    if ((col & 3) && (col >> 2)) { // the rows lie in the anchor's leaf: the cells below in the -z one
+        const int32_t* d = read[4] + kColumns.rowOffset[1][col][0] + 7;
+        return std::max(std::max(d[0], d[64]), std::max(d[8], d[72])) > tc;
+    }
     const uint16_t* off = kColumns.rowOffset[1][col];
     const uint8_t* lf = kColumns.rowLeaf[1][col];
-    const int32_t a = std::max(src[lf[0]][off[0] + 7], src[lf[1]][off[1] + 7]);
-    const int32_t b = std::max(src[lf[2]][off[2] + 7], src[lf[3]][off[3] + 7]);
-    return need & uint64_t(std::max(a, b) > tc);
+    const int32_t a = std::max(read[lf[0] | 4][off[0] + 7], read[lf[1] | 4][off[1] + 7]);
+    const int32_t b = std::max(read[lf[2] | 4][off[2] + 7], read[lf[3] | 4][off[3] + 7]);
+    return std::max(a, b) > tc;
 }
-
-/// lowerZBlock's pointers for an item's leaves @a read.
-struct LowerZLeaves {
-    const int32_t* p[2][4];
-    explicit LowerZLeaves(const int32_t* const read[8])
-        : p{{kZeroLeaf, kZeroLeaf, kZeroLeaf, kZeroLeaf}, {read[4], read[5], read[6], read[7]}}
-    {
-    }
-};
 
 #if defined(__SSE2__)
 template <int P>
@@ -577,7 +565,6 @@ __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], 
     };
     uint32_t cols = columnsOf(mask);
     uint64_t out = 0;
-    const LowerZLeaves low(read);
     while (cols) {
         const int col = __builtin_ctz(cols);
         cols &= cols - 1;
@@ -588,7 +575,7 @@ __attribute__((noinline)) uint64_t overBlocksSse2(const int32_t* const read[8], 
         const uint32_t z = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(l))) |
                            (uint32_t(_mm_movemask_ps(_mm_castsi128_ps(h))) << 4);
         uint64_t blocks = kColumns.zFold[P][z];
-        if (P == 1) blocks |= lowerZBlock(low.p, col, mask, blocks, tc);
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
@@ -605,7 +592,6 @@ __attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t*
     const __m256i lanes = _mm256_setr_epi32(-1, -1, -1, -1, -1, -1, -1, P == 0 ? -1 : 0); // odd: not z = 7
     uint32_t cols = columnsOf(mask);
     uint64_t out = 0;
-    const LowerZLeaves low(read);
     while (cols) {
         const int col = __builtin_ctz(cols);
         cols &= cols - 1;
@@ -619,7 +605,7 @@ __attribute__((noinline, target("avx2"))) uint64_t overBlocksAvx2(const int32_t*
         }
         const __m256i any = _mm256_or_si256(_mm256_or_si256(v[0], v[1]), _mm256_or_si256(v[2], v[3]));
         uint64_t blocks = kColumns.zFold[P][_mm256_movemask_ps(_mm256_castsi256_ps(any))];
-        if (P == 1) blocks |= lowerZBlock(low.p, col, mask, blocks, tc);
+        if (P == 1 && ((mask >> col) & 1u) && !(blocks & 1u) && lowerZOver(read, col, tc)) blocks |= 1u;
         out |= blocks << col;
     }
     return out & mask;
