@@ -3,7 +3,8 @@
 // Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
 // holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
 // flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
-// otherwise through value accessors (only the leaves the mask's blocks touch). In 3D the over-cell
+// otherwise through value accessors (only the leaves the mask's blocks touch); with a table, the
+// next items' entries and candidate rows are prefetched meanwhile (prefetchAhead). In 3D the over-cell
 // filter then drops the candidates holding no cell over Tc, a column of 4 blocks at a time (AVX2 or
 // SSE2, chosen at run time; see "The over-cell filter" below). Then for each candidate block left:
 // load its cells (even: at constant offsets from the block's first cell; odd: through the addressing tables),
@@ -764,8 +765,10 @@ __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, ui
 constexpr bool kPrefetch = true;
 
 /// While item @a wi runs: the table entry of item wi + 2 (its flags and slot 0 on the even phase; all
-/// of it on the odd), and the rows of item wi + 1's candidate columns (two lines a column on the even phase, four on the odd, in the
-/// leaves that hold the column's rows; entry read from the lines prefetched one item earlier).
+/// of it on the odd), and the rows of item wi + 1's candidate columns (two lines a column on the even
+/// phase, four on the odd, in the leaves that hold the column's rows; the entry read from the lines
+/// prefetched one item earlier). It adds 8 % instructions and measured 0.5-4 % faster (press128, one
+/// thread; docs/PERFORMANCE.md, "Round 7: the kernel"); callgrind does not model prefetches.
 template <int P>
 __attribute__((always_inline)) inline void prefetchAhead(const LeafTable::Impl& t, const WorkItem* work,
                                                          size_t wi, size_t end)
@@ -791,7 +794,8 @@ __attribute__((always_inline)) inline void prefetchAhead(const LeafTable::Impl& 
                 __builtin_prefetch(r + 64);
             } else { // y odd: four lines, possibly in four leaves
                 for (int k = 0; k < 4; ++k)
-                    __builtin_prefetch(e.slot[kColumns.rowLeaf[1][col][k]].read + kColumns.rowOffset[1][col][k]);
+                    __builtin_prefetch(e.slot[kColumns.rowLeaf[1][col][k]].read +
+                                       kColumns.rowOffset[1][col][k]);
             }
         }
     }
