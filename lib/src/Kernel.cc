@@ -767,7 +767,7 @@ constexpr bool kPrefetch = true;
 /// While item @a wi runs: the table entry of item wi + 2 (its flags and slot 0 on the even phase; all
 /// of it on the odd), and the rows of item wi + 1's candidate columns (two lines a column on the even
 /// phase, four on the odd, in the leaves that hold the column's rows; the entry read from the lines
-/// prefetched one item earlier). It adds 8 % instructions and measured 0.5-4 % faster (press128, one
+/// prefetched one item earlier). It adds 8 % instructions and measured 1-3 % faster (press128, one
 /// thread; docs/PERFORMANCE.md, "Round 7: the kernel"); callgrind does not model prefetches.
 template <int P>
 __attribute__((always_inline)) inline void prefetchAhead(const LeafTable::Impl& t, const WorkItem* work,
