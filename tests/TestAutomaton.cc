@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <string>
 #include <vector>
+#include "RandomAnchorIndex.h"
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -397,32 +398,11 @@ TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
     for (int is3D = 0; is3D < 2; ++is3D) {
         for (uint64_t seed = 1; seed <= 8; ++seed) {
             Rng g(seed * 17 + uint64_t(is3D));
-            const int side = is3D ? 9 : 20, nz = is3D ? side : 1;
-            std::vector<Origin> keys; // leaves (some missing) and their upper neighbours, as LeafTable
-            for (int x = 0; x < side; ++x)
-                for (int y = 0; y < side; ++y)
-                    for (int z = 0; z < nz; ++z) {
-                        if (g.range(0, 3) == 0) continue;
-                        for (int d = 0; d < (is3D ? 8 : 4); ++d)
-                            keys.push_back(Origin(8 * x + ((d & 1) ? 8 : 0), 8 * y + ((d & 2) ? 8 : 0),
-                                                  8 * z + ((d & 4) ? 8 : 0)));
-                    }
-            auto less = [](const Origin& a, const Origin& b) { return layerLess(a, b); };
-            std::sort(keys.begin(), keys.end(), less);
-            keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-            std::vector<uint32_t> up(8 * keys.size(), kNoEntry), down(8 * keys.size(), kNoEntry);
-            AnchorIndex index;
-            index.keys = keys.data();
-            index.size = keys.size();
-            for (size_t k = 0; k < keys.size(); ++k)
-                for (int sh = 0; sh < (is3D ? 8 : 4); ++sh) {
-                    const int dx = (sh & 1) ? 8 : 0, dy = (sh & 2) ? 8 : 0, dz = (sh & 4) ? 8 : 0;
-                    const Origin& a = keys[k];
-                    up[8 * k + sh] = index.find(Origin(a.x() + dx, a.y() + dy, a.z() + dz));
-                    down[8 * k + sh] = index.find(Origin(a.x() - dx, a.y() - dy, a.z() - dz));
-                }
-            index.up = up.data();
-            index.down = down.data();
+            const int side = is3D ? 9 : 20;
+            const vdbclay_test::RandomAnchorIndex table(g, side, is3D != 0, 3);
+            const std::vector<Origin>& keys = table.keys;
+            const AnchorIndex& index = table.index;
+            auto less = vdbclay_test::RandomAnchorIndex::less;
             std::vector<Origin> hot;
             for (int i = 0; i < 40; ++i)
                 hot.push_back(keys[size_t(g.range(0, int(keys.size()) - 1))]);

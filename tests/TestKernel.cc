@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "RandomAnchorIndex.h"
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -554,32 +555,10 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
             vdbclay_test::Rng g(seed * 31 + uint64_t(is3D));
             // Leaves in a 6^3 (2D: 6^2) box of leaves, some missing; the index is what LeafTable
             // holds: every leaf's origin and its upper neighbours', in layer order.
-            std::vector<Origin> keys;
-            const int nz = is3D ? 6 : 1;
-            for (int x = 0; x < 6; ++x)
-                for (int y = 0; y < 6; ++y)
-                    for (int z = 0; z < nz; ++z) {
-                        if (g.range(0, 2) == 0) continue;
-                        for (int d = 0; d < (is3D ? 8 : 4); ++d)
-                            keys.push_back(Origin(8 * x + ((d & 1) ? 8 : 0), 8 * y + ((d & 2) ? 8 : 0),
-                                                  8 * z + ((d & 4) ? 8 : 0)));
-                    }
-            auto less = [](const Origin& a, const Origin& b) { return layerLess(a, b); };
-            std::sort(keys.begin(), keys.end(), less);
-            keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-            std::vector<uint32_t> up(8 * keys.size(), kNoEntry), down(8 * keys.size(), kNoEntry);
-            AnchorIndex index;
-            index.keys = keys.data();
-            index.size = keys.size();
-            for (size_t k = 0; k < keys.size(); ++k)
-                for (int sh = 0; sh < (is3D ? 8 : 4); ++sh) {
-                    const int dx = (sh & 1) ? 8 : 0, dy = (sh & 2) ? 8 : 0, dz = (sh & 4) ? 8 : 0;
-                    const Origin& a = keys[k];
-                    up[8 * k + sh] = index.find(Origin(a.x() + dx, a.y() + dy, a.z() + dz));
-                    down[8 * k + sh] = index.find(Origin(a.x() - dx, a.y() - dy, a.z() - dz));
-                }
-            index.up = up.data();
-            index.down = down.data();
+            const vdbclay_test::RandomAnchorIndex table(g, 6, is3D != 0, 2);
+            const std::vector<Origin>& keys = table.keys;
+            const AnchorIndex& index = table.index;
+            auto less = vdbclay_test::RandomAnchorIndex::less;
             ASSERT_EQ(index.find(Origin(-8, 0, 0)), kNoEntry);
 
             Candidates merged, dense;

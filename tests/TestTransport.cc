@@ -704,6 +704,20 @@ std::string pressScene(const char* rule, const char* push, const char* transport
         "settle": {"max_steps": 400000}})";
 }
 
+/// @a json (a 3D pressScene) with clay walled in a closed chamber beside the cube, more than Tc per cell
+/// in part of it (950 on 4^3 cells, 1500 more on 2^3): overload that never finds room.
+std::string withWalledOverloadBesideTheCube(std::string json)
+{
+    json.replace(json.find(R"("clay": [)"), 9,
+                 R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
+        {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
+    json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
+        {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
+        {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
+        {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
+    return json;
+}
+
 } // namespace
 
 TEST_F(TransportTest, GlobalPressKeepsMassOverEveryFrameWithEveryRuleIn2DAnd3D)
@@ -857,14 +871,7 @@ TEST_F(TransportTest, AGlobalRunStoppedAndResumedIsIdenticalToAnUnbrokenRun)
     // cap, then the layer runs. A stop asked inside the try is honoured after the layer (a frame saved
     // open is past its layer): the resumed run never repeats or skips it.
     for (const char* push : {"compress", "surface"}) {
-        std::string json = pressScene("prorata", push, "global");
-        json.replace(json.find(R"("clay": [)"), 9,
-                     R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
-        {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
-        json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
-        {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
-        {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
-        {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
+        std::string json = withWalledOverloadBesideTheCube(pressScene("prorata", push, "global"));
         const bool surface = std::string(push) == "surface";
         json.replace(json.find(R"("max_steps": 400000)"), 19,
                      surface ? R"("max_steps": 400)" : R"("max_steps": 40)");
@@ -1083,14 +1090,7 @@ TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheO
     // presses a cube at Tc once, then lifts away; beside it, clay walled in a closed chamber with more
     // than Tc per cell: every frame ends with that overload left (no room). The first frame's layer
     // seeds it (it lies in the push's region); the later frames touch no clay and run no layer.
-    std::string json = pressScene("prorata", "compress", "global");
-    json.replace(json.find(R"("clay": [)"), 9,
-                 R"("clay": [{"shape": "box", "min": [31,1,31], "max": [34,4,34], "mass": 950},
-        {"shape": "box", "min": [31,1,31], "max": [32,2,32], "mass": 1500}, )");
-    json.replace(json.find(R"("obstacles": [)"), 14, R"("obstacles": [
-        {"shape": "box", "min": [30,0,30], "max": [35,0,35]}, {"shape": "box", "min": [30,5,30], "max": [35,5,35]},
-        {"shape": "box", "min": [30,1,30], "max": [30,4,35]}, {"shape": "box", "min": [35,1,30], "max": [35,4,35]},
-        {"shape": "box", "min": [31,1,30], "max": [34,4,30]}, {"shape": "box", "min": [31,1,35], "max": [34,4,35]}, )");
+    std::string json = withWalledOverloadBesideTheCube(pressScene("prorata", "compress", "global"));
     const std::string path = R"([{"translate": [0,-1,0], "frames": 4}])";
     json.replace(json.find(path), path.size(),
                  R"([{"translate": [0,-1,0], "frames": 1}, {"translate": [0,10,0], "frames": 3}])");
