@@ -3,8 +3,7 @@
 // Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
 // holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
 // flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
-// otherwise through value accessors (only the leaves the mask's blocks touch); with a table, the
-// next items' entries and candidate rows are prefetched meanwhile (prefetchAhead). In 3D the over-cell
+// otherwise through value accessors (only the leaves the mask's blocks touch). In 3D the over-cell
 // filter then drops the candidates holding no cell over Tc, a column of 4 blocks at a time (AVX2 or
 // SSE2, chosen at run time; see "The over-cell filter" below). Then for each candidate block left:
 // load its cells (even: at constant offsets from the block's first cell; odd: through the addressing tables),
@@ -76,18 +75,14 @@ alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
 
 struct LeafTable::Impl {
     /// One anchor's leaves, as fetchLeaves hands them to the pass (slot w: leafOrigin(anchor, w)).
-    /// Slot-major, flags first: the even phase reads the flags and slot 0 alone, which share the
-    /// entry's first 32 bytes (one cache line: entries are 32-byte aligned); the odd phase reads 200
-    /// bytes (4 lines). (Field-major, 8 pointers per field, the even phase touched 5 lines.)
-    struct alignas(32) Entry {
+    struct Entry {
+        MassLeaf* leaf[8];
+        int32_t* data[8];
+        const int32_t* read[8]; // data, or kZeroLeaf for a missing leaf
+        const ObsLeaf* obs[8];
         uint8_t missing; // slots whose mass leaf is missing
         uint8_t obsAny;  // slots holding obstacles: an obstacle leaf, or an active obstacle tile
         uint8_t obsTile; // slots inside an active obstacle tile
-        struct Leaves {
-            MassLeaf* leaf;
-            const int32_t* read; // the leaf's values, or kZeroLeaf for a missing leaf
-            const ObsLeaf* obs;
-        } slot[8];
     };
     struct Slot {
         int32_t x, y, z;
@@ -212,14 +207,14 @@ void LeafTable::build(MassTree& tree, const ObsTree* obstacles, bool is3D)
         for (int w = 0; w < 8; ++w) {
             const Origin lo = leafOrigin(t.keys[k], w);
             const Coord c(lo.x(), lo.y(), lo.z());
-            Impl::Entry::Leaves& l = e.slot[w];
-            l.leaf = acc.probeLeaf(c);
-            l.read = l.leaf ? l.leaf->buffer().data() : kZeroLeaf;
-            if (!l.leaf) e.missing |= uint8_t(1u << w);
-            l.obs = oacc ? oacc->probeConstLeaf(c) : nullptr;
-            const bool tile = oacc && !l.obs && oacc->isValueOn(c);
+            e.leaf[w] = acc.probeLeaf(c);
+            e.data[w] = e.leaf[w] ? e.leaf[w]->buffer().data() : nullptr;
+            e.read[w] = e.leaf[w] ? e.data[w] : kZeroLeaf;
+            if (!e.leaf[w]) e.missing |= uint8_t(1u << w);
+            e.obs[w] = oacc ? oacc->probeConstLeaf(c) : nullptr;
+            const bool tile = oacc && !e.obs[w] && oacc->isValueOn(c);
             if (tile) e.obsTile |= uint8_t(1u << w);
-            if (l.obs || tile) e.obsAny |= uint8_t(1u << w);
+            if (e.obs[w] || tile) e.obsAny |= uint8_t(1u << w);
         }
     }
     mValid = true;
@@ -689,11 +684,10 @@ __attribute__((always_inline)) inline void copyEntry(LeafSet& ls, const LeafTabl
                                                      const Origin& anchor, uint32_t need)
 {
     for (int w = 0; w < kCount; ++w) {
-        const LeafTable::Impl::Entry::Leaves& l = e.slot[w];
-        ls.leaf[w] = l.leaf;
-        ls.read[w] = l.read;
-        ls.data[w] = ((e.missing >> w) & 1u) ? nullptr : const_cast<int32_t*>(l.read);
-        ls.obs[w] = l.obs;
+        ls.leaf[w] = e.leaf[w];
+        ls.data[w] = e.data[w];
+        ls.read[w] = e.read[w];
+        ls.obs[w] = e.obs[w];
         ls.obsTile[w] = (e.obsTile >> w) & 1u;
     }
     ls.anyMissing = (e.missing & need) != 0;
@@ -761,46 +755,6 @@ __attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, ui
     ls.fetched = need;
 }
 
-/// Software prefetch in the pass (prefetchAhead).
-constexpr bool kPrefetch = true;
-
-/// While item @a wi runs: the table entry of item wi + 2 (its flags and slot 0 on the even phase; all
-/// of it on the odd), and the rows of item wi + 1's candidate columns (two lines a column on the even
-/// phase, four on the odd, in the leaves that hold the column's rows; the entry read from the lines
-/// prefetched one item earlier). It adds 8 % instructions and measured 1-3 % faster (press128, one
-/// thread; docs/PERFORMANCE.md, "Round 7: the kernel"); callgrind does not model prefetches.
-template <int P>
-__attribute__((always_inline)) inline void prefetchAhead(const LeafTable::Impl& t, const WorkItem* work,
-                                                         size_t wi, size_t end)
-{
-    if (wi + 2 < end && work[wi + 2].entry != kNoEntry) {
-        const char* e = reinterpret_cast<const char*>(&t.entries[work[wi + 2].entry]);
-        __builtin_prefetch(e);
-        if (P == 1) {
-            __builtin_prefetch(e + 64);
-            __builtin_prefetch(e + 128);
-            __builtin_prefetch(e + 192);
-        }
-    }
-    if (wi + 1 < end && work[wi + 1].entry != kNoEntry) {
-        const LeafTable::Impl::Entry& e = t.entries[work[wi + 1].entry];
-        uint32_t cols = columnsOf(work[wi + 1].mask);
-        while (cols) {
-            const int col = __builtin_ctz(cols);
-            cols &= cols - 1;
-            if (P == 0) { // rows y, y + 1 share a line (y even)
-                const int32_t* r = e.slot[0].read + kColumns.rowOffset[0][col][0];
-                __builtin_prefetch(r);
-                __builtin_prefetch(r + 64);
-            } else { // y odd: four lines, possibly in four leaves
-                for (int k = 0; k < 4; ++k)
-                    __builtin_prefetch(e.slot[kColumns.rowLeaf[1][col][k]].read +
-                                       kColumns.rowOffset[1][col][k]);
-            }
-        }
-    }
-}
-
 /// A block's hash from the step's prefix, computed only when a remainder or a tie needs it (its
 /// coordinates too: most updated blocks need no hash).
 template <bool D3> struct BlockHash {
@@ -866,7 +820,6 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     int64_t overloadDelta = 0, maxWritten = 0;
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
-        if (kPrefetch && table) prefetchAhead<P>(*table, work, wi, end);
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         if constexpr (I == Isa::Avx2)
