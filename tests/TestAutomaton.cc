@@ -15,7 +15,7 @@
 #include <cstdio>
 #include <string>
 #include <vector>
-#include "RandomAnchorIndex.h"
+#include "CandidatesTesting.h"
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -453,12 +453,7 @@ TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
                     wr[i].changed = wp[i].changed = wr[i].mask & g.next() & (g.next() | g.next());
                 auto sinkOne = [&](const DenseSink& s, const WorkItem& w) {
                     if (!w.changed || w.entry == kNoEntry) return;
-                    if (is3D)
-                        phase ? sinkChanges<1, true>(s, w.entry, w.changed)
-                              : sinkChanges<0, true>(s, w.entry, w.changed);
-                    else
-                        phase ? sinkChanges<1, false>(s, w.entry, w.changed)
-                              : sinkChanges<0, false>(s, w.entry, w.changed);
+                    vdbclay_test::sinkChangesAt(phase, is3D != 0, s, w.entry, w.changed);
                 };
                 const DenseSink* sr = ref.lanes(2);
                 const DenseSink* sp = pre.lanes(2);

@@ -20,7 +20,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "RandomAnchorIndex.h"
+#include "CandidatesTesting.h"
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -633,12 +633,7 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                             if (!d.changed || d.entry == kNoEntry) continue;
                             for (int rep = g.range(0, 9) == 0 ? 2 : 1; rep > 0; --rep) {
                                 const DenseSink& s = sink[g.range(0, lanes - 1)];
-                                if (is3D)
-                                    phase ? sinkChanges<1, true>(s, d.entry, d.changed)
-                                          : sinkChanges<0, true>(s, d.entry, d.changed);
-                                else
-                                    phase ? sinkChanges<1, false>(s, d.entry, d.changed)
-                                          : sinkChanges<0, false>(s, d.entry, d.changed);
+                                vdbclay_test::sinkChangesAt(phase, is3D != 0, s, d.entry, d.changed);
                             }
                         }
                         ++sunkSteps;

@@ -195,6 +195,16 @@ template <typename F> void Candidates::drain(int slot, F&& f, size_t fromWord, s
     }
 }
 
+void Candidates::drainInto(int slot, std::vector<WorkItem>& out, size_t fromWord, size_t toWord)
+{
+    drain(
+        slot,
+        [&](uint32_t e, uint64_t m) {
+            out.push_back(WorkItem{mIndex.keys[e], m, 0, e});
+        },
+        fromWord, toWord);
+}
+
 void Candidates::clearSlot(int slot)
 {
     if (mPreSlot == slot) undoPredrain(/*keep=*/false);
@@ -225,12 +235,7 @@ void Candidates::predrain(int passPhase, uint32_t first)
     const size_t words = bound / 64;
     if (words == 0) return;
     mPre.clear();
-    drain(
-        slot,
-        [&](uint32_t e, uint64_t m) {
-            mPre.push_back(WorkItem{mIndex.keys[e], m, 0, e});
-        },
-        0, words);
+    drainInto(slot, mPre, 0, words);
     mPreSlot = slot;
     mPreWords = words;
 }
@@ -376,12 +381,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
             mPreSlot = -1;
             mPreWords = 0;
         }
-        drain(
-            phase,
-            [&](uint32_t e, uint64_t m) {
-                work.push_back(WorkItem{mIndex.keys[e], m, 0, e});
-            },
-            from);
+        drainInto(phase, work, from, SIZE_MAX);
         mGathered = {work.data(), work.size()};
         return;
     }

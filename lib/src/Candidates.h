@@ -150,6 +150,8 @@ private:
     /// Empties dense slot @a slot of every lane, calling f(entry, mask) for each nonzero entry in
     /// index order (the masks of all lanes ORed).
     template <typename F> void drain(int slot, F&& f, size_t fromWord = 0, size_t toWord = SIZE_MAX);
+    /// drain() over words [@a fromWord, @a toWord), appending a work item per entry to @a out.
+    void drainInto(int slot, std::vector<WorkItem>& out, size_t fromWord, size_t toWord);
     /// Puts predrain()'s masks back into their slot (lane 0), or drops them when @a keep is false.
     void undoPredrain(bool keep = true);
     void addExtra(const Anchor& a, int anchorPhase, int phase, bool is3D);

@@ -223,6 +223,18 @@ bool touches(const Box& a, const Box& b)
     return !intersect(a, b).empty();
 }
 
+/// Whether two of the boxes @a boxOf(i), i in @a ids, touch while @a pair(i, j) holds for them (a
+/// sweep along x: a box meets only those that start before it ends).
+template <typename BoxOf, typename Pair>
+bool anyTouchingPair(std::vector<size_t> ids, const BoxOf& boxOf, const Pair& pair)
+{
+    std::sort(ids.begin(), ids.end(), [&](size_t a, size_t b) { return boxOf(a).min[0] < boxOf(b).min[0]; });
+    for (size_t i = 0; i < ids.size(); ++i)
+        for (size_t j = i + 1; j < ids.size() && boxOf(ids[j]).min[0] <= boxOf(ids[i]).max[0]; ++j)
+            if (touches(boxOf(ids[i]), boxOf(ids[j])) && pair(ids[i], ids[j])) return true;
+    return false;
+}
+
 /// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
 /// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
 /// 100000 one-voxel boxes in a few leaves), else bounded by their sum and by their bounding box.
@@ -660,16 +672,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         // Clay no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless
         // shapes overlap and add up: it keeps its own leaves.
         bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
-        if (!moves) { // overlaps, found by a sweep along x
-            std::vector<size_t> order(g);
-            std::sort(order.begin(), order.end(),
-                      [&](size_t a, size_t b) { return areas[a].box.min[0] < areas[b].box.min[0]; });
-            for (size_t i = 0; i < order.size() && !moves; ++i)
-                for (size_t j = i + 1;
-                     j < order.size() && areas[order[j]].box.min[0] <= areas[order[i]].box.max[0] && !moves;
-                     ++j)
-                    moves = touches(areas[order[i]].box, areas[order[j]].box);
-        }
+        if (!moves) // overlaps
+            moves = anyTouchingPair(
+                g, [&](size_t i) -> const Box& { return areas[i].box; }, [](size_t, size_t) { return true; });
         if (!moves) {
             std::vector<Box> own;
             for (size_t i : g)
@@ -756,18 +761,17 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lb.maxSteps = scene.settle.maxSteps;
         lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
-        // Shapes that overlap add up: over Tc where two of them do (found by a sweep along x).
-        std::vector<size_t> order(clayBoxes.size());
-        for (size_t i = 0; i < order.size(); ++i)
-            order[i] = i;
-        std::sort(order.begin(), order.end(),
-                  [&](size_t a, size_t b) { return clayBoxes[a].min[0] < clayBoxes[b].min[0]; });
-        for (size_t i = 0; i < order.size() && !lb.clayMoves; ++i)
-            for (size_t j = i + 1; j < order.size() &&
-                                   clayBoxes[order[j]].min[0] <= clayBoxes[order[i]].max[0] && !lb.clayMoves;
-                 ++j)
-                lb.clayMoves = touches(clayBoxes[order[i]], clayBoxes[order[j]]) &&
-                               clayMasses[order[i]] + clayMasses[order[j]] > int64_t(scene.rule.threshold);
+        // Shapes that overlap add up: over Tc where two of them do.
+        if (!lb.clayMoves) {
+            std::vector<size_t> shapes(clayBoxes.size());
+            for (size_t i = 0; i < shapes.size(); ++i)
+                shapes[i] = i;
+            lb.clayMoves = anyTouchingPair(
+                shapes, [&](size_t i) -> const Box& { return clayBoxes[i]; },
+                [&](size_t i, size_t j) {
+                    return clayMasses[i] + clayMasses[j] > int64_t(scene.rule.threshold);
+                });
+        }
         for (const Box& t : toolBoxes) {
             for (const Area& a : areas) {
                 if (!a.clay) continue;

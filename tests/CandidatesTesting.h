@@ -1,5 +1,6 @@
-// A random leaf-table index for the candidates' tests (TestAutomaton, TestKernel): the anchors a
-// LeafTable would hold for leaves scattered in a box of leaves, in layer order, with their neighbours.
+// What the candidates' tests (TestAutomaton, TestKernel) share: a random leaf-table index (the anchors a
+// LeafTable would hold for leaves scattered in a box of leaves, in layer order, with their neighbours),
+// and sinkChanges chosen at run time.
 #pragma once
 
 #include "Candidates.h"
@@ -56,5 +57,16 @@ struct RandomAnchorIndex {
         return vdbclay::automaton_internal::layerLess(a, b);
     }
 };
+
+/// sinkChanges<phase, is3D> (Candidates.h) for a phase and dimension known at run time.
+inline void sinkChangesAt(int phase, bool is3D, const vdbclay::automaton_internal::DenseSink& s, uint32_t e,
+                          uint64_t changed)
+{
+    using namespace vdbclay::automaton_internal;
+    if (is3D)
+        phase ? sinkChanges<1, true>(s, e, changed) : sinkChanges<0, true>(s, e, changed);
+    else
+        phase ? sinkChanges<1, false>(s, e, changed) : sinkChanges<0, false>(s, e, changed);
+}
 
 } // namespace vdbclay_test
