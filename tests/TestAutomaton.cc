@@ -487,6 +487,81 @@ TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
     EXPECT_GT(undone, 10u);
 }
 
+TEST_F(AutomatonTest, PrunedCandidatesChangeOnlyTheBlocksVisited)
+{
+    // Round 8: the pass wakes a block of the other phase only through cells that were or went over
+    // Tc, and its own blocks two steps on only while they hold an over and a not-over cell
+    // (sinkActive). Against the full bookkeeping (setPruneCandidates(false)), step by step: the same
+    // grid, the same blocks updated and the same overload, with fewer blocks visited. A third
+    // automaton switches pruning on and off every few steps and is edited midway (the two
+    // bookkeepings must mix). Every rule, 2D and 3D, obstacles, 1 and 3 threads.
+    for (Rule rule : kAll) {
+        for (int dims : {2, 3}) {
+            for (int threads : {1, 3}) {
+                const int z = dims == 3 ? 10 : 0;
+                const CoordBBox body(Coord(-14, -10, -z), Coord(14, 10, z));
+                const CoordBBox hot(Coord(-4, 4, -std::min(z, 4)), Coord(4, 10, std::min(z, 4)));
+                std::vector<openvdb::Int32Grid::Ptr> grids;
+                std::vector<std::unique_ptr<Automaton>> autos;
+                for (int k = 0; k < 3; ++k) {
+                    Rng rng(17 + uint64_t(dims));
+                    auto mass = newMass();
+                    auto obs = openvdb::MaskGrid::create(false);
+                    mass->tree().fill(body, 80, true); // clay at 0.8 Tc
+                    mass->tree().voxelizeActiveTiles();
+                    randomScene(rng, hot, dims, 400, 3, *mass, obs.get(), nullptr);
+                    if (dims == 2) { // the fill covered z != 0 too: 2D clay lives in z = 0 only
+                        auto acc = mass->getAccessor();
+                        for (auto it = body.begin(); it; ++it)
+                            if ((*it).z() != 0) acc.setValueOff(*it, 0);
+                        mass->tree().prune();
+                    }
+                    grids.push_back(mass);
+                    autos.push_back(
+                        std::make_unique<Automaton>(mass, options(rule, dims, 100, threads, 5), obs));
+                }
+                Automaton& pruned = *autos[0];
+                Automaton& full = *autos[1];
+                Automaton& mixed = *autos[2];
+                EXPECT_TRUE(pruned.pruneCandidates());
+                full.setPruneCandidates(false);
+                uint64_t visitedPruned = 0, visitedFull = 0, updated = 0;
+                const std::string what = std::string(ruleName(rule)) + " " + std::to_string(dims) + "D " +
+                                         std::to_string(threads) + " threads";
+                for (int t = 0; t < 400; ++t) {
+                    if (t == 150) { // an edit: more clay dropped on top, in all three
+                        const Box region{{-2, 8, 0}, {2, 10, dims == 3 ? 2 : 0}};
+                        for (Automaton* a : {&pruned, &full, &mixed})
+                            a->edit(region, [&](openvdb::Int32Grid& g) {
+                                auto acc = g.getAccessor();
+                                for (int x = -2; x <= 2; ++x)
+                                    for (int y = 8; y <= 10; ++y)
+                                        for (int zz = 0; zz <= (dims == 3 ? 2 : 0); ++zz)
+                                            acc.setValue(Coord(x, y, zz),
+                                                         acc.getValue(Coord(x, y, zz)) + 300);
+                            });
+                    }
+                    mixed.setPruneCandidates((t / 7) % 2 == 0);
+                    const StepReport a = pruned.step(), b = full.step(), c = mixed.step();
+                    ASSERT_EQ(a.blocksUpdated, b.blocksUpdated) << what << " step " << t;
+                    ASSERT_EQ(c.blocksUpdated, b.blocksUpdated) << what << " step " << t;
+                    ASSERT_EQ(a.residualOverload, b.residualOverload) << what << " step " << t;
+                    ASSERT_LE(a.blocksVisited, b.blocksVisited) << what << " step " << t;
+                    if (t % 25 == 0 || t == 399) {
+                        ASSERT_EQ(contentHash(*grids[0]), contentHash(*grids[1])) << what << " step " << t;
+                        ASSERT_EQ(contentHash(*grids[2]), contentHash(*grids[1])) << what << " step " << t;
+                    }
+                    visitedPruned += a.blocksVisited;
+                    visitedFull += b.blocksVisited;
+                    updated += a.blocksUpdated;
+                }
+                EXPECT_GT(updated, dims == 3 ? 2000u : 500u) << what;
+                EXPECT_LT(visitedPruned, visitedFull) << what; // the pruning did prune
+            }
+        }
+    }
+}
+
 TEST_F(AutomatonTest, SeedChangesTheResultButNotTheMass)
 {
     auto run = [](uint64_t seed) {

@@ -149,3 +149,79 @@ TEST(BlockMasks, AddressingTablesPointAtEachCorner)
         }
     }
 }
+
+namespace {
+template <int P, bool D3> void dilateCornersAt(const uint64_t act[8], uint64_t out[8])
+{
+    dilateCorners<P, D3>(act, out);
+}
+void dilateCornersRun(int phase, bool is3D, const uint64_t act[8], uint64_t out[8])
+{
+    if (is3D)
+        phase ? dilateCornersAt<1, true>(act, out) : dilateCornersAt<0, true>(act, out);
+    else
+        phase ? dilateCornersAt<1, false>(act, out) : dilateCornersAt<0, false>(act, out);
+}
+} // namespace
+
+TEST(BlockMasks, DilateCornersSendsEachCellToTheOneBlockOfTheOtherPhaseHoldingIt)
+{
+    // Round 8's sink follows single cells: corner k (bit 0 = +x, 1 = +y, 2 = +z) of block b of
+    // phase P is the cell at local 2 b - P + d along each axis; the block of phase Q = 1 - P holding
+    // it is the one whose two cells 2 c - Q and 2 c - Q + 1 (c = 0..3, in the anchor's leaf or in the
+    // neighbour the dilation spills to: +8 on the even phase, -8 on the odd) include it.
+    for (int is3D = 0; is3D < 2; ++is3D) {
+        const int axes = is3D ? 3 : 2;
+        for (int phase = 0; phase < 2; ++phase) {
+            const int q = 1 - phase;
+            for (int b = 0; b < (is3D ? 64 : 16); ++b) {
+                const int bc[3] = {b & 3, (b >> 2) & 3, b >> 4};
+                for (int k = 0; k < (1 << axes); ++k) {
+                    uint64_t act[8] = {0, 0, 0, 0, 0, 0, 0, 0}, out[8];
+                    act[k] = uint64_t(1) << b;
+                    dilateCornersRun(phase, is3D != 0, act, out);
+                    int s = 0, bit = 0;
+                    for (int ax = 0; ax < axes; ++ax) {
+                        int u = 2 * bc[ax] - phase + ((k >> ax) & 1); // the cell, in the anchor's frame
+                        const int shift = phase == 0 ? 8 : -8;        // the neighbour the dilation reaches
+                        if (u + q < 0 || u + q > 7) {
+                            u -= shift;
+                            s |= 1 << ax;
+                        }
+                        const int c = (u + q) / 2;
+                        ASSERT_GE(c, 0);
+                        ASSERT_LE(c, 3);
+                        bit += c << (2 * ax);
+                    }
+                    for (int t = 0; t < (1 << axes); ++t)
+                        EXPECT_EQ(out[t], t == s ? uint64_t(1) << bit : 0u)
+                            << (is3D ? "3D" : "2D") << " phase " << phase << " block " << b << " corner " << k
+                            << " anchor " << t;
+                }
+            }
+        }
+    }
+}
+
+TEST(BlockMasks, DilateCornersWithEveryCornerFollowedIsDilateAll)
+{
+    uint64_t x = 0x9E3779B97F4A7C15ull;
+    for (int trial = 0; trial < 2000; ++trial) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        for (int is3D = 0; is3D < 2; ++is3D) {
+            const uint64_t m = is3D ? x : (x & 0xFFFFull);
+            for (int phase = 0; phase < 2; ++phase) {
+                uint64_t act[8], out[8], want[8];
+                for (uint64_t& a : act)
+                    a = m;
+                dilateCornersRun(phase, is3D != 0, act, out);
+                if (is3D)
+                    phase ? dilateAll<1, true>(m, want) : dilateAll<0, true>(m, want);
+                else
+                    phase ? dilateAll<1, false>(m, want) : dilateAll<0, false>(m, want);
+                for (int s = 0; s < (is3D ? 8 : 4); ++s)
+                    ASSERT_EQ(out[s], want[s]) << trial << " phase " << phase << " anchor " << s;
+            }
+        }
+    }
+}

@@ -147,6 +147,7 @@ struct Automaton::Impl {
     Candidates candidates;
     LeafTable leafTable;           // cleared whenever a leaf may appear or vanish, or the obstacles change
     uint64_t workWithoutTable = 0; // anchors passed through the accessors since the last build
+    bool prune = true;             // setPruneCandidates
 
     // scratch, reused between steps
     std::vector<WorkItem> work;
@@ -351,6 +352,7 @@ struct Automaton::Impl {
         in.mayOverflow = maxBound > INT32_MAX / 8;
         in.dryRun = dryRun;
         in.table = leafTable.valid() ? &leafTable : nullptr;
+        in.prune = prune;
         // The pass records its items' changes as it goes; with several threads each into its own
         // lane (atomic ORs into shared words cost the pass its second thread: press 128^3 1.1x, and
         // recording serially after the pass left 0.4 s of 2.2 on one core).
@@ -872,6 +874,16 @@ const AutomatonOptions& Automaton::options() const
 {
     return mImpl->opts;
 }
+void Automaton::setPruneCandidates(bool on)
+{
+    mImpl->prune = on;
+}
+
+bool Automaton::pruneCandidates() const
+{
+    return mImpl->prune;
+}
+
 uint64_t Automaton::stepCount() const
 {
     return mImpl->stepCount;

@@ -126,6 +126,37 @@ template <int FromPhase, bool D3> inline void dilateAll(uint64_t m, uint64_t out
     }
 }
 
+/// dilateAll cell by cell: @a act[k] holds the blocks (phase @a FromPhase) whose corner k (bit 0 =
+/// +x, 1 = +y, 2 = +z within the block, as BlockTables' corners) is to be followed; @a out[s] gets
+/// the blocks of the other phase that hold those corners, per neighbour anchor s as in dilateAll.
+/// Each cell lies in exactly one block of the other phase: on the even phase corner k's cell moves
+/// one block up along the axes where k's bit is 1, on the odd phase one block down where it is 0.
+/// With every act[k] equal to m this is dilateAll(m). 2D reads act[0..3] and fills out[0..3].
+template <int FromPhase, bool D3> inline void dilateCorners(const uint64_t act[8], uint64_t out[8])
+{
+    constexpr uint64_t lo[3] = {kX0, kY0, kZ0}, hi[3] = {kX3, kY3, kZ3};
+    constexpr int unit[3] = {1, 4, 16};
+    constexpr int axes = D3 ? 3 : 2;
+    // Axis by axis (unrolled: constant bounds). Before axis ax is folded, bit ax of out's index is
+    // the corner's; after, the neighbour anchor's: the cells of corner bit 0 and 1 along ax meet.
+    for (int k = 0; k < (1 << axes); ++k)
+        out[k] = act[k];
+    for (int ax = 0; ax < axes; ++ax) {
+        const int bit = 1 << ax;
+        for (int j = 0; j < (1 << axes); ++j) {
+            if (j & bit) continue;
+            const uint64_t a = out[j], b = out[j | bit]; // corner bit 0, 1 along ax
+            if (FromPhase == 0) {                        // bit 1 moves one block up
+                out[j] = a | ((b & ~hi[ax]) << unit[ax]);
+                out[j | bit] = (b & hi[ax]) >> (3 * unit[ax]);
+            } else { // bit 0 moves one block down
+                out[j] = b | ((a & ~lo[ax]) >> unit[ax]);
+                out[j | bit] = (a & lo[ax]) << (3 * unit[ax]);
+            }
+        }
+    }
+}
+
 /// Appends to @a out the merge of two runs sorted by layerLess with distinct origins; anchors with
 /// the same origin in both become one, their masks ORed. The result has distinct origins too.
 inline void mergeOr(const Anchor* a, const Anchor* ae, const Anchor* b, const Anchor* be,

@@ -48,6 +48,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cstring>
 #include <optional>
 #include <type_traits>
 
@@ -306,6 +307,37 @@ struct FirstBitsTable {
 };
 constexpr FirstBitsTable kFirstBits;
 
+/// The blocks whose corner k is set in @a cells[b] (one byte per block bit b, 64 bytes, 16-aligned),
+/// into @a act[k] for the corners in @a corners; the others' act[k] are 0. (sinkActive's input, from
+/// the byte per updated block the pass stores: a transpose, four byte-sign masks a corner.)
+template <bool D3>
+__attribute__((always_inline)) inline void cornerMasks(const uint8_t* cells, uint32_t corners,
+                                                       uint64_t act[8])
+{
+    for (int k = 0; k < 8; ++k)
+        act[k] = 0;
+#if defined(__SSE2__)
+    const __m128i* v = reinterpret_cast<const __m128i*>(cells);
+    const __m128i v0 = _mm_load_si128(v);
+    __m128i v1 = v0, v2 = v0, v3 = v0;
+    if constexpr (D3) v1 = _mm_load_si128(v + 1), v2 = _mm_load_si128(v + 2), v3 = _mm_load_si128(v + 3);
+    for (uint32_t x = corners; x; x &= x - 1) {
+        const int k = __builtin_ctz(x);
+        const __m128i sh = _mm_cvtsi32_si128(7 - k); // corner k's bit to each byte's sign
+        uint64_t m = uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v0, sh)));
+        if constexpr (D3)
+            m |= uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v1, sh)))) << 16 |
+                 uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v2, sh)))) << 32 |
+                 uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v3, sh)))) << 48;
+        act[k] = m;
+    }
+#else
+    for (int b = 0; b < (D3 ? 64 : 16); ++b)
+        for (uint32_t x = cells[b] & corners; x; x &= x - 1)
+            act[__builtin_ctz(x)] |= uint64_t(1) << b;
+#endif
+}
+
 /// What a branch in registers did: Done when it applied its branch, Unchanged when the block has no
 /// over or no under cell (the rule would change nothing), Rule when the block is in another branch
 /// (the caller runs the rule). The surplus branch (E > A: every room filled, the surplus E - A shared
@@ -319,6 +351,8 @@ struct Surplus {
     int64_t overDelta; // change of the overload: -A (E before, E - A after)
     int64_t maxOut;    // the largest value written
     int64_t e, a;      // the block's excess and room (set when the result is Rule)
+    uint32_t active;   // cells that were or went over Tc, or a superset of them (sinkActive)
+    bool again;        // the block may still hold an over and a not-over cell: false only if not
 };
 
 /// Rotations of an N-bit cell mask (N = 4 or 8): bit k of rotr(x, s) is cell (s + k) mod N; rotl
@@ -386,11 +420,12 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
     const __m128i shareV = _mm_set1_epi32(int32_t(share));
     __m128i oLo = _mm_add_epi32(t, _mm_andnot_si128(gtLo, shareV));
     __m128i oHi = N == 8 ? _mm_add_epi32(t, _mm_andnot_si128(gtHi, shareV)) : _mm_setzero_si128();
+    uint32_t extra = 0;
     if (r) {
         // One unit to each of the first r under cells of the rotation starting at the hash.
         const int start = int(hash() & uint64_t(N - 1));
-        const uint32_t extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
-        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u)); // lanes of -1: one more unit
+        extra = rotl<N>(kFirstBits.t[rotr<N>(under, start)][r], start); // r < nu <= N <= 8
+        oLo = _mm_sub_epi32(oLo, lanesOf(extra & 15u));                 // lanes of -1: one more unit
         if constexpr (N == 8) oHi = _mm_sub_epi32(oHi, lanesOf(extra >> 4));
     }
     if (blocked) {
@@ -401,6 +436,10 @@ __attribute__((always_inline)) inline Branch surplusBranch(__m128i lo, __m128i h
     s.hi = oHi;
     // Every under cell ends at Tc or more (> 0): the zero cells that change are the zero under cells.
     s.grow = under;
+    // Over cells end at Tc, under cells at Tc + share (+ 1 for the remainder's): over Tc where that
+    // is positive, and since the surplus is, some are.
+    s.active = over | (share ? under : extra);
+    s.again = true;
     s.overDelta = -(e - sum);
     s.maxOut = tc + share + (r ? 1 : 0);
     return Branch::Done;
@@ -475,6 +514,9 @@ __attribute__((always_inline)) inline bool roomBranch(__m128i lo, __m128i hi, ui
     s.lo = oLo;
     s.hi = oHi;
     s.grow = changedCells<N>(lo, hi, oLo, oHi);
+    // Only the second remainder pass lifts cells over Tc (extra2); the others end at or below it.
+    s.active = overCells | extra2;
+    s.again = extra2 != 0;
     // Shares and the first remainder pass keep every under cell at or below Tc (E <= A); the second
     // pass lifts cells at Tc to Tc + 1: the overload goes from E to the number of those cells.
     s.overDelta = -e + rules_internal::popcount8(extra2);
@@ -803,6 +845,7 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     if (in.obstacles) oacc.emplace(*in.obstacles);
     LeafSet ls;
     const DenseSink* sink = dryRun ? nullptr : in.sink;
+    const bool prune = in.prune;
     if (sink && in.sinkLanes > 1) {
         // This thread's lane: its slot in the pass's arena, which has sinkLanes slots.
         // Should it lie outside (not expected), the range records nothing and says so: record()
@@ -822,6 +865,9 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
         WorkItem& w = work[wi];
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
+        // For the sink (sinkActive): the updated blocks that may still hold an over and a not-over
+        // cell, and per updated block its cells that were or went over Tc (corners: their union).
+        uint64_t again = 0, act[8] = {0, 0, 0, 0, 0, 0, 0, 0};
         if constexpr (I == Isa::Avx2)
             examined += uint64_t(__builtin_popcountll(w.mask)); // one POPCNT
         else
@@ -981,6 +1027,9 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                     maxWritten = std::max(maxWritten, sp.maxOut);
                     ++updated;
                     itemChanged |= uint64_t(1) << b;
+                    for (uint32_t x = sp.active; x; x &= x - 1)
+                        act[__builtin_ctz(x)] |= uint64_t(1) << b;
+                    again |= uint64_t(sp.again) << b;
                     continue;
                 }
             }
@@ -1032,9 +1081,22 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             }
             ++updated;
             itemChanged |= uint64_t(1) << b;
+            uint32_t overBefore = 0, overAfter = 0;
+            for (int c = 0; c < N; ++c) {
+                overBefore |= uint32_t(m[c] > tc) << c;
+                overAfter |= uint32_t(out[c] > tc) << c;
+            }
+            for (uint32_t x = overBefore | overAfter; x; x &= x - 1)
+                act[__builtin_ctz(x)] |= uint64_t(1) << b;
+            again |= uint64_t((overAfter & valid) && (valid & ~overAfter & ((1u << N) - 1))) << b;
         }
         w.changed = itemChanged;
-        if (itemChanged && sink && w.entry != kNoEntry) sinkChanges<P, D3>(*sink, w.entry, itemChanged);
+        if (itemChanged && sink && w.entry != kNoEntry) {
+            if (prune)
+                sinkActive<P, D3>(*sink, w.entry, again, act);
+            else
+                sinkChanges<P, D3>(*sink, w.entry, itemChanged);
+        }
     }
     tot.examined += examined;
     tot.overTc += overTc;

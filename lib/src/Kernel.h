@@ -104,6 +104,7 @@ struct PassInput {
     const LeafTable* table = nullptr;     // valid leaf table of both trees, or null: accessors
     const DenseSink* sink = nullptr; // dense candidates: record each item's changes here (not in dry runs)
     int sinkLanes = 1;               // sink[0..sinkLanes): one per thread of the pass's arena (lanes())
+    bool prune = true;               // record through sinkActive (else sinkChanges: every neighbour)
 };
 
 /// What one range of the pass accumulates.

@@ -276,6 +276,15 @@ struct Sculptor::Impl {
         const double tc = double(scene.rule.threshold);
         if (double(clay) >= kTrySaturated * tc * double(voxels)) return total;
         const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
+        // The cap counts the blocks the automaton visits. With the candidates pruned (round 8) that
+        // count would depend on how the automaton's bookkeeping started (a resumed run begins from
+        // merged lists): the try visits every block near a change, as before, so that a resumed run
+        // gives up where the unbroken one does and the results stay round 7's.
+        struct FullVisits {
+            Automaton& a;
+            explicit FullVisits(Automaton& x) : a(x) { a.setPruneCandidates(false); }
+            ~FullVisits() { a.setPruneCandidates(true); }
+        } fullVisits(*automaton);
         for (;;) {
             const StepReport r =
                 settleFrameUpTo(std::min<uint64_t>(scene.settle.maxSteps, openSteps + kTryChunk),

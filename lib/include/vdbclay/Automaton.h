@@ -200,6 +200,14 @@ public:
     /// remainder hash follow the counter, so the continuation is identical to an unbroken run.
     /// Every block is reconsidered on the next two steps.
     void setStepCount(uint64_t steps);
+    /// Which blocks a step examines (blocksVisited; the results are the same either way). On (the
+    /// default), a block is examined again only where the cells that changed near it can let it
+    /// change: its own over cells, or cells that went over Tc or came down from over it. Off, every
+    /// block that overlaps a block changed in the last two steps is examined, as before round 8, so
+    /// that blocksVisited counts the same blocks however the automaton was built or resumed (a
+    /// Sculptor's try caps its work by that count).
+    void setPruneCandidates(bool on);
+    bool pruneCandidates() const;
 
     const AutomatonOptions& options() const;
     uint64_t stepCount() const; ///< steps run since construction; step parity gives the phase
