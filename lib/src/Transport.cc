@@ -133,7 +133,7 @@ struct Buffers {
     std::vector<int32_t> denseIndex; ///< the cell index over the flood's box (Solver::indexOf)
     /// The routing's radix sort (Solver::sortByPotential): keys, and the pass's copies and counts.
     std::vector<uint64_t> sortKey, sortKeyTmp;
-    std::vector<int32_t> sortTmp;
+    std::vector<int32_t> sortTmp, sortPart;
     std::vector<size_t> sortCount;
     std::vector<Automaton::CellMass> write; ///< the routing's changed cells and their masses
     std::vector<int32_t> micNb6;            ///< MIC(0)'s rows at a fixed width (row n: none)
@@ -567,7 +567,7 @@ private:
             const size_t old = byCoord.size();
             for (size_t i = mByCoordCells; i < mCells.size(); ++i)
                 byCoord.push_back(int32_t(i));
-            std::sort(byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
+            sortByCoord(byCoord, old);
             std::inplace_merge(byCoord.begin(), byCoord.begin() + std::ptrdiff_t(old), byCoord.end(), before);
             mByCoordCells = mCells.size();
             mRowCell.clear();
@@ -942,36 +942,21 @@ private:
             std::vector<double>().swap(v);
     }
 
-    /// Sorts @a order (cells) as @a higher does: decreasing p, ties by coordinate. A stable LSD radix
-    /// sort on p's bits (11 bits a pass; a pass whose digit is the same for every key is skipped), then
-    /// each run of equal p by coordinate: the same sequence as a comparison sort, in O(n) (round 6: the
-    /// comparison sort took 6.5 % of a 128-wide compress stroke's frame).
-    template <typename Higher> void sortByPotential(std::vector<int32_t>& order, const Higher& higher)
+    /// The radix sorts' digits: six of 11 bits (the last one of 9).
+    static constexpr int kBits = 11, kDigits = 6;
+    static constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
+
+    /// The passes of a stable LSD radix sort of @a order[0, n) by mB.sortKey, whose digit counts
+    /// mB.sortCount holds (kDigits tables of 2^kBits): a pass whose digit is the same for every key is
+    /// skipped. Leaves the keys sorted in mB.sortKey.
+    void radixPasses(size_t n, std::vector<int32_t>& order)
     {
-        const size_t n = order.size();
-        if (n < 2) return;
         std::vector<uint64_t>& key = mB.sortKey;
         std::vector<uint64_t>& keyTmp = mB.sortKeyTmp;
         std::vector<int32_t>& tmp = mB.sortTmp;
-        key.resize(n);
         keyTmp.resize(n);
-        tmp.resize(n);
-        // Six digits of 11 bits (the last one of 9).
-        constexpr int kBits = 11, kDigits = 6;
-        constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
+        tmp.resize(order.size());
         std::vector<size_t>& count = mB.sortCount;
-        count.assign(size_t(kDigits) << kBits, 0);
-        for (size_t u = 0; u < n; ++u) {
-            // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
-            // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
-            const double v = mP[size_t(order[u])] + 0.0;
-            uint64_t b;
-            std::memcpy(&b, &v, sizeof b);
-            b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
-            key[u] = ~b;
-            for (int d = 0; d < kDigits; ++d)
-                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
-        }
         for (int d = 0; d < kDigits; ++d) {
             size_t* c = &count[size_t(d) << kBits];
             if (c[(key[0] >> (kBits * d)) & kMask] == n) continue; // one digit for all: the order stands
@@ -989,6 +974,69 @@ private:
             key.swap(keyTmp);
             order.swap(tmp);
         }
+    }
+
+    /// Sorts the cells @a order[from, end) by coordinate (x, then y, then z: Coord's <). Their
+    /// coordinates relative to the smallest, packed into one 64-bit key when they fit (21 bits an
+    /// axis), are radix-sorted (the keys are distinct: the same sequence as a comparison sort, in
+    /// O(n)); otherwise std::sort. (Round 8: the comparison sort was 2.5 % of a surface stroke's frame.)
+    void sortByCoord(std::vector<int32_t>& order, size_t from)
+    {
+        const size_t n = order.size() - from;
+        if (n < 2) return;
+        const auto before = [&](int32_t a, int32_t b) { return mCells[size_t(a)] < mCells[size_t(b)]; };
+        Coord lo = mCells[size_t(order[from])], hi = lo;
+        for (size_t u = from; u < order.size(); ++u) {
+            lo.minComponent(mCells[size_t(order[u])]);
+            hi.maxComponent(mCells[size_t(order[u])]);
+        }
+        constexpr int64_t kAxis = int64_t(1) << 21;
+        if (n < 64 || int64_t(hi.x()) - lo.x() >= kAxis || int64_t(hi.y()) - lo.y() >= kAxis ||
+            int64_t(hi.z()) - lo.z() >= kAxis) {
+            std::sort(order.begin() + std::ptrdiff_t(from), order.end(), before);
+            return;
+        }
+        std::vector<int32_t>& part = mB.sortPart;
+        part.assign(order.begin() + std::ptrdiff_t(from), order.end());
+        std::vector<uint64_t>& key = mB.sortKey;
+        key.resize(n);
+        std::vector<size_t>& count = mB.sortCount;
+        count.assign(size_t(kDigits) << kBits, 0);
+        for (size_t u = 0; u < n; ++u) {
+            const Coord& c = mCells[size_t(part[u])];
+            key[u] = uint64_t(int64_t(c.x()) - lo.x()) << 42 | uint64_t(int64_t(c.y()) - lo.y()) << 21 |
+                     uint64_t(int64_t(c.z()) - lo.z());
+            for (int d = 0; d < kDigits; ++d)
+                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
+        }
+        radixPasses(n, part);
+        std::copy(part.begin(), part.end(), order.begin() + std::ptrdiff_t(from));
+    }
+
+    /// Sorts @a order (cells) as @a higher does: decreasing p, ties by coordinate. A stable LSD radix
+    /// sort on p's bits (11 bits a pass; a pass whose digit is the same for every key is skipped), then
+    /// each run of equal p by coordinate: the same sequence as a comparison sort, in O(n) (round 6: the
+    /// comparison sort took 6.5 % of a 128-wide compress stroke's frame).
+    template <typename Higher> void sortByPotential(std::vector<int32_t>& order, const Higher& higher)
+    {
+        const size_t n = order.size();
+        if (n < 2) return;
+        std::vector<uint64_t>& key = mB.sortKey;
+        key.resize(n);
+        std::vector<size_t>& count = mB.sortCount;
+        count.assign(size_t(kDigits) << kBits, 0);
+        for (size_t u = 0; u < n; ++u) {
+            // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
+            // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
+            const double v = mP[size_t(order[u])] + 0.0;
+            uint64_t b;
+            std::memcpy(&b, &v, sizeof b);
+            b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
+            key[u] = ~b;
+            for (int d = 0; d < kDigits; ++d)
+                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
+        }
+        radixPasses(n, order);
         for (size_t u = 0; u < n;) {
             size_t e = u + 1;
             while (e < n && key[e] == key[u])
