@@ -649,16 +649,17 @@ private:
             std::vector<double> piv(n);
             std::vector<double>& inv = mInv;
             inv.assign(n, 0.0);
-            std::vector<uint8_t> upper(n, 0);
+            // In coordinate order a row's even faces (-x, -y, -z) are its lower rows and its odd
+            // faces its upper ones: the factor reads only those (the same terms in the same order).
+            std::vector<uint8_t> upper(n);
             for (size_t k = 0; k < n; ++k)
-                for (int d = 0; d < 6; ++d)
-                    if (nb[k * 6 + size_t(d)] > int32_t(k)) ++upper[k];
+                upper[k] = uint8_t((nb[k * 6 + 1] >= 0) + (nb[k * 6 + 3] >= 0) + (nb[k * 6 + 5] >= 0));
             constexpr double tau = 0.97, safety = 0.25;
             for (size_t k = 0; k < n; ++k) {
                 double e = diag[k];
-                for (int d = 0; d < 6; ++d) {
+                for (int d = 0; d < 6; d += 2) {
                     const int32_t j = nb[k * 6 + size_t(d)];
-                    if (j < 0 || j >= int32_t(k)) continue;
+                    if (j < 0) continue;
                     e -= (1.0 + tau * double(upper[size_t(j)] - 1)) / piv[size_t(j)];
                 }
                 if (e < safety * diag[k]) e = diag[k];
