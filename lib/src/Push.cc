@@ -608,29 +608,35 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     // an edit() of the region that empties the sources and adds the targets' and pools' clay, without
     // edit()'s two scans of the region (round 8: 9 % of a surface stroke's frame).
     std::vector<Automaton::CellMass> cells;
+    cells.reserve(moves.size() + pusher.added().size());
     {
-        std::unordered_map<Coord, size_t, CoordHash> index;
         auto acc = automaton.mass()->getConstAccessor();
-        auto cell = [&](const Coord& c) -> Automaton::CellMass& {
-            const auto [it, fresh] = index.emplace(c, cells.size());
-            if (fresh) cells.push_back(Automaton::CellMass{{{c.x(), c.y(), c.z()}}, acc.getValue(c)});
-            return cells[it->second];
-        };
+        // Sources lie inside a tool and targets outside every tool, and each is listed once: no voxel
+        // twice. The pools' voxels may be targets too (or another pool's): those are merged by a map.
         for (const Move& m : moves)
-            cell(m.from).mass = 0;
+            cells.push_back(Automaton::CellMass{{{m.from.x(), m.from.y(), m.from.z()}}, 0});
         for (const auto& a : pusher.added()) {
-            Automaton::CellMass& c = cell(a.first);
-            c.mass = int32_t(int64_t(c.mass) + a.second);
+            const Coord& c = a.first;
+            cells.push_back(
+                Automaton::CellMass{{{c.x(), c.y(), c.z()}}, int32_t(int64_t(acc.getValue(c)) + a.second)});
         }
-        for (const auto& pool : pools) {
-            if (!pool) continue;
-            for (auto it = pool->cbeginValueOn(); it; ++it) {
-                if (!*it) continue;
-                Automaton::CellMass& c = cell(it.getCoord());
-                c.mass = int32_t(int64_t(c.mass) + *it);
+        if (!shared.empty()) {
+            std::unordered_map<Coord, size_t, CoordHash> index;
+            for (size_t k = moves.size(); k < cells.size(); ++k)
+                index.emplace(Coord(cells[k].at[0], cells[k].at[1], cells[k].at[2]), k);
+            for (const auto& pool : pools) {
+                if (!pool) continue;
+                for (auto it = pool->cbeginValueOn(); it; ++it) {
+                    if (!*it) continue;
+                    const Coord& c = it.getCoord();
+                    const auto [at, fresh] = index.emplace(c, cells.size());
+                    if (fresh) cells.push_back(Automaton::CellMass{{{c.x(), c.y(), c.z()}}, acc.getValue(c)});
+                    Automaton::CellMass& cell = cells[at->second];
+                    cell.mass = int32_t(int64_t(cell.mass) + *it);
+                }
             }
         }
-    }
+    } // the accessor goes before the write
     automaton.setMasses(editRegion, cells);
     return report;
 }
