@@ -87,6 +87,19 @@ struct DenseSink {
     const uint32_t* nb = nullptr; // AnchorIndex::up for a step of phase 0, down for phase 1
 };
 
+/// ORs @a out[k], blocks of the other phase in neighbour anchor k of anchor @a e (dilateAll's
+/// order), into the next step's slot (1 - P) of this thread's sink.
+template <int P, bool D3> inline void sinkNext(const DenseSink& s, uint32_t e, const uint64_t out[8])
+{
+    const uint32_t* nb = s.nb + 8 * size_t(e);
+    for (int k = 0; k < (D3 ? 8 : 4); ++k) {
+        const uint32_t t = nb[k];
+        if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
+        if (std::exchange(s.acc[1 - P][t], s.acc[1 - P][t] | out[k]) == 0)
+            s.touched[1 - P][t >> 6] |= uint64_t(1) << (t & 63);
+    }
+}
+
 /// Records that the blocks @a changed of anchor @a e changed at a step of phase P (see DenseSink):
 /// into slot P for the step after next, dilated into slot 1 - P for the next step.
 template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e, uint64_t changed)
@@ -96,13 +109,7 @@ template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e
     s.touched[P][e >> 6] |= uint64_t(1) << (e & 63);
     uint64_t out[8];
     dilateAll<P, D3>(changed, out);
-    const uint32_t* nb = s.nb + 8 * size_t(e);
-    for (int k = 0; k < (D3 ? 8 : 4); ++k) {
-        const uint32_t t = nb[k];
-        if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
-        if (std::exchange(s.acc[1 - P][t], s.acc[1 - P][t] | out[k]) == 0)
-            s.touched[1 - P][t >> 6] |= uint64_t(1) << (t & 63);
-    }
+    sinkNext<P, D3>(s, e, out);
 }
 
 /// sinkChanges for what the pass knows cell by cell (the kernel): a block can change only while it
@@ -123,13 +130,7 @@ inline void sinkActive(const DenseSink& s, uint32_t e, uint64_t again, const uin
     }
     uint64_t out[8];
     dilateCorners<P, D3>(act, out);
-    const uint32_t* nb = s.nb + 8 * size_t(e);
-    for (int k = 0; k < (D3 ? 8 : 4); ++k) {
-        const uint32_t t = nb[k];
-        if (!out[k] || t == kNoEntry) continue; // no entry: no leaf within reach, cannot change
-        if (std::exchange(s.acc[1 - P][t], s.acc[1 - P][t] | out[k]) == 0)
-            s.touched[1 - P][t >> 6] |= uint64_t(1) << (t & 63);
-    }
+    sinkNext<P, D3>(s, e, out);
 }
 
 class Candidates {
