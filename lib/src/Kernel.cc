@@ -48,7 +48,6 @@
 
 #include <algorithm>
 #include <climits>
-#include <cstring>
 #include <optional>
 #include <type_traits>
 
@@ -307,35 +306,15 @@ struct FirstBitsTable {
 };
 constexpr FirstBitsTable kFirstBits;
 
-/// The blocks whose corner k is set in @a cells[b] (one byte per block bit b, 64 bytes, 16-aligned),
-/// into @a act[k] for the corners in @a corners; the others' act[k] are 0. (sinkActive's input, from
-/// the byte per updated block the pass stores: a transpose, four byte-sign masks a corner.)
-template <bool D3>
-__attribute__((always_inline)) inline void cornerMasks(const uint8_t* cells, uint32_t corners,
-                                                       uint64_t act[8])
+/// Notes for sinkActive that block @a b was updated: its cells @a active (those that were or went
+/// over Tc, or a superset) into @a act[corner], and the block into @a again when it may still hold
+/// an over and a not-over cell (@a mayChange).
+__attribute__((always_inline)) inline void noteUpdated(int b, uint32_t active, bool mayChange,
+                                                       uint64_t act[8], uint64_t& again)
 {
-    for (int k = 0; k < 8; ++k)
-        act[k] = 0;
-#if defined(__SSE2__)
-    const __m128i* v = reinterpret_cast<const __m128i*>(cells);
-    const __m128i v0 = _mm_load_si128(v);
-    __m128i v1 = v0, v2 = v0, v3 = v0;
-    if constexpr (D3) v1 = _mm_load_si128(v + 1), v2 = _mm_load_si128(v + 2), v3 = _mm_load_si128(v + 3);
-    for (uint32_t x = corners; x; x &= x - 1) {
-        const int k = __builtin_ctz(x);
-        const __m128i sh = _mm_cvtsi32_si128(7 - k); // corner k's bit to each byte's sign
-        uint64_t m = uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v0, sh)));
-        if constexpr (D3)
-            m |= uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v1, sh)))) << 16 |
-                 uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v2, sh)))) << 32 |
-                 uint64_t(uint32_t(_mm_movemask_epi8(_mm_sll_epi16(v3, sh)))) << 48;
-        act[k] = m;
-    }
-#else
-    for (int b = 0; b < (D3 ? 64 : 16); ++b)
-        for (uint32_t x = cells[b] & corners; x; x &= x - 1)
-            act[__builtin_ctz(x)] |= uint64_t(1) << b;
-#endif
+    for (uint32_t x = active; x; x &= x - 1)
+        act[__builtin_ctz(x)] |= uint64_t(1) << b;
+    again |= uint64_t(mayChange) << b;
 }
 
 /// What a branch in registers did: Done when it applied its branch, Unchanged when the block has no
@@ -845,7 +824,6 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     if (in.obstacles) oacc.emplace(*in.obstacles);
     LeafSet ls;
     const DenseSink* sink = dryRun ? nullptr : in.sink;
-    const bool prune = in.prune;
     if (sink && in.sinkLanes > 1) {
         // This thread's lane: its slot in the pass's arena, which has sinkLanes slots.
         // Should it lie outside (not expected), the range records nothing and says so: record()
@@ -858,6 +836,8 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             tot.sinkMissed = true;
         }
     }
+    // Per updated block, what sinkActive needs: only when it records (a sink, pruning on).
+    const bool noting = sink && in.prune;
     // Totals in locals (registers), added to tot once at the end.
     uint64_t examined = 0, overTc = 0, updated = 0;
     int64_t overloadDelta = 0, maxWritten = 0;
@@ -1027,9 +1007,7 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                     maxWritten = std::max(maxWritten, sp.maxOut);
                     ++updated;
                     itemChanged |= uint64_t(1) << b;
-                    for (uint32_t x = sp.active; x; x &= x - 1)
-                        act[__builtin_ctz(x)] |= uint64_t(1) << b;
-                    again |= uint64_t(sp.again) << b;
+                    if (noting) noteUpdated(b, sp.active, sp.again, act, again);
                     continue;
                 }
             }
@@ -1081,18 +1059,19 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             }
             ++updated;
             itemChanged |= uint64_t(1) << b;
-            uint32_t overBefore = 0, overAfter = 0;
-            for (int c = 0; c < N; ++c) {
-                overBefore |= uint32_t(m[c] > tc) << c;
-                overAfter |= uint32_t(out[c] > tc) << c;
+            if (noting) {
+                uint32_t overBefore = 0, overAfter = 0;
+                for (int c = 0; c < N; ++c) {
+                    overBefore |= uint32_t(m[c] > tc) << c;
+                    overAfter |= uint32_t(out[c] > tc) << c;
+                }
+                noteUpdated(b, overBefore | overAfter,
+                            (overAfter & valid) && (valid & ~overAfter & ((1u << N) - 1)), act, again);
             }
-            for (uint32_t x = overBefore | overAfter; x; x &= x - 1)
-                act[__builtin_ctz(x)] |= uint64_t(1) << b;
-            again |= uint64_t((overAfter & valid) && (valid & ~overAfter & ((1u << N) - 1))) << b;
         }
         w.changed = itemChanged;
         if (itemChanged && sink && w.entry != kNoEntry) {
-            if (prune)
+            if (noting)
                 sinkActive<P, D3>(*sink, w.entry, again, act);
             else
                 sinkChanges<P, D3>(*sink, w.entry, itemChanged);

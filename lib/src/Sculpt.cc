@@ -282,8 +282,12 @@ struct Sculptor::Impl {
         // gives up where the unbroken one does and the results stay round 7's.
         struct FullVisits {
             Automaton& a;
-            explicit FullVisits(Automaton& x) : a(x) { a.setPruneCandidates(false); }
-            ~FullVisits() { a.setPruneCandidates(true); }
+            const bool was;
+            explicit FullVisits(Automaton& x) : a(x), was(x.pruneCandidates())
+            {
+                a.setPruneCandidates(false);
+            }
+            ~FullVisits() { a.setPruneCandidates(was); }
         } fullVisits(*automaton);
         for (;;) {
             const StepReport r =

@@ -947,10 +947,10 @@ private:
     static constexpr int kBits = 11, kDigits = 6;
     static constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
 
-    /// The passes of a stable LSD radix sort of @a order[0, n) by mB.sortKey, whose digit counts
-    /// mB.sortCount holds (kDigits tables of 2^kBits): a pass whose digit is the same for every key is
-    /// skipped. Leaves the keys sorted in mB.sortKey.
-    void radixPasses(size_t n, std::vector<int32_t>& order)
+    /// A stable LSD radix sort of @a order[0, n) by mB.sortKey[0, n): the digits counted in one pass
+    /// (mB.sortCount, kDigits tables of 2^kBits), then a pass per digit, skipped where every key has
+    /// the same digit. Leaves the keys sorted in mB.sortKey.
+    void radixSort(size_t n, std::vector<int32_t>& order)
     {
         std::vector<uint64_t>& key = mB.sortKey;
         std::vector<uint64_t>& keyTmp = mB.sortKeyTmp;
@@ -958,6 +958,10 @@ private:
         keyTmp.resize(n);
         tmp.resize(order.size());
         std::vector<size_t>& count = mB.sortCount;
+        count.assign(size_t(kDigits) << kBits, 0);
+        for (size_t u = 0; u < n; ++u)
+            for (int d = 0; d < kDigits; ++d)
+                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
         for (int d = 0; d < kDigits; ++d) {
             size_t* c = &count[size_t(d) << kBits];
             if (c[(key[0] >> (kBits * d)) & kMask] == n) continue; // one digit for all: the order stands
@@ -1001,16 +1005,12 @@ private:
         part.assign(order.begin() + std::ptrdiff_t(from), order.end());
         std::vector<uint64_t>& key = mB.sortKey;
         key.resize(n);
-        std::vector<size_t>& count = mB.sortCount;
-        count.assign(size_t(kDigits) << kBits, 0);
         for (size_t u = 0; u < n; ++u) {
             const Coord& c = mCells[size_t(part[u])];
             key[u] = uint64_t(int64_t(c.x()) - lo.x()) << 42 | uint64_t(int64_t(c.y()) - lo.y()) << 21 |
                      uint64_t(int64_t(c.z()) - lo.z());
-            for (int d = 0; d < kDigits; ++d)
-                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
         }
-        radixPasses(n, part);
+        radixSort(n, part);
         std::copy(part.begin(), part.end(), order.begin() + std::ptrdiff_t(from));
     }
 
@@ -1024,8 +1024,6 @@ private:
         if (n < 2) return;
         std::vector<uint64_t>& key = mB.sortKey;
         key.resize(n);
-        std::vector<size_t>& count = mB.sortCount;
-        count.assign(size_t(kDigits) << kBits, 0);
         for (size_t u = 0; u < n; ++u) {
             // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
             // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
@@ -1034,10 +1032,8 @@ private:
             std::memcpy(&b, &v, sizeof b);
             b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
             key[u] = ~b;
-            for (int d = 0; d < kDigits; ++d)
-                ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
         }
-        radixPasses(n, order);
+        radixSort(n, order);
         for (size_t u = 0; u < n;) {
             size_t e = u + 1;
             while (e < n && key[e] == key[u])
