@@ -16,7 +16,7 @@
 // - the global layer (Scene::transport global): per cell of its domain (Transport.cc), see
 //   kTransportBytesPerCell, over the whole body or the bound below.
 //
-// The global layer's domain (Sculpt.cc's runFrame, Transport.cc; layerMargin). A frame whose tools
+// The global layer's domain (Sculpt.cc's runFrame, Transport.cc; layerReach). A frame whose tools
 // touch clay runs the layer with reach r0 = ceil(contact) + 2 (contact: sqrt of the voxels a tool
 // entered, 2D their number; at most sqrt of the voxels of the tool's bounds at one frame) on the
 // cells over Tc within the push's region. Its unknowns are the full cells within `reach` face steps
@@ -24,22 +24,27 @@
 // where a part the reach cut has no room the reach doubles, so it ends below twice an over cell's
 // distance to room (or r0), which a tool entering the clay from its surface finds within its
 // extent E (the diagonal of its bounds: around the tool to where it sticks out, or to the cells it
-// left). So the domain lies within a tool's sweep grown by
-// - compress push (round 5): its chains (as deep as the contact is wide), max(r0, 2E), 4 for an
-//   inner seed's margin, 1 for the Dirichlet cells;
+// left). So the layer's seeds lie within a tool's sweep grown by S voxels (on every axis), and its
+// cells within F face steps of those seeds (layerReach):
+// - compress push (round 5): S = its chains' depth (as deep as the contact is wide); F = max(r0,
+//   2E), 4 for an inner seed's margin, 1 for the Dirichlet cells;
 // - surface push (round 6): its targets (within maxSearch + 2 of the tool: Push.cc's region), then
 //   the automaton's try (settleBounded), which may run S steps before the layer, moving the
 //   overload a voxel per axis (three face steps) a step. Round 7: the layer then looks for its seeds
 //   in the push's region only (runFrame; round 6 looked S further, so S = 4096 under the default
 //   max_steps grew the sweep by ~28,700 voxels: the whole body). So a seed lies within the region,
 //   moved at most c = min(S, maxSearch + 2) voxels from its target, and room lies E + 3c face steps
-//   away: max(r0, 2 (E + 3c)), region, 4, 1. The try runs in chunks of kTryChunk steps and gives
-//   up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no layer: S <
-//   max_steps, a multiple of kTryChunk, so c = 0 when max_steps <= 16 (trySteps), 16 up to 32,
-//   then 18 whatever the budget (the 512-wide stroke under the default budget: a margin of 177
-//   voxels, a layer figure of 10.3 GiB; 72 and 928 MiB at max_steps <= 16; the whole body 50.1
-//   GiB). The try is skipped on saturated clay (mean density near the tool >= kTrySaturated), but
-//   nothing here can know that before the run.
+//   away: S = region, F = max(r0, 2 (E + 3c)) + 4 + 1. The try runs in chunks of kTryChunk steps
+//   and gives up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no
+//   layer: S < max_steps, a multiple of kTryChunk, so c = 0 when max_steps <= 16 (trySteps), 16 up
+//   to 32, then 18 whatever the budget. The try is skipped on saturated clay (mean density near the
+//   tool >= kTrySaturated), but nothing here can know that before the run.
+// The cells counted are those of the clay's extent within F face steps of the sweep grown by S
+// (round 9: an octahedron's corners around the box, voxelsWithinFaceSteps; round 7 counted every
+// voxel of the leaves meeting the sweep grown by S + F on every axis, a cube). The 512-wide stroke
+// under the default budget: S 18, F 159; 3.29 GiB for the layer, 6.76 GiB in all (round 7: 10.3 and
+// 13.7 GiB; its run peaks at 1.7 GB); at max_steps <= 16, 472 MiB for the layer (928 MiB); the whole
+// body 50.1 GiB.
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
 // axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
 // corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
@@ -56,7 +61,9 @@
 // Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
 // within a budget of distance evaluations (kTightenBudget; a large face sampled first, a tool's pose
 // moved by whole voxels from one tightened before takes that box, moved: round 6), leaves are
-// counted on boxes, a file's voxels are read only when it lacks OpenVDB's grid statistics.
+// counted on boxes, a file's voxels are read only when it lacks OpenVDB's grid statistics; the
+// layer's cells a row at a time over the grown sweep's rows (at most kFaceStepRowsMax, else the
+// leaves' voxels).
 #include "vdbclay/Sculpt.h"
 
 #include "vdbclay/IO.h"
@@ -119,6 +126,8 @@ constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
 using sculpt_internal::growBox;
+using memory_internal::voxelsWithinFaceSteps;
+using sculpt_internal::kDenseIndexMax;
 using sculpt_internal::kReachPerContact;
 using sculpt_internal::kTryChunk;
 using sculpt_internal::kTrySteps;
@@ -522,7 +531,7 @@ struct LayerBound {
 /// layer runs after it, under a step budget of @a maxSteps per frame: its chunks of kTryChunk steps
 /// end at multiples of kTryChunk, it gives up (and the layer runs) at the first one >= kTrySteps, and
 /// a chunk that reaches @a maxSteps finishes the frame without the layer. So none when @a maxSteps
-/// <= kTryChunk. (layerMargin counts no more of them than cross the push's region: round 7.)
+/// <= kTryChunk. (layerReach counts no more of them than cross the push's region: round 7.)
 uint64_t trySteps(uint64_t maxSteps)
 {
     if (maxSteps == 0) return 0;
@@ -530,17 +539,26 @@ uint64_t trySteps(uint64_t maxSteps)
     return std::min(giveUp, (maxSteps - 1) / kTryChunk * kTryChunk);
 }
 
-/// How far beyond a tool's sweep the global layer's domain reaches (file comment), or -1 where no
-/// bound holds (the whole body).
-int64_t layerMargin(const LayerBound& b)
+/// Where the global layer's domain lies around a tool's sweep (file comment): its seeds within the
+/// sweep grown by `seeds` voxels on every axis, its cells within `faceSteps` face steps of a seed.
+struct LayerReach {
+    bool bounded = false; ///< false: no bound holds (the whole body)
+    int64_t seeds = 0;
+    int64_t faceSteps = 0;
+};
+
+LayerReach layerReach(const LayerBound& b)
 {
-    if (b.clayMoves || b.covers || b.buried) return -1;
+    LayerReach r;
+    if (b.clayMoves || b.covers || b.buried) return r;
+    r.bounded = true;
     const double contact = b.dims == 2 ? double(b.toolMost) : std::sqrt(double(b.toolMost));
     const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
     const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
     if (b.push == PushMode::Compress) {
-        const int64_t depth = int64_t(std::ceil(contact));
-        return std::max(reach, 2 * room) + depth + 4 + 1;
+        r.seeds = int64_t(std::ceil(contact)); // the chains' depth
+        r.faceSteps = std::max(reach, 2 * room) + 4 + 1;
+        return r;
     }
     // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
     // try's steps, each moving clay one voxel (three face steps) at most; the layer's seeds stay in
@@ -548,10 +566,48 @@ int64_t layerMargin(const LayerBound& b)
     // steps.
     const int64_t region = int64_t(PushOptions().maxSearch) + 2;
     const int64_t steps = std::min(int64_t(trySteps(b.maxSteps)), region);
-    return std::max(reach, 2 * (room + 3 * steps)) + region + 4 + 1;
+    r.seeds = region;
+    r.faceSteps = std::max(reach, 2 * (room + 3 * steps)) + 4 + 1;
+    return r;
 }
 
+
 } // namespace
+
+namespace memory_internal {
+
+uint64_t voxelsWithinFaceSteps(const Box& b, int64_t r, Box within, int dims)
+{
+    if (dims == 2) {
+        within.min[2] = std::max(within.min[2], 0);
+        within.max[2] = std::min(within.max[2], 0);
+    }
+    if (b.empty() || within.empty() || r < 0) return 0;
+    int64_t lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max<int64_t>(within.min[a], int64_t(b.min[a]) - r);
+        hi[a] = std::min<int64_t>(within.max[a], int64_t(b.max[a]) + r);
+        if (lo[a] > hi[a]) return 0;
+    }
+    if ((hi[0] - lo[0] + 1) > kFaceStepRowsMax / (hi[1] - lo[1] + 1)) return UINT64_MAX;
+    auto outside = [&](int a, int64_t v) -> int64_t { // face steps from v to b's range on axis a
+        return v < b.min[a] ? b.min[a] - v : v > b.max[a] ? v - b.max[a] : 0;
+    };
+    uint64_t n = 0;
+    for (int64_t x = lo[0]; x <= hi[0]; ++x) {
+        const int64_t dx = outside(0, x);
+        for (int64_t y = lo[1]; y <= hi[1]; ++y) {
+            const int64_t left = r - dx - outside(1, y);
+            if (left < 0) continue;
+            const int64_t z0 = std::max<int64_t>(lo[2], int64_t(b.min[2]) - left);
+            const int64_t z1 = std::min<int64_t>(hi[2], int64_t(b.max[2]) + left);
+            if (z0 <= z1) n += uint64_t(z1 - z0 + 1);
+        }
+    }
+    return n;
+}
+
+} // namespace memory_internal
 
 uint64_t MemoryEstimate::total() const
 {
@@ -745,12 +801,16 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.automatonBytes = e.clayLeavesGrown * (kAutomatonBytesPerLeaf + lanes * kAutomatonLaneBytesPerLeaf);
     // The global layer (lib/src/Transport.cc) holds, per cell of its domain: its coordinate,
     // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
-    // growth), the index tree (4 bytes a voxel) and the solver's seven vectors and neighbour table
+    // growth), the index (4 bytes a voxel) and the solver's seven vectors and neighbour table
     // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
     // work vectors, coordinates, aggregates, members over every level: ~88 bytes). Its domain is at
-    // most the clay's leaves' voxels, and near the tools' sweeps where the bound of the file comment
-    // (the layer's domain) holds: counted as every voxel of the leaves meeting each sweep grown by
-    // layerMargin().
+    // most the clay's leaves' voxels. Near the tools' sweeps, where the bound of the file comment
+    // (the layer's domain) holds, it is at most the voxels of the clay's extent within the reach's
+    // face steps of the seeds' box (voxelsWithinFaceSteps: round 9; before, every voxel of the
+    // leaves meeting that box grown by the reach as a cube, ~4x more for the 512-wide stroke); the
+    // index is then the dense array over the seeds' bounds grown by the reach + 2 (at most
+    // kDenseIndexMax entries) and a tree over the cells beyond it, counted as every voxel of those
+    // leaves.
     if (scene.transport == Transport::Global) {
         uint64_t cells = e.clayLeavesGrown * 512;
         LayerBound lb;
@@ -800,23 +860,37 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             }
             lb.buried |= !out;
         }
-        const int64_t d = layerMargin(lb);
-        if (d >= 0 && !toolBoxes.empty()) {
+        const LayerReach reach = layerReach(lb);
+        uint64_t bytes = cells * kTransportBytesPerCell;
+        uint64_t counted = cells; // the domain's cells counted
+        if (reach.bounded && !toolBoxes.empty()) {
             Box extent; // where the clay can be
             for (const Box& b : grownBoxes)
                 extent = unite(extent, b);
-            uint64_t near = 0;
+            const int64_t d = reach.seeds + reach.faceSteps;
+            uint64_t nearLeaves = 0, nearCells = 0; // voxels of the leaves meeting the grown boxes; cells
+            Box denseBox;                           // where the dense index may lie
             bool walled = false;
             for (const Box& t : toolBoxes) {
                 const Box g = growBox(t, d, 3);
                 for (const Box& o : obsBoxes)
                     walled |= !intersect(g, o).empty();
                 const Box b = intersect(g, extent);
-                near += b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+                const uint64_t leaves = b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+                nearLeaves += leaves;
+                nearCells += std::min(
+                    leaves, voxelsWithinFaceSteps(growBox(t, reach.seeds, dims), reach.faceSteps, extent, dims));
+                denseBox = unite(denseBox, growBox(t, d + 2, dims));
             }
-            if (!walled) cells = std::min(cells, near);
+            if (!walled) {
+                const uint64_t dense = std::min<uint64_t>(voxelsIn(denseBox), uint64_t(kDenseIndexMax));
+                counted = std::min(cells, nearCells);
+                bytes = std::min(bytes, counted * (kTransportBytesPerCell - 4) +
+                                            4 * (std::min(cells, nearLeaves) + dense));
+            }
         }
-        e.transportBytes = cells * kTransportBytesPerCell;
+        e.transportBytes = bytes;
+        e.transportCells = counted;
     }
     // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
     // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid

@@ -54,6 +54,7 @@
 
 #include "Chunks.h"
 #include "Multigrid.h"
+#include "SculptTuning.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -94,8 +95,7 @@ constexpr int kDir[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0,
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
 
-/// The dense cell index's largest box (entries of 4 bytes: 32 MiB); a larger one uses the tree alone.
-constexpr int64_t kDenseIndexMax = int64_t(1) << 23;
+using sculpt_internal::kDenseIndexMax; // the dense cell index's largest box (the estimate counts it)
 
 /// The active set's rounds solve to the tolerance once a round changes at most 1/kTightChange of the rows.
 constexpr size_t kTightChange = 1000;

@@ -71,6 +71,7 @@ struct MemoryEstimate {
     uint64_t automatonBytes = 0;  ///< the automaton's per-leaf block masks and work lists
     uint64_t outputBytes = 0;     ///< writing the result: density and surface grids
     uint64_t transportBytes = 0;  ///< Scene::transport global: the solver's cells and vectors
+    uint64_t transportCells = 0;  ///< Scene::transport global: the cells of its domain counted (a bound)
     uint64_t total() const;
     /// One line: "about 1.2 GiB (clay 800 MiB for up to 370000 leaves, obstacles ..., ...)".
     std::string describe() const;
