@@ -22,7 +22,7 @@
 #include <unistd.h>
 
 #include "AllocationCounter.h" // the byte-counting operator new and delete
-#include "MemoryEstimate.h"     // memory_internal::voxelsWithinFaceSteps
+#include "MemoryEstimate.h"    // memory_internal::voxelsWithinFaceSteps
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -222,7 +222,8 @@ TEST_F(MemoryTest, TheLayersCellsAreCountedExactlyWithinTheFaceSteps)
     // A whole octahedron of radius r around one voxel: (2r + 1)(2r^2 + 2r + 3) / 3 voxels.
     const Box one{{{0, 0, 0}}, {{0, 0, 0}}}, everywhere{{{-100, -100, -100}}, {{100, 100, 100}}};
     for (int64_t r : {0, 1, 2, 17, 90})
-        EXPECT_EQ(voxelsWithinFaceSteps(one, r, everywhere, 3), uint64_t((2 * r + 1) * (2 * r * r + 2 * r + 3) / 3))
+        EXPECT_EQ(voxelsWithinFaceSteps(one, r, everywhere, 3),
+                  uint64_t((2 * r + 1) * (2 * r * r + 2 * r + 3) / 3))
             << r;
     // More rows than it may count: it says so (the caller counts the leaves' voxels instead).
     const Box huge{{{-1000000, -1000000, 0}}, {{1000000, 1000000, 10}}};
@@ -238,8 +239,8 @@ TEST_F(MemoryTest, TheLayersCountedCellsBoundTheCellsEveryFrameSolves)
         "clay": [{"shape": "box", "min": [0,0,0], "max": [127,23,127], "mass": 1000}],
         "tools": [{"shape": "sphere", "center": [64,26,64], "radius": 3, "path": [{"translate": [0,-1,0], "frames": 6}]}],
         "settle": {"max_steps": 100000}})";
-    for (const std::string& json : {stroke(160, "surface", 100000), stroke(128, "compress"),
-                                    stroke(512, "surface", 100000, 2), poke}) {
+    for (const std::string& json :
+         {stroke(160, "surface", 100000), stroke(128, "compress"), stroke(512, "surface", 100000, 2), poke}) {
         const Scene scene = parseScene(json, "s.json", "");
         const MemoryEstimate e = estimateSceneMemory(scene);
         ASSERT_LT(e.transportCells, e.clayLeavesGrown * 512) << json; // the bound applies

@@ -125,8 +125,8 @@ constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
 /// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
-using sculpt_internal::growBox;
 using memory_internal::voxelsWithinFaceSteps;
+using sculpt_internal::growBox;
 using sculpt_internal::kDenseIndexMax;
 using sculpt_internal::kReachPerContact;
 using sculpt_internal::kTryChunk;
@@ -571,7 +571,6 @@ LayerReach layerReach(const LayerBound& b)
     return r;
 }
 
-
 } // namespace
 
 namespace memory_internal {
@@ -878,8 +877,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 const Box b = intersect(g, extent);
                 const uint64_t leaves = b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
                 nearLeaves += leaves;
-                nearCells += std::min(
-                    leaves, voxelsWithinFaceSteps(growBox(t, reach.seeds, dims), reach.faceSteps, extent, dims));
+                nearCells += std::min(leaves, voxelsWithinFaceSteps(growBox(t, reach.seeds, dims),
+                                                                    reach.faceSteps, extent, dims));
                 denseBox = unite(denseBox, growBox(t, d + 2, dims));
             }
             if (!walled) {

@@ -47,6 +47,7 @@
 #include "vdbclay/Automaton.h"
 
 #include "ClayLeaves.h"
+#include "CoordHash.h"
 #include "ParallelFor.h"
 
 #include <openvdb/openvdb.h>
@@ -68,17 +69,6 @@ using openvdb::Coord;
 using openvdb::CoordBBox;
 
 constexpr int kMaxSearchLimit = 1024;
-
-/// A voxel's hash (std::hash<Coord>, OpenVDB's, keeps 20 bits: too few buckets for a large push).
-struct CoordHash {
-    size_t operator()(const Coord& c) const
-    {
-        uint64_t h = uint64_t(uint32_t(c.x())) * 0x9E3779B97F4A7C15ull;
-        h ^= uint64_t(uint32_t(c.y())) * 0xC2B2AE3D27D4EB4Full;
-        h ^= uint64_t(uint32_t(c.z())) * 0x165667B19E3779F9ull;
-        return size_t(h ^ (h >> 29));
-    }
-};
 
 /// The clay planned into voxels so far (step 3's room test, step 4's edit): a hash map from voxel to
 /// its entry, the entries in the order of their first add (source order: deterministic, and near

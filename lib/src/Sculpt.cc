@@ -22,6 +22,7 @@
 #include "vdbclay/Metrics.h"
 
 #include "ClayLeaves.h"
+#include "CoordHash.h"
 #include "Format.h"
 #include "MemoryEstimate.h"
 #include "ParallelFor.h"
@@ -39,6 +40,7 @@
 #include <iterator>
 #include <sstream>
 #include <thread>
+#include <unordered_set>
 
 namespace vdbclay {
 
@@ -159,11 +161,15 @@ struct Sculptor::Impl {
     std::vector<std::pair<openvdb::Coord, openvdb::MaskTree::LeafNodeType::NodeMaskType>> toolCells;
     Box toolRegion; ///< bounds of the tools as placed now
     // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
-    std::vector<ShapePtr> placed;          ///< the tools as placed now
-    openvdb::MaskTree coveredSlots{false}; ///< slots of toolRegion whose tool cells are marked
-    openvdb::MaskTree seenLeaves{false};   ///< mass leaves whose neighbouring slots are covered
-    bool coveredAll = false;               ///< every slot of toolRegion is covered
-    openvdb::Index64 leavesAtCover = 0;    ///< the mass tree's leaf count at the last cover
+    std::vector<ShapePtr> placed; ///< the tools as placed now
+    // Sets, not MaskTrees: a few hundred slots a frame, where a tree cleared every frame allocated
+    // and zeroed its upper nodes again (~1 ms a frame on the 48^3 press; round 9).
+    std::unordered_set<openvdb::Coord, CoordHash>
+        coveredSlots; ///< slots of toolRegion whose tool cells are marked
+    std::unordered_set<openvdb::Coord, CoordHash>
+        seenLeaves;                     ///< mass leaves whose neighbouring slots are covered
+    bool coveredAll = false;            ///< every slot of toolRegion is covered
+    openvdb::Index64 leavesAtCover = 0; ///< the mass tree's leaf count at the last cover
     std::function<bool()> stopPoll;
     bool stopped = false;
     ClayMeta startMeta;
@@ -351,40 +357,32 @@ struct Sculptor::Impl {
             all = int64_t(leaves.size()) > boxSlots / around;
         }
         std::vector<Coord> slots;
-        openvdb::tree::ValueAccessor<openvdb::MaskTree> covered(coveredSlots);
         if (all) {
             for (int32_t x = lo.x(); x <= hi.x(); ++x)
                 for (int32_t y = lo.y(); y <= hi.y(); ++y)
                     for (int32_t z = lo.z(); z <= hi.z(); ++z)
-                        if (!covered.isValueOn(Coord(x, y, z))) slots.emplace_back(x, y, z);
+                        if (!coveredSlots.count(Coord(x, y, z))) slots.emplace_back(x, y, z);
             coveredAll = true;
         } else {
-            openvdb::tree::ValueAccessor<openvdb::MaskTree> seen(seenLeaves);
-            openvdb::MaskTree want(false);
-            openvdb::tree::ValueAccessor<openvdb::MaskTree> wacc(want);
             const int r = int(reach), rz = is2D ? 0 : r;
             for (const auto* leaf : leaves) {
                 const Coord o(leaf->origin().x() >> 3, leaf->origin().y() >> 3, leaf->origin().z() >> 3);
-                if (reach == 1) {
-                    if (seen.isValueOn(o)) continue;
-                    seen.setValueOn(o);
-                }
+                if (reach == 1 && !seenLeaves.insert(o).second) continue;
                 for (int dx = -r; dx <= r; ++dx)
                     for (int dy = -r; dy <= r; ++dy)
                         for (int dz = -rz; dz <= rz; ++dz) {
                             const Coord c = o.offsetBy(dx, dy, dz);
                             if (c.x() < lo.x() || c.x() > hi.x() || c.y() < lo.y() || c.y() > hi.y() ||
-                                c.z() < lo.z() || c.z() > hi.z() || covered.isValueOn(c))
+                                c.z() < lo.z() || c.z() > hi.z() || coveredSlots.count(c))
                                 continue;
-                            wacc.setValueOn(c);
+                            slots.push_back(c);
                         }
             }
-            for (auto it = want.cbeginValueOn(); it; ++it)
-                slots.push_back(it.getCoord());
+            // In coordinate order, each once (as the MaskTree of slots wanted gave them before).
             std::sort(slots.begin(), slots.end());
+            slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
         }
-        for (const Coord& c : slots)
-            covered.setValueOn(c);
+        coveredSlots.insert(slots.begin(), slots.end());
         if (slots.empty()) return;
         auto acc = grid.getAccessor();
         using MaskLeaf = openvdb::MaskTree::LeafNodeType;
