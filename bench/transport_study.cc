@@ -3,7 +3,8 @@
 //   transport_study squeeze R0        cylinder R0, H0 = 2 R0 between slip plates, pressed to H = R0
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc
 //   transport_study stroke W          sphere r 6 dipped 9 voxels into a clay sphere W wide, slid 2/frame
-//                                     (--mass M: the clay's mass per voxel, default 1000 = Tc)
+//                                     (--mass M: the clay's mass per voxel, default 1000 = Tc;
+//                                     --body slab: into the flat top of a W x 64 x W slab instead)
 //                                     (no memory budget: the surface push's estimate counts the global
 //                                     layer over the whole body, 54 GiB at W 512; compress: 5.7 GiB)
 //   transport_study scene FILE        a scene file, its transport and push overridden: steps, block
@@ -180,25 +181,38 @@ void poke(const std::string& only)
     }
 }
 
-void stroke(int width, int mass, const std::string& only)
+/// The stroke on a sphere W wide, or (@a slab) on the flat top of a W x 64 x W slab: the same tool
+/// and path, dipped 9 voxels, with no curvature (the slab's frames cost the same at any W if the
+/// work follows the tool and not the model).
+void stroke(int width, int mass, bool slab, const std::string& only)
 {
     const double R = width / 2.0;
     for (auto& c : kCombos) {
         if (!wanted(only, c[0], c[1])) continue;
+        char clay[256];
+        if (slab)
+            std::snprintf(clay, sizeof clay,
+                          R"({"shape": "box", "min": [0, 0, 0], "max": [%d, 63, %d], "mass": %d})", width - 1,
+                          width - 1, mass);
+        else
+            std::snprintf(clay, sizeof clay,
+                          R"({"shape": "sphere", "center": [%g, %g, %g], "radius": %g, "mass": %d})", R, R, R,
+                          R, mass);
+        const double top = slab ? 64.0 : 2 * R; // the clay's top surface
         char json[2048];
         std::snprintf(json, sizeof json, R"({"threshold": 1000, "rule": "prorata", "seed": 1, %s
-            "clay": [{"shape": "sphere", "center": [%g, %g, %g], "radius": %g, "mass": %d}],
+            "clay": [%s],
             "tools": [{"shape": "sphere", "center": [%g, %g, %g], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 12}]}],
             "settle": {"max_steps": 5000000}, "memory_budget": "none"})",
-                      combo(c[0], c[1]).c_str(), R, R, R, R, mass, R - 12, 2 * R + 6 - 9, R);
+                      combo(c[0], c[1]).c_str(), clay, R - 12, top + 6 - 9, R);
         const Run run = runScene(parseScene(json, "stroke", ""));
         std::vector<double> f(run.frameSeconds.begin() + 1, run.frameSeconds.end()); // frame 1 dips
         std::sort(f.begin(), f.end());
         std::printf(
-            "stroke %d (m0 %d) %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld  "
+            "stroke %d%s (m0 %d) %-6s %-8s  median frame %.2f ms (frames 2..12)  steps %llu  drift %lld  "
             "hash %016llx\n",
-            width, mass, c[0], c[1], 1e3 * f[f.size() / 2], (unsigned long long)run.steps,
-            (long long)run.drift, (unsigned long long)contentHash(*run.mass));
+            width, slab ? " slab" : "", mass, c[0], c[1], 1e3 * f[f.size() / 2],
+            (unsigned long long)run.steps, (long long)run.drift, (unsigned long long)contentHash(*run.mass));
         std::fflush(stdout);
     }
 }
@@ -230,15 +244,19 @@ int main(int argc, char** argv)
 {
     openvdb::initialize();
     if (argc < 2) {
-        std::fprintf(stderr, "usage: transport_study squeeze R0 | poke | stroke W [--mass M] | scene FILE  "
-                             "[--only local-surface,...]\n");
+        std::fprintf(
+            stderr,
+            "usage: transport_study squeeze R0 | poke | stroke W [--mass M] [--body slab] | scene FILE  "
+            "[--only local-surface,...]\n");
         return 2;
     }
     std::string only;
     int mass = 1000;
+    bool slab = false;
     for (int i = 1; i + 1 < argc; ++i) {
         if (!std::strcmp(argv[i], "--only")) only = argv[i + 1];
         if (!std::strcmp(argv[i], "--mass")) mass = std::atoi(argv[i + 1]);
+        if (!std::strcmp(argv[i], "--body")) slab = !std::strcmp(argv[i + 1], "slab");
     }
     const std::string what = argv[1];
     if (what == "squeeze")
@@ -248,7 +266,7 @@ int main(int argc, char** argv)
     else if (what == "scene" && argc > 2)
         sceneFile(argv[2], only);
     else if (what == "stroke")
-        stroke(argc > 2 && argv[2][0] != '-' ? std::atoi(argv[2]) : 128, mass, only);
+        stroke(argc > 2 && argv[2][0] != '-' ? std::atoi(argv[2]) : 128, mass, slab, only);
     else
         return 2;
     return 0;
