@@ -1139,3 +1139,49 @@ TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheO
     EXPECT_EQ(contentHash(*resumed.mass()), first);
     std::remove(ckpt.c_str());
 }
+
+TEST_F(TransportTest, TheLayersWorkFollowsTheToolNotTheBody)
+{
+    // Round 9: the stroke of transport_study (a sphere r 6 dipped 9 voxels, slid 2 a frame) into the
+    // flat top of a slab at Tc, 96 wide and 256 wide, the tool at the same place. The layer's domain
+    // is the clay within the reach of the contact: every frame solves the same unknowns with the same
+    // solves and iterations and routes the same clay, and the small slab's clay is the large one's
+    // voxel for voxel. (Anything the layer did over the whole body, or its bounds, would differ.)
+    auto slab = [](int lo, int hi) {
+        return R"({"threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": "surface",
+        "clay": [{"shape": "box", "min": [)" +
+               std::to_string(lo) + ",0," + std::to_string(lo) + "], \"max\": [" + std::to_string(hi) +
+               ",63," + std::to_string(hi) + R"(], "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [36,61,48], "radius": 6, "path": [{"translate": [2,0,0], "frames": 6}]}],
+        "settle": {"max_steps": 100000}})";
+    };
+    Sculptor small(parseScene(slab(0, 95), "s.json", ""), 2),
+        large(parseScene(slab(-80, 175), "l.json", ""), 2);
+    uint64_t solved = 0;
+    while (!small.done()) {
+        const FrameReport a = small.runFrame(), b = large.runFrame();
+        const std::string at = "frame " + std::to_string(a.frame);
+        EXPECT_EQ(a.push.voxelsPushed, b.push.voxelsPushed) << at;
+        EXPECT_EQ(a.transport.unknowns, b.transport.unknowns) << at;
+        EXPECT_EQ(a.transport.solves, b.transport.solves) << at;
+        EXPECT_EQ(a.transport.iterations, b.transport.iterations) << at;
+        EXPECT_EQ(a.transport.massMoved, b.transport.massMoved) << at;
+        EXPECT_EQ(a.settle.steps, b.settle.steps) << at;
+        solved += a.transport.unknowns;
+    }
+    EXPECT_TRUE(large.done());
+    EXPECT_GT(solved, 6u * 10000u); // the layer ran every frame, on ~14 k cells
+    // The small slab's clay (all of it within its box and up to 8 voxels above) is the large one's there.
+    auto sa = small.mass()->getConstAccessor();
+    auto la = large.mass()->getConstAccessor();
+    uint64_t differ = 0;
+    for (int x = -1; x <= 96; ++x)
+        for (int y = 0; y <= 71; ++y)
+            for (int z = -1; z <= 96; ++z) {
+                const openvdb::Coord c(x, y, z);
+                const int32_t expect = (x < 0 || x > 95 || z < 0 || z > 95) ? 0 : la.getValue(c);
+                differ += sa.getValue(c) != expect ? 1 : 0;
+            }
+    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(totalMass(*small.mass()), int64_t(96) * 64 * 96 * 1000);
+}
