@@ -181,6 +181,14 @@ TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHea
     // 13.7 GiB, refused by a 12 GB budget; the run peaks at 1.7 GB).
     EXPECT_LT(eDefault.total(), uint64_t(8) << 30) << eDefault.describe();
     EXPECT_LT(eDefault.transportBytes * 12, wholeBody(eDefault)) << eDefault.describe();
+    // Round 9: the layer's arrays serve one frame at a time, so its figure is the largest frame's and
+    // does not grow with the stroke's length (before, the whole sweep's: +36 % at 50 frames).
+    std::string longer = stroke(512, "surface", 100000);
+    longer.replace(longer.find(R"("frames": 12)"), 12, R"("frames": 48)");
+    const MemoryEstimate eLong = estimateSceneMemory(parseScene(longer, "s.json", ""));
+    EXPECT_LE(eLong.transportCells, eDefault.transportCells + eDefault.transportCells / 50)
+        << eLong.describe();
+    EXPECT_GE(eLong.transportCells, eDefault.transportCells) << eLong.describe();
 }
 
 TEST_F(MemoryTest, TheLayersCellsAreCountedExactlyWithinTheFaceSteps)
@@ -239,8 +247,10 @@ TEST_F(MemoryTest, TheLayersCountedCellsBoundTheCellsEveryFrameSolves)
         "clay": [{"shape": "box", "min": [0,0,0], "max": [127,23,127], "mass": 1000}],
         "tools": [{"shape": "sphere", "center": [64,26,64], "radius": 3, "path": [{"translate": [0,-1,0], "frames": 6}]}],
         "settle": {"max_steps": 100000}})";
+    std::string longer = stroke(160, "surface", 100000); // 24 frames: the largest frame's cells count
+    longer.replace(longer.find(R"("frames": 12)"), 12, R"("frames": 24)");
     for (const std::string& json :
-         {stroke(160, "surface", 100000), stroke(128, "compress"), stroke(512, "surface", 100000, 2), poke}) {
+         {longer, stroke(128, "compress"), stroke(512, "surface", 100000, 2), poke}) {
         const Scene scene = parseScene(json, "s.json", "");
         const MemoryEstimate e = estimateSceneMemory(scene);
         ASSERT_LT(e.transportCells, e.clayLeavesGrown * 512) << json; // the bound applies

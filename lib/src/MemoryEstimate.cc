@@ -41,9 +41,11 @@
 //   tool >= kTrySaturated), but nothing here can know that before the run.
 // The cells counted are those of the clay's extent within F face steps of the sweep grown by S
 // (round 9: an octahedron's corners around the box, voxelsWithinFaceSteps; round 7 counted every
-// voxel of the leaves meeting the sweep grown by S + F on every axis, a cube). The 512-wide stroke
-// under the default budget: S 18, F 159; 3.29 GiB for the layer, 6.76 GiB in all (round 7: 10.3 and
-// 13.7 GiB; its run peaks at 1.7 GB); at max_steps <= 16, 472 MiB for the layer (928 MiB); the whole
+// voxel of the leaves meeting the sweep grown by S + F on every axis, a cube), for the frame that
+// holds most (layerCellsAlong: each frame's push lies between the tool's bounds at that frame and the
+// one before; the layer's arrays serve one frame at a time). The 512-wide stroke
+// under the default budget: S 18, F 159; 2.96 GiB for the layer, 6.42 GiB in all (round 7: 10.3 and
+// 13.7 GiB; its run peaks at 1.7 GB); at max_steps <= 16, 393 MiB for the layer (928 MiB); the whole
 // body 50.1 GiB.
 // The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
 // axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
@@ -472,7 +474,10 @@ bool wholeVoxelMove(const Pose& a, const Pose& b, int dims, int64_t d[3])
 /// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
 /// Each frame's bounds are tightened while @a budget lasts (tighten()); a frame whose pose is one
 /// tightened before moved by whole voxels (a press, a stroke: every frame) takes that box, moved.
-std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget)
+/// @a frameBoxes, when given, receives every frame's bounds in frame order (empty when frames were
+/// sampled).
+std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget,
+                               std::vector<Box>* frameBoxes = nullptr)
 {
     const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
     Box all;
@@ -500,11 +505,14 @@ std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, 
         }
         all = unite(all, b);
         most = std::max(most, voxelsIn(b));
+        if (frameBoxes) frameBoxes->push_back(b);
     };
     const uint64_t stride = std::max<uint64_t>(1, end / 100000);
     for (uint64_t f = 0; f <= end; f += stride)
         at(f);
     if (stride > 1) {
+        if (frameBoxes) frameBoxes->clear();
+        frameBoxes = nullptr;
         uint64_t f = 0;
         for (const PathSegment& seg : tool.path) {
             f += seg.frames;
@@ -569,6 +577,41 @@ LayerReach layerReach(const LayerBound& b)
     r.seeds = region;
     r.faceSteps = std::max(reach, 2 * (room + 3 * steps)) + 4 + 1;
     return r;
+}
+
+/// Rows voxelsWithinFaceSteps may count for one tool's frames together (layerCellsAlong): ~50 ms.
+constexpr uint64_t kFrameRowsMax = uint64_t(1) << 25;
+
+/// The cells of the global layer's domain (the clay's @a extent within @a reach of the seeds) at the
+/// frame that holds most, for a tool whose bounds frame by frame are @a frames (round 9): a frame's
+/// layer runs after its push, whose region lies within the tool's bounds at this frame and the one
+/// before (the sub-steps of a sweep move between them), and the layer's arrays are reused from frame
+/// to frame, so its peak is the largest frame's, not the whole @a sweep's. The whole sweep where the
+/// frames are sampled or counting them all would take more than kFrameRowsMax rows.
+uint64_t layerCellsAlong(const std::vector<Box>& frames, const Box& sweep, const LayerReach& reach,
+                         const Box& extent, int dims)
+{
+    using memory_internal::voxelsWithinFaceSteps;
+    const uint64_t whole =
+        voxelsWithinFaceSteps(growBox(sweep, reach.seeds, dims), reach.faceSteps, extent, dims);
+    if (frames.empty()) return whole;
+    const int64_t grow = 2 * (reach.seeds + reach.faceSteps);
+    uint64_t rows = 0, most = 0;
+    Box last;
+    for (size_t k = 0; k < frames.size(); ++k) {
+        const Box pair = k ? unite(frames[k - 1], frames[k]) : frames[k];
+        if (k && pair.min == last.min && pair.max == last.max) continue; // the tool stood still
+        last = pair;
+        if (pair.empty()) continue;
+        rows += uint64_t(int64_t(pair.max[0]) - pair.min[0] + 1 + grow) *
+                uint64_t(int64_t(pair.max[1]) - pair.min[1] + 1 + grow);
+        if (rows > kFrameRowsMax) return whole;
+        const uint64_t n =
+            voxelsWithinFaceSteps(growBox(pair, reach.seeds, dims), reach.faceSteps, extent, dims);
+        if (n == UINT64_MAX) return whole;
+        most = std::max(most, n);
+    }
+    return std::min(most, whole);
 }
 
 } // namespace
@@ -690,10 +733,12 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
     uint64_t toolLeaves = 0;
     std::vector<Box> toolBoxes;
-    uint64_t toolMost = 0; // voxels of the largest tool's bounds at one frame
-    double toolExtent = 0; // the largest tool's diagonal
+    std::vector<std::vector<Box>> toolFrames; // each tool's bounds frame by frame (empty: sampled)
+    uint64_t toolMost = 0;                    // voxels of the largest tool's bounds at one frame
+    double toolExtent = 0;                    // the largest tool's diagonal
     for (const ToolSpec& t : scene.tools) {
-        const auto sw = sweep(t, scene.frames, dims, toolBudget);
+        toolFrames.emplace_back();
+        const auto sw = sweep(t, scene.frames, dims, toolBudget, &toolFrames.back());
         areas.push_back({sw.first, false, true});
         e.toolVoxels += sw.second;
         toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
@@ -870,15 +915,15 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             uint64_t nearLeaves = 0, nearCells = 0; // voxels of the leaves meeting the grown boxes; cells
             Box denseBox;                           // where the dense index may lie
             bool walled = false;
-            for (const Box& t : toolBoxes) {
+            for (size_t i = 0; i < toolBoxes.size(); ++i) {
+                const Box& t = toolBoxes[i];
                 const Box g = growBox(t, d, 3);
                 for (const Box& o : obsBoxes)
                     walled |= !intersect(g, o).empty();
                 const Box b = intersect(g, extent);
                 const uint64_t leaves = b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
                 nearLeaves += leaves;
-                nearCells += std::min(leaves, voxelsWithinFaceSteps(growBox(t, reach.seeds, dims),
-                                                                    reach.faceSteps, extent, dims));
+                nearCells += std::min(leaves, layerCellsAlong(toolFrames[i], t, reach, extent, dims));
                 denseBox = unite(denseBox, growBox(t, d + 2, dims));
             }
             if (!walled) {
