@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "InsideBox.h" // shape_internal::insideVoxelBox
+
 #include <climits>
 #include <cmath>
 #include <cstring>
@@ -311,6 +313,73 @@ TEST_F(ShapesTest, TransformedDistanceIsBitIdenticalToTheInnerDistanceAtApplyInv
         }
     }
     EXPECT_EQ(compared, 4 * 20 * 50);
+}
+
+TEST_F(ShapesTest, InsideVoxelBoxIsExactlyTheVoxelsWhoseCentreIsInside)
+{
+    // Round 9: an unrotated box, moved by any translation and pivot, is marked and rasterised as a
+    // box (InsideBox.h) instead of a distance per voxel; it must be the same voxels, bit for bit.
+    // Boxes with corners on quarter voxels and at random, translations on half voxels (centres on
+    // the faces: not inside) and at random.
+    uint64_t state = 2026;
+    auto next = [&state](double lo, double hi) {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return lo + (hi - lo) * double(state >> 11) / double(uint64_t(1) << 53);
+    };
+    int compared = 0, nonEmpty = 0;
+    for (int k = 0; k < 400; ++k) {
+        Vec3 lo, hi;
+        Pose pose;
+        for (int i = 0; i < 3; ++i) {
+            const bool quarter = k % 2 == 0;
+            lo[i] = quarter ? std::floor(next(-40, 40)) / 4 : next(-10, 10);
+            hi[i] = lo[i] + (quarter ? std::floor(next(0, 40)) / 4 : next(0, 8));
+            pose.translation[i] = k % 4 < 2 ? std::floor(next(-60, 60)) / 2 : next(-30, 30);
+            pose.pivot[i] = k % 3 == 0 ? 0.0 : next(-10, 10);
+        }
+        const ShapePtr b = makeBox(lo, hi);
+        for (const ShapePtr& s : {b, makeTransformed(b, pose)}) {
+            Box got;
+            ASSERT_TRUE(shape_internal::insideVoxelBox(*s, got)) << s->describe();
+            Box want;
+            const Box bb = s->bounds();
+            for (int x = bb.min[0] - 1; x <= bb.max[0] + 1; ++x)
+                for (int y = bb.min[1] - 1; y <= bb.max[1] + 1; ++y)
+                    for (int z = bb.min[2] - 1; z <= bb.max[2] + 1; ++z)
+                        if (s->distance(Vec3{{double(x), double(y), double(z)}}) < 0)
+                            want = unite(want, Box{{{x, y, z}}, {{x, y, z}}});
+            ASSERT_EQ(got.empty(), want.empty()) << s->describe();
+            if (!want.empty()) {
+                EXPECT_EQ(got.min, want.min) << s->describe();
+                EXPECT_EQ(got.max, want.max) << s->describe();
+                // A box: every voxel of it inside, none beside it (checked above by the bounding box
+                // of the inside voxels: the count says the box is full).
+                uint64_t inside = 0;
+                for (int x = want.min[0]; x <= want.max[0]; ++x)
+                    for (int y = want.min[1]; y <= want.max[1]; ++y)
+                        for (int z = want.min[2]; z <= want.max[2]; ++z)
+                            inside += s->distance(Vec3{{double(x), double(y), double(z)}}) < 0 ? 1 : 0;
+                EXPECT_EQ(inside, uint64_t(want.max[0] - want.min[0] + 1) *
+                                      uint64_t(want.max[1] - want.min[1] + 1) *
+                                      uint64_t(want.max[2] - want.min[2] + 1));
+                ++nonEmpty;
+            }
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 800);
+    EXPECT_GT(nonEmpty, 400);
+    // Not boxes of voxels: a rotated box, a sphere, a box moved twice (left to the distance).
+    Box unused;
+    Pose turned;
+    turned.rotationDeg = {{0, 30, 0}};
+    EXPECT_FALSE(
+        shape_internal::insideVoxelBox(*makeTransformed(makeBox({{0, 0, 0}}, {{4, 4, 4}}), turned), unused));
+    EXPECT_FALSE(shape_internal::insideVoxelBox(*makeSphere({{0, 0, 0}}, 5), unused));
+    Pose shifted;
+    shifted.translation = {{1, 2, 3}};
+    EXPECT_FALSE(shape_internal::insideVoxelBox(
+        *makeTransformed(makeTransformed(makeBox({{0, 0, 0}}, {{4, 4, 4}}), shifted), shifted), unused));
 }
 
 TEST_F(ShapesTest, ParameterErrorsNameTheParameter)

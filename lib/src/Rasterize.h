@@ -12,6 +12,7 @@
 // already holds (a leaf, or a tile) is written voxel by voxel as before.
 #pragma once
 
+#include "InsideBox.h"
 #include "ParallelFor.h"
 
 #include "vdbclay/Shapes.h"
@@ -40,6 +41,10 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
         b.min[2] = std::max(b.min[2], 0);
         b.max[2] = std::min(b.max[2], 0);
     }
+    // An unrotated box: its inside voxels are a box, every voxel of it inside (InsideBox.h).
+    Box cells;
+    const bool boxed = shape_internal::insideVoxelBox(shape, cells);
+    if (boxed) b = intersect(b, cells);
     if (b.empty()) return 0;
     const int64_t lo[3] = {int64_t(b.min[0]) >> 3, int64_t(b.min[1]) >> 3, int64_t(b.min[2]) >> 3};
     const int64_t n[3] = {(int64_t(b.max[0]) >> 3) - lo[0] + 1, (int64_t(b.max[1]) >> 3) - lo[1] + 1,
@@ -69,7 +74,8 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
             for (int32_t x = x0; x <= x1; ++x)
                 for (int32_t y = y0; y <= y1; ++y)
                     for (int32_t z = z0; z <= z1; ++z) {
-                        if (!(shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0)) continue;
+                        if (!boxed && !(shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0))
+                            continue;
                         if (!leaf) leaf = std::make_unique<LeafT>(origin, tree.background(), false);
                         leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(x, y, z)), value);
                         ++count;

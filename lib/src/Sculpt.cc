@@ -23,6 +23,7 @@
 
 #include "ClayLeaves.h"
 #include "CoordHash.h"
+#include "InsideBox.h"
 #include "Format.h"
 #include "MemoryEstimate.h"
 #include "ParallelFor.h"
@@ -389,6 +390,10 @@ struct Sculptor::Impl {
         for (const ShapePtr& t : placed) {
             Box tb = t->bounds();
             if (is2D) tb = intersect(tb, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
+            // An unrotated box tool (a plate): its cells are a box (InsideBox.h), no distance per cell.
+            Box cellsBox;
+            const bool boxed = shape_internal::insideVoxelBox(*t, cellsBox);
+            if (boxed) tb = intersect(tb, cellsBox);
             // Per slot, the mask of its cells inside the tool (merged whole leaves at a time below,
             // instead of a cell at a time through the accessor: press 128^3, ~0.1 M cells a frame).
             std::vector<MaskLeaf::NodeMaskType> inside(slots.size());
@@ -403,7 +408,7 @@ struct Sculptor::Impl {
                         for (int32_t z = sb.min[2]; z <= sb.max[2]; ++z) {
                             const Coord c(x, y, z);
                             if (ro.isValueOn(c)) continue;
-                            if (t->distance(Vec3{{double(x), double(y), double(z)}}) < 0)
+                            if (boxed || t->distance(Vec3{{double(x), double(y), double(z)}}) < 0)
                                 inside[i].setOn(MaskLeaf::coordToOffset(c));
                         }
             });

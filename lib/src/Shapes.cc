@@ -7,10 +7,12 @@
 
 #include "vdbclay/Shapes.h"
 
+#include "InsideBox.h"
 #include "ShapeMath.h"
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace vdbclay {
@@ -65,6 +67,10 @@ public:
     }
     Box bounds() const override { return mBounds; }
     std::string describe() const override { return "box (min " + vecStr(mLo) + ", max " + vecStr(mHi) + ")"; }
+    /// Whether coordinate @a v lies inside on axis @a i: distance() < 0 exactly when it does on all
+    /// three (its q's, compared as distance() compares them: all below 0 gives max q < 0, any above 0
+    /// a positive sqrt or a zero).
+    bool insideOnAxis(int i, double v) const { return std::abs(v - mCenter[i]) - mHalf[i] < 0; }
 
 private:
     Vec3 mLo, mHi, mCenter, mHalf;
@@ -169,6 +175,21 @@ public:
     }
     double distance(const Vec3& p) const override { return mInner->distance(toInner(p)); }
     Vec3 normal(const Vec3& p) const override { return mul(mRot, mInner->normal(toInner(p))); }
+    const Shape& inner() const { return *mInner; }
+    /// No rotation: the matrix is exactly the identity (sin 0 and cos 0 are exact), so toInner's
+    /// coordinate @a i depends on p[i] alone (the zeros add nothing), as toInnerAxis() computes it.
+    bool unrotated() const
+    {
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                if (mRot[i][j] != (i == j ? 1.0 : 0.0)) return false;
+        return true;
+    }
+    /// toInner(p)[i] for any p with p[i] = @a v, when unrotated(): the same operations in the same order.
+    double toInnerAxis(int i, double v) const
+    {
+        return (v - mPose.translation[i] - mPose.pivot[i]) + mPose.pivot[i];
+    }
     Box bounds() const override { return mBounds; }
     std::string describe() const override
     {
@@ -244,6 +265,46 @@ private:
 };
 
 } // namespace
+
+// ---- Boxes ---------------------------------------------------------------------------------------
+
+namespace shape_internal {
+
+bool insideVoxelBox(const Shape& shape, Box& voxels)
+{
+    const auto* moved = dynamic_cast<const Transformed*>(&shape);
+    if (moved && !moved->unrotated()) return false;
+    const auto* box = dynamic_cast<const BoxShape*>(moved ? &moved->inner() : &shape);
+    if (!box) return false;
+    const Box b = shape.bounds();
+    if (b.empty()) {
+        voxels = Box();
+        return true;
+    }
+    Box out;
+    for (int i = 0; i < 3; ++i) {
+        // The inside coordinates of axis i within the bounds: one interval (|v' - c| < h with v'
+        // monotonic in v), checked.
+        int64_t lo = INT64_MAX, hi = INT64_MIN, count = 0;
+        for (int64_t v = b.min[i]; v <= b.max[i]; ++v) {
+            if (!box->insideOnAxis(i, moved ? moved->toInnerAxis(i, double(v)) : double(v))) continue;
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+            ++count;
+        }
+        if (count == 0) { // no voxel inside
+            voxels = Box();
+            return true;
+        }
+        if (count != hi - lo + 1) return false;
+        out.min[i] = int32_t(lo);
+        out.max[i] = int32_t(hi);
+    }
+    voxels = out;
+    return true;
+}
+
+} // namespace shape_internal
 
 // ---- Pose, Shape ---------------------------------------------------------------------------------
 
