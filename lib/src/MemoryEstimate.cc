@@ -591,12 +591,13 @@ constexpr uint64_t kFrameRowsMax = uint64_t(1) << 25;
 uint64_t layerCellsAlong(const std::vector<Box>& frames, const Box& sweep, const LayerReach& reach,
                          const Box& extent, int dims)
 {
-    using memory_internal::voxelsWithinFaceSteps;
-    const uint64_t whole =
-        voxelsWithinFaceSteps(growBox(sweep, reach.seeds, dims), reach.faceSteps, extent, dims);
-    if (frames.empty()) return whole;
+    // The cells within reach of the seeds of a push whose tool's bounds are @a b.
+    const auto around = [&](const Box& b) {
+        return voxelsWithinFaceSteps(growBox(b, reach.seeds, dims), reach.faceSteps, extent, dims);
+    };
+    if (frames.empty()) return around(sweep);
     const int64_t grow = 2 * (reach.seeds + reach.faceSteps);
-    uint64_t rows = 0, most = 0;
+    uint64_t rows = 0, most = 0; // (each frame's pair lies within the sweep: most <= around(sweep))
     Box last;
     for (size_t k = 0; k < frames.size(); ++k) {
         const Box pair = k ? unite(frames[k - 1], frames[k]) : frames[k];
@@ -605,13 +606,12 @@ uint64_t layerCellsAlong(const std::vector<Box>& frames, const Box& sweep, const
         if (pair.empty()) continue;
         rows += uint64_t(int64_t(pair.max[0]) - pair.min[0] + 1 + grow) *
                 uint64_t(int64_t(pair.max[1]) - pair.min[1] + 1 + grow);
-        if (rows > kFrameRowsMax) return whole;
-        const uint64_t n =
-            voxelsWithinFaceSteps(growBox(pair, reach.seeds, dims), reach.faceSteps, extent, dims);
-        if (n == UINT64_MAX) return whole;
+        if (rows > kFrameRowsMax) return around(sweep);
+        const uint64_t n = around(pair);
+        if (n == UINT64_MAX) return around(sweep);
         most = std::max(most, n);
     }
-    return std::min(most, whole);
+    return most;
 }
 
 } // namespace

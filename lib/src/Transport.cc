@@ -947,16 +947,17 @@ private:
     static constexpr int kBits = 11, kDigits = 6;
     static constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
 
-    /// A stable LSD radix sort of @a order[0, n) by mB.sortKey[0, n): the digits counted in one pass
-    /// (mB.sortCount, kDigits tables of 2^kBits), then a pass per digit, skipped where every key has
-    /// the same digit. Leaves the keys sorted in mB.sortKey.
-    void radixSort(size_t n, std::vector<int32_t>& order)
+    /// A stable LSD radix sort of @a order by mB.sortKey (one key per entry): the digits counted in
+    /// one pass (mB.sortCount, kDigits tables of 2^kBits), then a pass per digit, skipped where every
+    /// key has the same digit. Leaves the keys sorted in mB.sortKey.
+    void radixSort(std::vector<int32_t>& order)
     {
+        const size_t n = order.size();
         std::vector<uint64_t>& key = mB.sortKey;
         std::vector<uint64_t>& keyTmp = mB.sortKeyTmp;
         std::vector<int32_t>& tmp = mB.sortTmp;
         keyTmp.resize(n);
-        tmp.resize(order.size());
+        tmp.resize(n);
         std::vector<size_t>& count = mB.sortCount;
         count.assign(size_t(kDigits) << kBits, 0);
         for (size_t u = 0; u < n; ++u)
@@ -1010,7 +1011,7 @@ private:
             key[u] = uint64_t(int64_t(c.x()) - lo.x()) << 42 | uint64_t(int64_t(c.y()) - lo.y()) << 21 |
                      uint64_t(int64_t(c.z()) - lo.z());
         }
-        radixSort(n, part);
+        radixSort(part);
         std::copy(part.begin(), part.end(), order.begin() + std::ptrdiff_t(from));
     }
 
@@ -1033,7 +1034,7 @@ private:
             b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
             key[u] = ~b;
         }
-        radixSort(n, order);
+        radixSort(order);
         for (size_t u = 0; u < n;) {
             size_t e = u + 1;
             while (e < n && key[e] == key[u])
