@@ -84,7 +84,70 @@ void expectLikeOpenVdb(const openvdb::Int32Grid& mass, double voxelSize = 1.0)
     }
 }
 
+/// surfaceLevelSet (the band's sweep) against OpenVDB's fogToSdf over the whole fog, clipped alike,
+/// bit for bit, on 1, 2, 3 and 8 threads. Returns how many voxels the band's sweep updated, and in
+/// @a all how many the whole fog's sweep does.
+uint64_t expectBandLikeOpenVdb(const openvdb::Int32Grid& mass, double voxelSize, uint64_t& all)
+{
+    const float background = float(3 * voxelSize);
+    auto expected = openvdb::tools::fogToSdf(*fogOf(mass, voxelSize), 0.5f);
+    io_internal::clipToNarrowBand(*expected, background);
+    auto density = io_internal::densityGrid(mass, 1000, voxelSize);
+    uint64_t swept = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        auto got = io_internal::surfaceLevelSet(*density, 0.5);
+        expectSameBits(*expected, *got);
+        EXPECT_EQ(got->tree().activeVoxelCount(), expected->tree().activeVoxelCount()) << threads;
+        io_internal::narrowBandSdfFromFog(fogOf(mass, voxelSize), 0.5f, background, &swept);
+    }
+    io_internal::narrowBandSdfFromFog(fogOf(mass, voxelSize), 0.5f, 0.f, &all); // band 0: everything
+    return swept;
+}
+
 } // namespace
+
+TEST_F(SurfaceSweepTest, NarrowBandSweepsOnlyNearTheSurfaceAndMatchesTheWholeSweep)
+{
+    // A ball of radius 14 (full cells inside, a graded shell): its centre lies 14 voxels deep, past
+    // the band's reach, so the band's sweep leaves the inside out and must still agree.
+    auto ball = openvdb::Int32Grid::create(0);
+    for (int x = -16; x <= 16; ++x)
+        for (int y = -16; y <= 16; ++y)
+            for (int z = -16; z <= 16; ++z) {
+                const double r = std::sqrt(double(x * x + y * y + z * z));
+                if (r <= 14.5)
+                    ball->tree().setValue(Coord(x, y, z), r <= 13.5 ? 1000 : int32_t(1000 * (14.5 - r)));
+            }
+    for (double voxelSize : {1.0, 0.25, 7.5}) {
+        uint64_t all = 0;
+        const uint64_t swept = expectBandLikeOpenVdb(*ball, voxelSize, all);
+        EXPECT_GT(swept, 0u) << voxelSize;
+        EXPECT_LT(swept, all * 9 / 10) << voxelSize; // the inside beyond the band is not swept
+    }
+
+    // A box of clay pressed on top (uneven densities over a full core), across leaf boundaries.
+    vdbclay_test::Rng rng(7);
+    auto pressed = openvdb::Int32Grid::create(0);
+    for (int x = -13; x <= 20; ++x)
+        for (int y = 0; y <= 27; ++y)
+            for (int z = -5; z <= 26; ++z)
+                pressed->tree().setValue(Coord(x, y, z), y < 22 ? 1000 : rng.range(1, 1000));
+    uint64_t all = 0;
+    EXPECT_LT(expectBandLikeOpenVdb(*pressed, 1.0, all), all);
+
+    // Clay thinner than the band (a slab one voxel thick, random sparse clay): nothing reaches the
+    // band on the inside, so the whole fog is swept, as fogToSdf does.
+    auto slab = openvdb::Int32Grid::create(0);
+    slab->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(19, 19, 0)), 1000, true);
+    slab->tree().voxelizeActiveTiles();
+    EXPECT_EQ(expectBandLikeOpenVdb(*slab, 1.0, all), all);
+    auto sparse = openvdb::Int32Grid::create(0);
+    for (int i = 0; i < 6000; ++i)
+        sparse->tree().setValue(Coord(rng.range(-14, 14), rng.range(-10, 20), rng.range(-14, 14)),
+                                rng.range(1, 1000));
+    expectBandLikeOpenVdb(*sparse, 1.0, all);
+}
 
 TEST_F(SurfaceSweepTest, BallOfClayMatchesOpenVdbBitForBit)
 {

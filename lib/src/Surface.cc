@@ -85,29 +85,36 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         // new voxels hold 0, outside), then the fast sweeping method solves the eikonal equation
         // from the isosurface over those voxels. The cost follows the clay's voxels, not the span
         // of its bounding box (far-apart lumps cost what each lump costs).
+        // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromFog:
+        // the same band as sweeping the whole fog, bit for bit).
         openvdb::FloatGrid::Ptr fog = density.deepCopy();
         openvdb::tools::dilateActiveValues(fog->tree(), kHalfWidth + 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                            openvdb::tools::IGNORE_TILES);
-        surface = fogToSdfByLeaves(*fog, float(isovalue));
-        // A narrow band: values beyond the half width become inactive, signed background values.
-        openvdb::tree::LeafManager<openvdb::FloatTree> leaves(surface->tree());
-        leaves.foreach ([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
-            for (auto v = leaf.beginValueOn(); v; ++v) {
-                if (*v >= background) {
-                    v.setValueOff();
-                    v.setValue(background);
-                } else if (*v <= -background) {
-                    v.setValueOff();
-                    v.setValue(-background);
-                }
-            }
-        });
-        openvdb::tools::changeLevelSetBackground(surface->tree(), background);
-        openvdb::tools::pruneLevelSet(surface->tree());
+        surface = narrowBandSdfFromFog(fog, float(isovalue), background);
+        clipToNarrowBand(*surface, background);
     }
     surface->setName("surface");
     surface->setGridClass(openvdb::GRID_LEVEL_SET);
     return surface;
+}
+
+void clipToNarrowBand(openvdb::FloatGrid& sdf, float background)
+{
+    // Values beyond the half width become inactive, signed background values.
+    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(sdf.tree());
+    leaves.foreach ([background](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+        for (auto v = leaf.beginValueOn(); v; ++v) {
+            if (*v >= background) {
+                v.setValueOff();
+                v.setValue(background);
+            } else if (*v <= -background) {
+                v.setValueOff();
+                v.setValue(-background);
+            }
+        }
+    });
+    openvdb::tools::changeLevelSetBackground(sdf.tree(), background);
+    openvdb::tools::pruneLevelSet(sdf.tree());
 }
 
 SurfaceMesh surfaceMesh(const openvdb::FloatGrid& density, double isovalue)

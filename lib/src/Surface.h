@@ -8,6 +8,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
 #include <vector>
 
 namespace vdbclay {
@@ -34,6 +35,21 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
 /// flat neighbour table and in parallel over each sweep's leaf diagonals (SurfaceSweep.cc); the same
 /// result on any thread count. A fog holding tiles goes to OpenVDB's fogToSdf itself.
 openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue);
+
+/// fogToSdfByLeaves where it matters for a narrow band of half width @a band (world units): every
+/// voxel whose fogToSdf value v has |v| < band gets v bit for bit; every other voxel a value of the
+/// same sign and magnitude band or more. Sweeps only the voxels within reach of the band (see
+/// SurfaceSweep.cc), so a lump's deep inside costs nothing. Takes @a fog and returns it, swept in
+/// place; @a swept, if given, receives the number of voxels each sweep updated (the whole fog's
+/// sweepable voxels when the band could not be told apart; 0 if no sweep ran). A fog holding tiles
+/// goes to OpenVDB's fogToSdf.
+openvdb::FloatGrid::Ptr narrowBandSdfFromFog(openvdb::FloatGrid::Ptr fog, float isoValue, float band,
+                                             uint64_t* swept = nullptr);
+
+/// The narrow band of @a sdf, in place: values at or beyond +-@a background become inactive and
+/// exactly +-background, the background +background, inactive values +-background by their sign,
+/// then pruned (what surfaceLevelSet returns, less name and class).
+void clipToNarrowBand(openvdb::FloatGrid& sdf, float background);
 
 /// The surface of @a density at @a isovalue as polygons in index space (the density's voxel
 /// centres at integer points), oriented outwards.

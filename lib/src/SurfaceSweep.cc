@@ -23,6 +23,21 @@
 // Results do not depend on the thread count (each voxel's update reads only values fixed by the
 // order above). A fog with tiles (not what densityGrid builds: it voxelizes the automaton's clay,
 // but a file may carry tiles) goes to OpenVDB's own fogToSdf.
+//
+// The narrow band (narrowBandSdfFromFog, what surfaceLevelSet keeps: |value| < band). A voxel's
+// update that yields u < band reads only neighbours holding less than u, and compares u with the
+// others (u <= d2, u <= d3), which hold as long as those are at least band: the Godunov update's
+// three cases all give u > every neighbour they use (1: d1 + h; 2: u > d2 is tested; 3: taken only
+// when the 2-case u > d3, and then its root exceeds d3). So, update by update in the same order,
+// the values below band are the same whichever voxels holding band or more are swept. And each
+// such update adds at least h / sqrt(3) to its smallest neighbour (u - d1 >= h, h / sqrt 2, h / sqrt 3
+// in the three cases), so a value below band lies within ceil(band sqrt(3) / h) face steps of a
+// voxel next to the isosurface: the sweeps there (one step more for rounding) give every value
+// below band bit for bit, and the voxels deeper inside or further out (most of a large lump) are
+// not swept. Those keep +-FLT_MAX, which the finalisation turns into the extreme finite values: of
+// band or more whenever some swept value is (checked; otherwise, clay thinner than the band, the
+// whole fog is swept), as in the full sweep. tests/TestOutputStages.cc checks the band against
+// OpenVDB's fogToSdf, clipped alike, bit for bit.
 #include "Surface.h"
 
 #include <openvdb/math/Math.h>
@@ -109,6 +124,7 @@ inline float initValue(float value, const float nb[6], float isoValue, float h, 
 struct SweepLeaf {
     std::array<float, LeafT::SIZE> values;
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
+    LeafT::NodeMaskType boundary;     // active and next to the isosurface
     std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
     Coord key;                        // origin / 8
 };
@@ -148,6 +164,31 @@ inline void updateVoxel(float& value, float n0, float n1, float n2, float n3, fl
         update = float(1.0 / 3.0) * (d123 + std::sqrt(D));
         if (update < absV) value = sign * update;
     }
+}
+
+/// Leaf @a li's voxels of @a masks grown by one face step, within the leaf and from its face
+/// neighbours @a nb (-x, +x, -y, +y, -z, +z; -1: none). A word of a leaf mask is one x, its bit
+/// y * 8 + z.
+LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
+                                const std::array<int64_t, 6>& nb, size_t li)
+{
+    constexpr uint64_t kZ0 = 0x0101010101010101ull, kZ7 = kZ0 << 7; // the bits with z = 0, z = 7
+    auto word = [&masks](int64_t leaf, int x) -> uint64_t {
+        return leaf >= 0 ? masks[size_t(leaf)].template getWord<uint64_t>(Index(x)) : 0;
+    };
+    LeafT::NodeMaskType out;
+    for (int x = 0; x < kDim; ++x) {
+        const uint64_t m = word(int64_t(li), x);
+        uint64_t d = m | ((m << 1) & ~kZ0) | ((m >> 1) & ~kZ7) | (m << 8) | (m >> 8);
+        d |= x > 0 ? word(int64_t(li), x - 1) : word(nb[0], kDim - 1);
+        d |= x < kDim - 1 ? word(int64_t(li), x + 1) : word(nb[1], 0);
+        d |= word(nb[2], x) >> 56;        // -y neighbour's y = 7 row into y = 0
+        d |= word(nb[3], x) << 56;        // +y neighbour's y = 0 row into y = 7
+        d |= (word(nb[4], x) >> 7) & kZ0; // -z neighbour's z = 7 into z = 0
+        d |= (word(nb[5], x) << 7) & kZ7; // +z neighbour's z = 0 into z = 7
+        out.template getWord<uint64_t>(Index(x)) = d;
+    }
+    return out;
 }
 
 /// One sweep with signs (sx, sy, sz) over every leaf, in the order described at the top.
@@ -194,18 +235,16 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
     }
 }
 
-} // namespace
-
-openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue)
+/// The fast sweeping method over @a tree (a fog without tiles; its values are read, then replaced by
+/// the distances). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
+/// the voxels within reach of the band (top of the file), or everything where that cannot be told
+/// apart (returns after sweeping all when the band's sweep left no value of band or more).
+/// Returns the number of voxels the sweeps updated (each once per sweep), 0 if no sweep ran.
+uint64_t sweepFogTree(FloatTree& tree, float isoValue, float h, float band)
 {
-    if (hasTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
-
-    openvdb::FloatGrid::Ptr sdf = fog.deepCopy();
-    FloatTree& tree = sdf->tree();
     openvdb::tree::LeafManager<FloatTree> manager(tree);
     const size_t n = manager.leafCount();
     std::vector<SweepLeaf> leaves(n);
-    const float h = float(fog.voxelSize()[0]);
 
     // Leaf keys and the neighbour table (leaf origins -> index through a sorted list).
     std::vector<std::pair<Coord, size_t>> byOrigin(n);
@@ -220,9 +259,11 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
         return it != byOrigin.end() && it->first == key ? int64_t(it->second) : int64_t(-1);
     };
 
-    // Initialisation, leaf by leaf in parallel (each task writes its own leaves only).
+    // Initialisation, leaf by leaf in parallel (each task writes its own leaves only; the tree's
+    // values are read only, until the end). A face neighbour in this leaf or a neighbouring one is
+    // read from its buffer; one in a missing leaf through an accessor (the tree's tile or background).
     std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
-    const FloatTree& fogTree = fog.tree();
+    const FloatTree& fogTree = tree;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         openvdb::tree::ValueAccessor<const FloatTree> acc(fogTree);
         uint64_t boundary = 0, sweeping = 0;
@@ -231,23 +272,39 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
             const Coord key = out.key;
             const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
                                    Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
-            for (int d = 0; d < 6; ++d)
+            const float* nbData[6];
+            for (int d = 0; d < 6; ++d) {
                 out.neighbour[d] = find(key + dirs[d]);
-            const LeafT* in = fogTree.probeConstLeaf(manager.leaf(li).origin());
+                nbData[d] =
+                    out.neighbour[d] >= 0 ? manager.leaf(size_t(out.neighbour[d])).buffer().data() : nullptr;
+            }
+            const LeafT& in = manager.leaf(li);
+            const float* v = in.buffer().data();
             out.sweep.setOff();
+            out.boundary.setOff();
             for (Index i = 0; i < LeafT::SIZE; ++i) {
-                const float value = in->getValue(i);
-                if (!in->isValueOn(i)) {
+                const float value = v[i];
+                if (!in.isValueOn(i)) {
                     out.values[i] = value > isoValue ? -kMax : kMax;
                     continue;
                 }
-                const Coord ijk = in->offsetToGlobalCoord(i);
+                const int x = int(i >> (2 * LeafT::LOG2DIM)), y = int((i >> LeafT::LOG2DIM) & (kDim - 1)),
+                          z = int(i & (kDim - 1));
+                // The neighbour across face d at offset j of leaf nbData[d], or through the accessor.
+                auto across = [&](int d, Index j) {
+                    return nbData[d] ? nbData[d][j] : acc.getValue(in.offsetToGlobalCoord(i) + dirs[d]);
+                };
                 float nb[6];
-                for (int d = 0; d < 6; ++d)
-                    nb[d] = acc.getValue(ijk + dirs[d]);
+                nb[0] = x > 0 ? v[i - kDim * kDim] : across(0, offsetOf(kDim - 1, y, z));
+                nb[1] = x < kDim - 1 ? v[i + kDim * kDim] : across(1, offsetOf(0, y, z));
+                nb[2] = y > 0 ? v[i - kDim] : across(2, offsetOf(x, kDim - 1, z));
+                nb[3] = y < kDim - 1 ? v[i + kDim] : across(3, offsetOf(x, 0, z));
+                nb[4] = z > 0 ? v[i - 1] : across(4, offsetOf(x, y, kDim - 1));
+                nb[5] = z < kDim - 1 ? v[i + 1] : across(5, offsetOf(x, y, 0));
                 bool isBoundary = false;
                 out.values[i] = initValue(value, nb, isoValue, -h, isBoundary);
                 if (isBoundary) {
+                    out.boundary.setOn(i);
                     ++boundary;
                 } else {
                     out.sweep.setOn(i);
@@ -261,7 +318,30 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 
     // fogToSdf sweeps only when it found voxels to sweep and voxels to sweep from.
     float tileValue = kMax;
+    uint64_t swept = 0;
     if (boundaryCount.load() > 0 && sweepCount.load() > 0) {
+        if (band > 0) {
+            // Only the voxels within reach of the band: the boundary grown by that many face steps,
+            // a step at a time through the leaves' face neighbours (a value passes from voxel to
+            // voxel only through active ones, all in the fog's leaves).
+            const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h))) + 1;
+            std::vector<LeafT::NodeMaskType> reach(n), next(n);
+            for (size_t li = 0; li < n; ++li)
+                reach[li] = leaves[li].boundary;
+            for (int step = 0; step < steps; ++step) {
+                tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+                    for (size_t li = r.begin(); li != r.end(); ++li)
+                        next[li] = faceDilated(reach, leaves[li].neighbour, li);
+                });
+                reach.swap(next);
+            }
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t li = r.begin(); li != r.end(); ++li)
+                    leaves[li].sweep &= reach[li];
+            });
+        }
+        for (const SweepLeaf& leaf : leaves)
+            swept += leaf.sweep.countOn();
         // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
         const float sqrt2h = openvdb::math::Sqrt(2.f) * h;
         const int signs[4][3] = {{1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}};
@@ -302,6 +382,9 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
                 a.hi = std::max(a.hi, b.hi);
                 return a;
             });
+        // The unswept voxels must end beyond the band on their side, as in the full sweep: not
+        // so when no swept value reached the band (clay thinner than it): sweep everything.
+        if (band > 0 && !(e.lo <= -band && e.hi >= band)) return sweepFogTree(tree, isoValue, h, 0.f);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t li = r.begin(); li != r.end(); ++li) {
                 for (float& v : leaves[li].values) {
@@ -323,7 +406,26 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
     for (; it; ++it)
         it.setValue(tileValue);
     tree.root().setBackground(tileValue, /*updateChildNodes=*/false);
+    return swept;
+}
+
+} // namespace
+
+openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue)
+{
+    if (hasTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
+    openvdb::FloatGrid::Ptr sdf = fog.deepCopy();
+    sweepFogTree(sdf->tree(), isoValue, float(fog.voxelSize()[0]), 0.f);
     return sdf;
+}
+
+openvdb::FloatGrid::Ptr narrowBandSdfFromFog(openvdb::FloatGrid::Ptr fog, float isoValue, float band,
+                                             uint64_t* swept)
+{
+    if (hasTiles(fog->tree())) return openvdb::tools::fogToSdf(*fog, isoValue);
+    const uint64_t count = sweepFogTree(fog->tree(), isoValue, float(fog->voxelSize()[0]), band);
+    if (swept) *swept = count;
+    return fog;
 }
 
 } // namespace io_internal
