@@ -149,6 +149,53 @@ TEST_F(SurfaceSweepTest, NarrowBandSweepsOnlyNearTheSurfaceAndMatchesTheWholeSwe
     expectBandLikeOpenVdb(*sparse, 1.0, all);
 }
 
+TEST_F(SurfaceSweepTest, SurfaceFogIsOpenVdbsDilationBitForBit)
+{
+    // Clay of every kind (a ball, far lumps, a slab, random scattered cells with holes, across leaf
+    // boundaries and negative coordinates), grown by every radius the flat masks handle.
+    std::vector<openvdb::Int32Grid::Ptr> clays;
+    auto ball = openvdb::Int32Grid::create(0);
+    for (int x = -12; x <= 12; ++x)
+        for (int y = -12; y <= 12; ++y)
+            for (int z = -12; z <= 12; ++z)
+                if (x * x + y * y + z * z <= 110) ball->tree().setValue(Coord(x, y, z), 900);
+    clays.push_back(ball);
+    auto lumps = openvdb::Int32Grid::create(0);
+    for (int x = 0; x < 3; ++x)
+        for (int y = 0; y < 3; ++y)
+            for (int z = 0; z < 3; ++z) {
+                lumps->tree().setValue(Coord(x + 6, y - 1, z + 7), 1000);
+                lumps->tree().setValue(Coord(1000000 + x, y - 9, z - 17), 300);
+            }
+    clays.push_back(lumps);
+    auto slab = openvdb::Int32Grid::create(0);
+    slab->tree().fill(openvdb::CoordBBox(Coord(-9, 3, -9), Coord(19, 3, 12)), 1000, true);
+    slab->tree().voxelizeActiveTiles();
+    clays.push_back(slab);
+    vdbclay_test::Rng rng(11);
+    auto scattered = openvdb::Int32Grid::create(0);
+    for (int i = 0; i < 400; ++i)
+        scattered->tree().setValue(Coord(rng.range(-30, 30), rng.range(-30, 30), rng.range(-30, 30)),
+                                   rng.range(1, 1000));
+    clays.push_back(scattered);
+    for (size_t c = 0; c < clays.size(); ++c) {
+        auto density = io_internal::densityGrid(*clays[c], 1000, 0.5);
+        for (int radius = 1; radius <= 7; ++radius) {
+            auto expected = density->deepCopy();
+            openvdb::tools::dilateActiveValues(expected->tree(), radius, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                               openvdb::tools::IGNORE_TILES);
+            for (int threads : {1, 3}) {
+                tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+                auto got = io_internal::surfaceFog(*density, radius);
+                SCOPED_TRACE("clay " + std::to_string(c) + ", radius " + std::to_string(radius));
+                EXPECT_GT(expectSameBits(*expected, *got), 0u);
+                EXPECT_EQ(got->transform(), density->transform());
+                EXPECT_EQ(got->getName(), density->getName());
+            }
+        }
+    }
+}
+
 TEST_F(SurfaceSweepTest, BallOfClayMatchesOpenVdbBitForBit)
 {
     auto g = openvdb::Int32Grid::create(0);

@@ -3,7 +3,6 @@
 #include "vdbclay/Types.h"
 
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -87,10 +86,7 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         // of its bounding box (far-apart lumps cost what each lump costs).
         // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromFog:
         // the same band as sweeping the whole fog, bit for bit).
-        openvdb::FloatGrid::Ptr fog = density.deepCopy();
-        openvdb::tools::dilateActiveValues(fog->tree(), kHalfWidth + 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                           openvdb::tools::IGNORE_TILES);
-        surface = narrowBandSdfFromFog(fog, float(isovalue), background);
+        surface = narrowBandSdfFromFog(surfaceFog(density, kHalfWidth + 1), float(isovalue), background);
         clipToNarrowBand(*surface, background);
     }
     surface->setName("surface");
