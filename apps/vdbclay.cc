@@ -605,7 +605,10 @@ int runScene(const RunArgs& a)
     checkMeshName(outputs[3]);
     checkOutputs(outputs, inputs);
 
+    const auto setupStart = std::chrono::steady_clock::now();
     vdbclay::Sculptor sculptor(scene, a.threads);
+    const double setupSeconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - setupStart).count();
     if (!a.resume.empty()) checkResumeFits(scene, sculptor.startMeta(), a.resume);
     const bool tty = ::isatty(2) && !a.quiet;
     if (!a.quiet)
@@ -721,6 +724,7 @@ int runScene(const RunArgs& a)
         (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,
         s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
 
+    const auto outputStart = std::chrono::steady_clock::now();
     if (!outVdb.empty()) {
         vdbclay::writeClayFile(outVdb, *sculptor.mass(), sculptor.checkpointMeta());
         std::printf("wrote %s\n", outVdb.c_str());
@@ -733,6 +737,8 @@ int runScene(const RunArgs& a)
         vdbclay::writeSurfaceMesh(outMesh, *sculptor.mass(), scene.rule.threshold);
         std::printf("wrote %s\n", outMesh.c_str());
     }
+    const double outputSeconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - outputStart).count();
     if (!outStats.empty()) {
         nlohmann::json j;
         j["scene"] = scene.source;
@@ -743,6 +749,8 @@ int runScene(const RunArgs& a)
         j["steps"] = s.steps;
         j["seconds"] = s.seconds;
         j["push_seconds"] = s.pushSeconds;
+        j["setup_seconds"] = setupSeconds;   // the scene's clay, obstacles and tools into grids
+        j["output_seconds"] = outputSeconds; // the .vdb, picture and mesh (not this file)
         j["push"] = vdbclay::pushModeName(scene.push);
         j["sweep"] = scene.sweep;
         j["transport"] = vdbclay::transportName(scene.transport);

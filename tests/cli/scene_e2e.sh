@@ -14,6 +14,10 @@ grep -q '"settled": true' "$out.json" || { echo "FAIL $name: not settled"; cat "
 [ "$unsettled" = 0 ] || { echo "FAIL $name: $unsettled frames hit the step budget"; exit 1; }
 [ "$(num mass_drift)" = 0 ] && grep -q '"heterogeneity_cv": ' "$out.json" && grep -q '"compaction": ' "$out.json" \
   || { echo "FAIL $name: stats lack mass_drift 0, heterogeneity_cv or compaction"; cat "$out.json"; exit 1; }
+# The command's stages outside the run: set-up and the outputs, in seconds (values not checked).
+for k in seconds push_seconds setup_seconds output_seconds; do
+  grep -q "^  \"$k\": [0-9]" "$out.json" || { echo "FAIL $name: stats lack $k"; cat "$out.json"; exit 1; }
+done
 [ "$(head -c 8 "$out.png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || { echo "FAIL $name: not a PNG"; exit 1; }
 grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
 "$bin" info "$out.vdb" > "$out.info"
