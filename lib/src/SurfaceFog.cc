@@ -74,7 +74,7 @@ MaskT grownAlong(const std::vector<MaskT>& in, size_t li, int64_t lo, int64_t hi
             const uint64_t m = d, mlo = word(in, lo, x), mhi = word(in, hi, x);
             for (int k = 1; k <= r; ++k) {
                 d |= ((m << k) & ~lowBits(k)) | ((m >> k) & lowBits(kDim - k));
-                d |= (mlo >> (kDim - k)) & lowBits(k);  // z' >= 8 - k of the -z leaf, into z < k
+                d |= (mlo >> (kDim - k)) & lowBits(k);         // z' >= 8 - k of the -z leaf, into z < k
                 d |= (mhi << (kDim - k)) & ~lowBits(kDim - k); // z' < k of the +z leaf, into z >= 8 - k
             }
         }
@@ -146,8 +146,8 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
     for (int axis = 0; axis < 3; ++axis) {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i != r.end(); ++i)
-                next[i] = grownAlong(masks, i, neighbour[i][size_t(2 * axis)], neighbour[i][size_t(2 * axis + 1)],
-                                     axis, radius);
+                next[i] = grownAlong(masks, i, neighbour[i][size_t(2 * axis)],
+                                     neighbour[i][size_t(2 * axis + 1)], axis, radius);
         });
         masks.swap(next);
     }
