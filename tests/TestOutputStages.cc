@@ -99,9 +99,9 @@ uint64_t expectBandLikeOpenVdb(const openvdb::Int32Grid& mass, double voxelSize,
         auto got = io_internal::surfaceLevelSet(*density, 0.5);
         expectSameBits(*expected, *got);
         EXPECT_EQ(got->tree().activeVoxelCount(), expected->tree().activeVoxelCount()) << threads;
-        io_internal::narrowBandSdfFromFog(fogOf(mass, voxelSize), 0.5f, background, &swept);
+        io_internal::narrowBandSdfFromDensity(*density, 4, 0.5f, background, &swept);
     }
-    io_internal::narrowBandSdfFromFog(fogOf(mass, voxelSize), 0.5f, 0.f, &all); // band 0: everything
+    io_internal::narrowBandSdfFromDensity(*density, 4, 0.5f, 0.f, &all); // band 0: everything
     return swept;
 }
 

@@ -86,7 +86,7 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         // of its bounding box (far-apart lumps cost what each lump costs).
         // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromFog:
         // the same band as sweeping the whole fog, bit for bit).
-        surface = narrowBandSdfFromFog(surfaceFog(density, kHalfWidth + 1), float(isovalue), background);
+        surface = narrowBandSdfFromDensity(density, kHalfWidth + 1, float(isovalue), background);
         clipToNarrowBand(*surface, background);
     }
     surface->setName("surface");

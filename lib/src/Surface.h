@@ -31,6 +31,18 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
 /// follows the clay's voxels. Empty (no active voxels) if no cell exceeds the isovalue.
 openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue);
 
+/// The leaves of a density grown by a box of @a radius voxels (SurfaceFog.cc): each leaf's origin,
+/// grown active mask, and the density's leaf there (null for a new leaf, all background).
+struct GrownLeaves {
+    std::vector<openvdb::Coord> origins;
+    std::vector<openvdb::FloatTree::LeafNodeType::NodeMaskType> masks;
+    std::vector<const openvdb::FloatTree::LeafNodeType*> source;
+};
+/// Whether growByBox can grow @a density: no tiles, and 0 < radius < 8.
+bool boxGrowable(const openvdb::FloatGrid& density, int radius);
+/// The leaves surfaceFog(density, radius) has, without building them (requires boxGrowable).
+GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius);
+
 /// A deep copy of @a density with its active voxels grown by @a radius voxels in every direction
 /// (a box: radius iterations of the 26-neighbour dilation), bit for bit what deepCopy() and
 /// openvdb::tools::dilateActiveValues(NN_FACE_EDGE_VERTEX, IGNORE_TILES) give, by three passes over
@@ -43,15 +55,15 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
 /// result on any thread count. A fog holding tiles goes to OpenVDB's fogToSdf itself.
 openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue);
 
-/// fogToSdfByLeaves where it matters for a narrow band of half width @a band (world units): every
-/// voxel whose fogToSdf value v has |v| < band gets v bit for bit; every other voxel a value of the
-/// same sign and magnitude band or more. Sweeps only the voxels within reach of the band (see
-/// SurfaceSweep.cc), so a lump's deep inside costs nothing. Takes @a fog and returns it, swept in
-/// place; @a swept, if given, receives the number of voxels each sweep updated (the whole fog's
-/// sweepable voxels when the band could not be told apart; 0 if no sweep ran). A fog holding tiles
-/// goes to OpenVDB's fogToSdf.
-openvdb::FloatGrid::Ptr narrowBandSdfFromFog(openvdb::FloatGrid::Ptr fog, float isoValue, float band,
-                                             uint64_t* swept = nullptr);
+/// fogToSdfByLeaves(surfaceFog(density, radius), isoValue) where it matters for a narrow band of
+/// half width @a band (world units): every voxel whose value v there has |v| < band gets v bit for
+/// bit; every other voxel a value of the same sign and magnitude band or more. Sweeps only the
+/// voxels within reach of the band (see SurfaceSweep.cc), so a lump's deep inside costs nothing, and
+/// builds the fog's leaves without copying the density's values into them. @a swept, if given,
+/// receives the number of voxels each sweep updated (the whole fog's sweepable voxels when the band
+/// could not be told apart; 0 if no sweep ran). A fog holding tiles goes to OpenVDB's fogToSdf.
+openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
+                                                 float isoValue, float band, uint64_t* swept = nullptr);
 
 /// The narrow band of @a sdf, in place: values at or beyond +-@a background become inactive and
 /// exactly +-background, the background +background, inactive values +-background by their sign,

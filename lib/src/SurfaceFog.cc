@@ -95,31 +95,28 @@ bool hasTiles(const FloatTree& tree)
 
 } // namespace
 
-openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius)
+bool boxGrowable(const openvdb::FloatGrid& density, int radius)
 {
-    if (radius <= 0 || radius >= kDim || hasTiles(density.tree())) {
-        openvdb::FloatGrid::Ptr fog = density.deepCopy();
-        if (radius > 0)
-            openvdb::tools::dilateActiveValues(fog->tree(), radius, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                               openvdb::tools::IGNORE_TILES);
-        return fog;
-    }
+    return radius > 0 && radius < kDim && !hasTiles(density.tree());
+}
+
+GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
+{
+    GrownLeaves g;
     // The density's leaves, then every leaf next to one (the box reaches no further).
-    std::vector<const LeafT*> source;
-    source.reserve(density.tree().leafCount());
     for (auto it = density.tree().cbeginLeaf(); it; ++it)
-        source.push_back(&*it);
-    std::vector<Coord> keys;
+        g.source.push_back(&*it);
+    std::vector<Coord>& keys = g.origins; // leaf keys (origin / 8) until the end
     std::unordered_map<Coord, uint32_t, CoordHash> index;
-    index.reserve(source.size() * 2);
+    index.reserve(g.source.size() * 2);
     auto add = [&](const Coord& key) {
         if (index.emplace(key, uint32_t(keys.size())).second) keys.push_back(key);
     };
-    for (const LeafT* leaf : source)
+    for (const LeafT* leaf : g.source)
         add(leaf->origin() >> 3);
     const size_t n0 = keys.size();
     for (size_t i = 0; i < n0; ++i) {
-        if (source[i]->isEmpty()) continue; // no active voxel: grows nothing
+        if (g.source[i]->isEmpty()) continue; // no active voxel: grows nothing
         const Coord k = keys[i];
         for (int dx = -1; dx <= 1; ++dx)
             for (int dy = -1; dy <= 1; ++dy)
@@ -127,6 +124,7 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
                     add(k.offsetBy(dx, dy, dz));
     }
     const size_t n = keys.size();
+    g.source.resize(n, nullptr);
     std::vector<std::array<int64_t, 6>> neighbour(n); // -x, +x, -y, +y, -z, +z
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -140,9 +138,11 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
     });
 
     // The box, an axis at a time.
-    std::vector<MaskT> masks(n), next(n);
+    std::vector<MaskT>& masks = g.masks;
+    masks.resize(n);
+    std::vector<MaskT> next(n);
     for (size_t i = 0; i < n0; ++i)
-        masks[i] = source[i]->getValueMask();
+        masks[i] = g.source[i]->getValueMask();
     for (int axis = 0; axis < 3; ++axis) {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i != r.end(); ++i)
@@ -152,25 +152,45 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
         masks.swap(next);
     }
 
-    // The fog: the density's leaves (values kept) and the new leaves holding a grown voxel (the
-    // background elsewhere), each with its grown mask.
+    // Kept: the density's leaves and the new ones holding a grown voxel.
+    size_t kept = 0;
+    for (size_t i = 0; i < n; ++i) {
+        if (i >= n0 && masks[i].isOff()) continue;
+        g.origins[kept] = keys[i] << 3;
+        g.masks[kept] = masks[i];
+        g.source[kept] = g.source[i];
+        ++kept;
+    }
+    g.origins.resize(kept);
+    g.masks.resize(kept);
+    g.source.resize(kept);
+    return g;
+}
+
+openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius)
+{
+    if (!boxGrowable(density, radius)) {
+        openvdb::FloatGrid::Ptr fog = density.deepCopy();
+        if (radius > 0)
+            openvdb::tools::dilateActiveValues(fog->tree(), radius, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                               openvdb::tools::IGNORE_TILES);
+        return fog;
+    }
+    const GrownLeaves g = growByBox(density, radius);
+    // The fog: the density's leaves (values kept) and the new leaves (the background), each with its
+    // grown mask.
+    const size_t n = g.origins.size();
     std::vector<LeafT*> made(n, nullptr);
     const float background = density.tree().background();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
-            if (i < n0) {
-                made[i] = new LeafT(*source[i]);
-            } else if (!masks[i].isOff()) {
-                made[i] = new LeafT(keys[i] << 3, background, false);
-            } else {
-                continue;
-            }
-            made[i]->setValueMask(masks[i]);
+            made[i] = g.source[i] ? new LeafT(*g.source[i]) : new LeafT(g.origins[i], background, false);
+            made[i]->setValueMask(g.masks[i]);
         }
     });
     auto tree = std::make_shared<FloatTree>(background);
     for (LeafT* leaf : made)
-        if (leaf) tree->addLeaf(leaf);
+        tree->addLeaf(leaf);
     openvdb::FloatGrid::Ptr fog = density.copyWithNewTree();
     fog->setTree(tree);
     return fog;

@@ -120,9 +120,10 @@ inline float initValue(float value, const float nb[6], float isoValue, float h, 
     return isAbove ? h / openvdb::math::Sqrt(sum) : -h / openvdb::math::Sqrt(sum);
 }
 
-/// One leaf's state for the sweeps: its values, the voxels the sweeps update, its face neighbours.
+/// One leaf's state for the sweeps: its values (the output leaf's buffer), the voxels the sweeps
+/// update, its face neighbours.
 struct SweepLeaf {
-    std::array<float, LeafT::SIZE> values;
+    float* values;
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
     LeafT::NodeMaskType boundary;     // active and next to the isosurface
     std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
@@ -205,15 +206,18 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                 for (size_t k = r.begin(); k != r.end(); ++k) {
                     SweepLeaf& leaf = leaves[order[k].second];
                     if (leaf.sweep.isOff()) continue;
-                    float* v = leaf.values.data();
+                    float* v = leaf.values;
                     const float* nb[6]; // -x, +x, -y, +y, -z, +z (null: no leaf)
                     for (int f = 0; f < 6; ++f)
-                        nb[f] = leaf.neighbour[f] >= 0 ? leaves[leaf.neighbour[f]].values.data() : nullptr;
+                        nb[f] = leaf.neighbour[f] >= 0 ? leaves[leaf.neighbour[f]].values : nullptr;
                     auto at = [](const float* b, Index i) { return b ? b[i] : kMax; };
                     for (int a = 0; a < kDim; ++a) {
                         const int x = sx > 0 ? a : kDim - 1 - a;
+                        const uint64_t word = leaf.sweep.template getWord<uint64_t>(Index(x));
+                        if (!word) continue; // no voxel of this x to update (the order of the others holds)
                         for (int b = 0; b < kDim; ++b) {
                             const int y = sy > 0 ? b : kDim - 1 - b;
+                            if (!((word >> (kDim * y)) & 0xFFu)) continue;
                             for (int c = 0; c < kDim; ++c) {
                                 const int z = sz > 0 ? c : kDim - 1 - c;
                                 const Index i = offsetOf(x, y, z);
@@ -235,16 +239,28 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
     }
 }
 
-/// The fast sweeping method over @a tree (a fog without tiles; its values are read, then replaced by
-/// the distances). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
+/// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
+/// values become the distances; the fog's values are read from @a source (a tree without tiles
+/// holding them: the fog itself, or the density it was grown from, whose missing leaves read as its
+/// background). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
 /// the voxels within reach of the band (top of the file), or everything where that cannot be told
 /// apart (returns after sweeping all when the band's sweep left no value of band or more).
 /// Returns the number of voxels the sweeps updated (each once per sweep), 0 if no sweep ran.
-uint64_t sweepFogTree(FloatTree& tree, float isoValue, float h, float band)
+uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, float h, float band)
 {
     openvdb::tree::LeafManager<FloatTree> manager(tree);
     const size_t n = manager.leafCount();
     std::vector<SweepLeaf> leaves(n);
+    std::vector<const float*> input(n); // each leaf's fog values: its source leaf's, or the background
+    std::array<float, LeafT::SIZE> background;
+    background.fill(source.background());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            leaves[i].values = manager.leaf(i).buffer().data();
+            const LeafT* in = source.probeConstLeaf(manager.leaf(i).origin());
+            input[i] = in ? in->buffer().data() : background.data();
+        }
+    });
 
     // Leaf keys and the neighbour table (leaf origins -> index through a sorted list).
     std::vector<std::pair<Coord, size_t>> byOrigin(n);
@@ -259,13 +275,12 @@ uint64_t sweepFogTree(FloatTree& tree, float isoValue, float h, float band)
         return it != byOrigin.end() && it->first == key ? int64_t(it->second) : int64_t(-1);
     };
 
-    // Initialisation, leaf by leaf in parallel (each task writes its own leaves only; the tree's
-    // values are read only, until the end). A face neighbour in this leaf or a neighbouring one is
-    // read from its buffer; one in a missing leaf through an accessor (the tree's tile or background).
+    // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
+    // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
+    // from its input; one in a missing leaf through an accessor (the source's tile or background).
     std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
-    const FloatTree& fogTree = tree;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-        openvdb::tree::ValueAccessor<const FloatTree> acc(fogTree);
+        openvdb::tree::ValueAccessor<const FloatTree> acc(source);
         uint64_t boundary = 0, sweeping = 0;
         for (size_t li = r.begin(); li != r.end(); ++li) {
             SweepLeaf& out = leaves[li];
@@ -275,11 +290,10 @@ uint64_t sweepFogTree(FloatTree& tree, float isoValue, float h, float band)
             const float* nbData[6];
             for (int d = 0; d < 6; ++d) {
                 out.neighbour[d] = find(key + dirs[d]);
-                nbData[d] =
-                    out.neighbour[d] >= 0 ? manager.leaf(size_t(out.neighbour[d])).buffer().data() : nullptr;
+                nbData[d] = out.neighbour[d] >= 0 ? input[size_t(out.neighbour[d])] : nullptr;
             }
             const LeafT& in = manager.leaf(li);
-            const float* v = in.buffer().data();
+            const float* v = input[li];
             out.sweep.setOff();
             out.boundary.setOff();
             for (Index i = 0; i < LeafT::SIZE; ++i) {
@@ -384,23 +398,19 @@ uint64_t sweepFogTree(FloatTree& tree, float isoValue, float h, float band)
             });
         // The unswept voxels must end beyond the band on their side, as in the full sweep: not
         // so when no swept value reached the band (clay thinner than it): sweep everything.
-        if (band > 0 && !(e.lo <= -band && e.hi >= band)) return sweepFogTree(tree, isoValue, h, 0.f);
+        if (band > 0 && !(e.lo <= -band && e.hi >= band)) return sweepFogTree(tree, source, isoValue, h, 0.f);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t li = r.begin(); li != r.end(); ++li) {
-                for (float& v : leaves[li].values) {
-                    if (v == -kMax) v = e.lo;
-                    if (v == kMax) v = e.hi;
+                for (float* v = leaves[li].values; v != leaves[li].values + LeafT::SIZE; ++v) {
+                    if (*v == -kMax) *v = e.lo;
+                    if (*v == kMax) *v = e.hi;
                 }
             }
         });
         tileValue = e.hi;
     }
-    // The values into the tree. Tiles (only the fog's background 0 here) are outside: +FLT_MAX after
-    // InitSdf, then the largest finite value if the sweeps ran (the root's background too).
-    manager.foreach ([&leaves](LeafT& leaf, size_t li) {
-        float* buffer = leaf.buffer().data();
-        std::copy(leaves[li].values.begin(), leaves[li].values.end(), buffer);
-    });
+    // Tiles (only the fog's background 0 here) are outside: +FLT_MAX after InitSdf, then the largest
+    // finite value if the sweeps ran (the root's background too).
     auto it = tree.beginValueAll();
     it.setMaxDepth(it.getLeafDepth() - 1);
     for (; it; ++it)
@@ -415,17 +425,42 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 {
     if (hasTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
     openvdb::FloatGrid::Ptr sdf = fog.deepCopy();
-    sweepFogTree(sdf->tree(), isoValue, float(fog.voxelSize()[0]), 0.f);
+    sweepFogTree(sdf->tree(), fog.tree(), isoValue, float(fog.voxelSize()[0]), 0.f);
     return sdf;
 }
 
-openvdb::FloatGrid::Ptr narrowBandSdfFromFog(openvdb::FloatGrid::Ptr fog, float isoValue, float band,
-                                             uint64_t* swept)
+openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
+                                                 float isoValue, float band, uint64_t* swept)
 {
-    if (hasTiles(fog->tree())) return openvdb::tools::fogToSdf(*fog, isoValue);
-    const uint64_t count = sweepFogTree(fog->tree(), isoValue, float(fog->voxelSize()[0]), band);
+    if (!boxGrowable(density, radius)) {
+        openvdb::FloatGrid::Ptr fog = surfaceFog(density, radius);
+        if (hasTiles(fog->tree())) return openvdb::tools::fogToSdf(*fog, isoValue);
+        openvdb::FloatGrid::Ptr sdf = fog->deepCopy();
+        const uint64_t count =
+            sweepFogTree(sdf->tree(), fog->tree(), isoValue, float(fog->voxelSize()[0]), band);
+        if (swept) *swept = count;
+        return sdf;
+    }
+    // The fog's leaves and active voxels, with room for the distances: no value is copied, the
+    // initialisation reads the fog's values from the density (the grown voxels hold its background).
+    const GrownLeaves g = growByBox(density, radius);
+    const size_t n = g.origins.size();
+    std::vector<LeafT*> made(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
+            made[i]->buffer().allocate();
+            made[i]->setValueMask(g.masks[i]);
+        }
+    });
+    auto tree = std::make_shared<FloatTree>(density.tree().background());
+    for (LeafT* leaf : made)
+        tree->addLeaf(leaf);
+    openvdb::FloatGrid::Ptr sdf = density.copyWithNewTree();
+    sdf->setTree(tree);
+    const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
     if (swept) *swept = count;
-    return fog;
+    return sdf;
 }
 
 } // namespace io_internal
