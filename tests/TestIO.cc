@@ -475,6 +475,20 @@ TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
     // Written back from what was read (a checkpoint of a resumed run): the same record.
     writeClayFile(path, *back.mass, back.meta);
     EXPECT_EQ(readGrid(path, "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(), 3001);
+    // A tile counts as its cells (an 8^3 tile of 4000 over leaves of at most 3001), and an inactive
+    // cell as any other.
+    const auto tiled = clay->deepCopy();
+    tiled->tree().addTile(1, Coord(64, 0, 0), 4000, true);
+    writeClayFile(file("tiled.vdb"), *tiled, sampleMeta());
+    EXPECT_EQ(
+        readGrid(file("tiled.vdb"), "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(),
+        4000);
+    const auto offCell = clay->deepCopy();
+    offCell->tree().setValueOff(Coord(3, 2, 1), 3500);
+    writeClayFile(file("off.vdb"), *offCell, sampleMeta());
+    EXPECT_EQ(
+        readGrid(file("off.vdb"), "mass")->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass")->value(),
+        3500);
     // Empty clay records 0.
     writeClayFile(file("empty.vdb"), *openvdb::Int32Grid::create(0), sampleMeta());
     EXPECT_EQ(

@@ -21,6 +21,9 @@
 #include <openvdb/io/io.h>
 #include <openvdb/openvdb.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -301,9 +304,27 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
         clayMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
     }
     clayMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
-    int32_t largest = 0; // every value, tiles included (the background is 0)
-    for (auto it = mass.tree().cbeginValueAll(); it; ++it)
-        largest = std::max(largest, *it);
+    // Every value, tiles included (the background is 0): the leaves' values in parallel, then the
+    // tiles above them.
+    std::vector<const MassGrid::TreeType::LeafNodeType*> massLeaves;
+    massLeaves.reserve(mass.tree().leafCount());
+    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
+        massLeaves.push_back(&*it);
+    int32_t largest = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, massLeaves.size()), int32_t(0),
+        [&massLeaves](const tbb::blocked_range<size_t>& r, int32_t m) {
+            for (size_t i = r.begin(); i != r.end(); ++i) {
+                const int32_t* v = massLeaves[i]->buffer().data();
+                for (openvdb::Index k = 0; k < MassGrid::TreeType::LeafNodeType::SIZE; ++k)
+                    m = std::max(m, v[k]);
+            }
+            return m;
+        },
+        [](int32_t a, int32_t b) { return std::max(a, b); });
+    auto tile = mass.tree().cbeginValueAll();
+    tile.setMaxDepth(tile.getLeafDepth() - 1);
+    for (; tile; ++tile)
+        largest = std::max(largest, *tile);
     clayMeta.insertMeta(kMetaMaxMass, openvdb::Int64Metadata(largest));
     clayMeta.insertMeta(kMetaVoxelSize, openvdb::DoubleMetadata(meta.voxelSize));
     clayMeta.insertMeta(kMetaVersion, openvdb::StringMetadata(VDBCLAY_VERSION));

@@ -87,7 +87,6 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromFog:
         // the same band as sweeping the whole fog, bit for bit).
         surface = narrowBandSdfFromDensity(density, kHalfWidth + 1, float(isovalue), background);
-        clipToNarrowBand(*surface, background);
     }
     surface->setName("surface");
     surface->setGridClass(openvdb::GRID_LEVEL_SET);

@@ -55,19 +55,21 @@ openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius
 /// result on any thread count. A fog holding tiles goes to OpenVDB's fogToSdf itself.
 openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue);
 
-/// fogToSdfByLeaves(surfaceFog(density, radius), isoValue) where it matters for a narrow band of
-/// half width @a band (world units): every voxel whose value v there has |v| < band gets v bit for
-/// bit; every other voxel a value of the same sign and magnitude band or more. Sweeps only the
-/// voxels within reach of the band (see SurfaceSweep.cc), so a lump's deep inside costs nothing, and
-/// builds the fog's leaves without copying the density's values into them. @a swept, if given,
-/// receives the number of voxels each sweep updated (the whole fog's sweepable voxels when the band
-/// could not be told apart; 0 if no sweep ran). A fog holding tiles goes to OpenVDB's fogToSdf.
+/// The narrow band of half width @a band (world units) of fogToSdf(surfaceFog(density, radius),
+/// isoValue), clipped and pruned: bit for bit what clipToNarrowBand gives from OpenVDB's fogToSdf.
+/// Sweeps only the voxels within reach of the band (see SurfaceSweep.cc), so a lump's deep inside
+/// costs nothing, builds the fog's leaves without copying the density's values into them, and clips
+/// in the same pass as the sweeps' finalisation. @a band 0: fogToSdfByLeaves(surfaceFog(...)),
+/// unclipped. @a swept, if given, receives the number of voxels each sweep updated (the whole fog's
+/// sweepable voxels when the band could not be told apart; 0 if no sweep ran). A fog holding tiles
+/// goes to OpenVDB's fogToSdf.
 openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
                                                  float isoValue, float band, uint64_t* swept = nullptr);
 
 /// The narrow band of @a sdf, in place: values at or beyond +-@a background become inactive and
 /// exactly +-background, the background +background, inactive values +-background by their sign,
-/// then pruned (what surfaceLevelSet returns, less name and class).
+/// then pruned (what surfaceLevelSet returns, less name and class). The reference for
+/// narrowBandSdfFromDensity.
 void clipToNarrowBand(openvdb::FloatGrid& sdf, float background);
 
 /// The surface of @a density at @a isovalue as polygons in index space (the density's voxel

@@ -42,6 +42,7 @@
 
 #include <openvdb/math/Math.h>
 #include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
@@ -244,9 +245,11 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
 /// holding them: the fog itself, or the density it was grown from, whose missing leaves read as its
 /// background). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
 /// the voxels within reach of the band (top of the file), or everything where that cannot be told
-/// apart (returns after sweeping all when the band's sweep left no value of band or more).
+/// apart (returns after sweeping all when the band's sweep left no value of band or more), and the
+/// result clipped to the band as clipToNarrowBand does (not pruned).
 /// Returns the number of voxels the sweeps updated (each once per sweep), 0 if no sweep ran.
-uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, float h, float band)
+uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, float h, float band,
+                      bool reachOnly = true)
 {
     openvdb::tree::LeafManager<FloatTree> manager(tree);
     const size_t n = manager.leafCount();
@@ -334,11 +337,11 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     float tileValue = kMax;
     uint64_t swept = 0;
     if (boundaryCount.load() > 0 && sweepCount.load() > 0) {
-        if (band > 0) {
+        if (band > 0 && reachOnly) {
             // Only the voxels within reach of the band: the boundary grown by that many face steps,
             // a step at a time through the leaves' face neighbours (a value passes from voxel to
             // voxel only through active ones, all in the fog's leaves).
-            const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h))) + 1;
+            const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
             std::vector<LeafT::NodeMaskType> reach(n), next(n);
             for (size_t li = 0; li < n; ++li)
                 reach[li] = leaves[li].boundary;
@@ -398,7 +401,8 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             });
         // The unswept voxels must end beyond the band on their side, as in the full sweep: not
         // so when no swept value reached the band (clay thinner than it): sweep everything.
-        if (band > 0 && !(e.lo <= -band && e.hi >= band)) return sweepFogTree(tree, source, isoValue, h, 0.f);
+        if (band > 0 && reachOnly && !(e.lo <= -band && e.hi >= band))
+            return sweepFogTree(tree, source, isoValue, h, band, /*reachOnly=*/false);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t li = r.begin(); li != r.end(); ++li) {
                 for (float* v = leaves[li].values; v != leaves[li].values + LeafT::SIZE; ++v) {
@@ -409,13 +413,35 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         });
         tileValue = e.hi;
     }
+    if (band > 0) {
+        // The band, as clipToNarrowBand leaves it: active values at or beyond +-band become inactive
+        // +-band, inactive ones +-band by their sign (changeLevelSetBackground), the tiles likewise.
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t li = r.begin(); li != r.end(); ++li) {
+                float* v = leaves[li].values;
+                LeafT::NodeMaskType& active = manager.leaf(li).getValueMask();
+                for (Index i = 0; i < LeafT::SIZE; ++i) {
+                    if (!active.isOn(i)) {
+                        v[i] = v[i] < 0 ? -band : band;
+                    } else if (v[i] >= band) {
+                        v[i] = band;
+                        active.setOff(i);
+                    } else if (v[i] <= -band) {
+                        v[i] = -band;
+                        active.setOff(i);
+                    }
+                }
+            }
+        });
+        tileValue = tileValue < 0 ? -band : band;
+    }
     // Tiles (only the fog's background 0 here) are outside: +FLT_MAX after InitSdf, then the largest
-    // finite value if the sweeps ran (the root's background too).
+    // finite value if the sweeps ran (the root's background too; the band's outside when clipped).
     auto it = tree.beginValueAll();
     it.setMaxDepth(it.getLeafDepth() - 1);
     for (; it; ++it)
         it.setValue(tileValue);
-    tree.root().setBackground(tileValue, /*updateChildNodes=*/false);
+    tree.root().setBackground(band > 0 ? band : tileValue, /*updateChildNodes=*/false);
     return swept;
 }
 
@@ -434,11 +460,16 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& densi
 {
     if (!boxGrowable(density, radius)) {
         openvdb::FloatGrid::Ptr fog = surfaceFog(density, radius);
-        if (hasTiles(fog->tree())) return openvdb::tools::fogToSdf(*fog, isoValue);
+        if (hasTiles(fog->tree())) {
+            openvdb::FloatGrid::Ptr sdf = openvdb::tools::fogToSdf(*fog, isoValue);
+            if (band > 0) clipToNarrowBand(*sdf, band);
+            return sdf;
+        }
         openvdb::FloatGrid::Ptr sdf = fog->deepCopy();
         const uint64_t count =
             sweepFogTree(sdf->tree(), fog->tree(), isoValue, float(fog->voxelSize()[0]), band);
         if (swept) *swept = count;
+        if (band > 0) openvdb::tools::pruneLevelSet(sdf->tree());
         return sdf;
     }
     // The fog's leaves and active voxels, with room for the distances: no value is copied, the
@@ -460,6 +491,7 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& densi
     sdf->setTree(tree);
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
     if (swept) *swept = count;
+    if (band > 0) openvdb::tools::pruneLevelSet(*tree);
     return sdf;
 }
 
