@@ -24,20 +24,22 @@
 // order above). A fog with tiles (not what densityGrid builds: it voxelizes the automaton's clay,
 // but a file may carry tiles) goes to OpenVDB's own fogToSdf.
 //
-// The narrow band (narrowBandSdfFromFog, what surfaceLevelSet keeps: |value| < band). A voxel's
+// The narrow band (narrowBandSdfFromDensity, what surfaceLevelSet keeps: |value| < band). A voxel's
 // update that yields u < band reads only neighbours holding less than u, and compares u with the
 // others (u <= d2, u <= d3), which hold as long as those are at least band: the Godunov update's
 // three cases all give u > every neighbour they use (1: d1 + h; 2: u > d2 is tested; 3: taken only
 // when the 2-case u > d3, and then its root exceeds d3). So, update by update in the same order,
 // the values below band are the same whichever voxels holding band or more are swept. And each
 // such update adds at least h / sqrt(3) to its smallest neighbour (u - d1 >= h, h / sqrt 2, h / sqrt 3
-// in the three cases), so a value below band lies within ceil(band sqrt(3) / h) face steps of a
-// voxel next to the isosurface: the sweeps there (one step more for rounding) give every value
-// below band bit for bit, and the voxels deeper inside or further out (most of a large lump) are
-// not swept. Those keep +-FLT_MAX, which the finalisation turns into the extreme finite values: of
-// band or more whenever some swept value is (checked; otherwise, clay thinner than the band, the
-// whole fog is swept), as in the full sweep. tests/TestOutputStages.cc checks the band against
-// OpenVDB's fogToSdf, clipped alike, bit for bit.
+// in the three cases), so a value below band lies fewer than band sqrt(3) / h face steps from a
+// voxel next to the isosurface (at most 5 for the surface's band of 3 voxels): sweeping the voxels
+// within ceil(band sqrt(3) / h) steps (6: one to spare) gives every value below band bit for bit,
+// and the voxels deeper inside or further out (most of a large lump) are not swept. Those keep
+// +-FLT_MAX, which the finalisation turns into the extreme finite values: of band or more whenever
+// some swept value is (checked; otherwise, clay thinner than the band, the whole fog is swept), as
+// in the full sweep; clipped to the band, they are what the full sweep gives. The clipping itself
+// (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestOutputStages.cc
+// checks the band against OpenVDB's fogToSdf, clipped alike, bit for bit.
 #include "Surface.h"
 
 #include <openvdb/math/Math.h>
