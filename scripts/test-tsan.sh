@@ -57,7 +57,8 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
         -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_PYTHON=OFF >/dev/null
 fi
-cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_tool_placement test_transport vdbclay_cli
+cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_tool_placement test_transport \
+  test_output_stages vdbclay_cli
 
 # The instrumented TBB must be the one loaded: check, rather than trust the search path.
 export LD_LIBRARY_PATH=$TBB_PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -86,6 +87,9 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 # The push and the tools' placement on 1, 2, 3 and 8 threads; the global layer's solver likewise.
 "$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1
 "$BUILD_DIR/tests/test_transport" --gtest_brief=1 --gtest_filter='*Thread*'
+# The output's stages (the fog grown by flat masks, the band's sweeps, the leaf-parallel sums) on
+# 1, 2, 3 and 8 threads.
+"$BUILD_DIR/tests/test_output_stages" --gtest_brief=1
 # A whole scene through the CLI (scene, push, settle, the parallel output) on 2 and 3 threads.
 # Not --mesh: OpenVDB's volumeToMesh locks a tbb::concurrent_hash_map whose spin_rw_mutex is compiled
 # into libopenvdb.so, which is not instrumented, so TSan cannot see the lock and reports a race in
