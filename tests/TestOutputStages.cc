@@ -147,6 +147,14 @@ TEST_F(SurfaceSweepTest, NarrowBandSweepsOnlyNearTheSurfaceAndMatchesTheWholeSwe
         sparse->tree().setValue(Coord(rng.range(-14, 14), rng.range(-10, 20), rng.range(-14, 14)),
                                 rng.range(1, 1000));
     expectBandLikeOpenVdb(*sparse, 1.0, all);
+
+    // Clay holding a tile (a file may): the density holds a tile too, so the fog is grown and swept
+    // by OpenVDB itself, and the band is still clipped alike.
+    auto tiled = openvdb::Int32Grid::create(0);
+    tiled->tree().addTile(1, Coord(0, 0, 0), 1000, true);
+    tiled->tree().setValue(Coord(8, 3, 3), 700);
+    tiled->tree().setValue(Coord(-1, 4, 2), 400);
+    EXPECT_EQ(expectBandLikeOpenVdb(*tiled, 1.0, all), 0u); // no sweep of ours ran
 }
 
 TEST_F(SurfaceSweepTest, SurfaceFogIsOpenVdbsDilationBitForBit)
