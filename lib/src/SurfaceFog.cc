@@ -156,7 +156,8 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     size_t kept = 0;
     for (size_t i = 0; i < n; ++i) {
         if (i >= n0 && masks[i].isOff()) continue;
-        g.origins[kept] = keys[i] << 3;
+        g.origins[kept] =
+            Coord(keys[i].x() * kDim, keys[i].y() * kDim, keys[i].z() * kDim); // not << 3 (UB if < 0)
         g.masks[kept] = masks[i];
         g.source[kept] = g.source[i];
         ++kept;
