@@ -84,7 +84,7 @@ openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, doubl
         // new voxels hold 0, outside), then the fast sweeping method solves the eikonal equation
         // from the isosurface over those voxels. The cost follows the clay's voxels, not the span
         // of its bounding box (far-apart lumps cost what each lump costs).
-        // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromFog:
+        // Only the band is kept, so only the voxels within its reach are swept (narrowBandSdfFromDensity:
         // the same band as sweeping the whole fog, bit for bit).
         surface = narrowBandSdfFromDensity(density, kHalfWidth + 1, float(isovalue), background);
     }

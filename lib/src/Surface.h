@@ -8,6 +8,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -26,10 +27,25 @@ openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, dou
 
 /// The surface of @a density at @a isovalue as a narrow-band level set (GRID_LEVEL_SET, named
 /// "surface", same transform): negative inside (density > isovalue), positive outside, half band
-/// width 3 voxels each side. Built directly from the density by the fast sweeping method
-/// (fogToSdfByLeaves) over the density's voxels grown by the band, in parallel; its cost
-/// follows the clay's voxels. Empty (no active voxels) if no cell exceeds the isovalue.
+/// width 3 voxels each side. Built directly from the density by the fast sweeping method over the
+/// density's voxels grown by the band, swept only within reach of the band
+/// (narrowBandSdfFromDensity), in parallel; its cost follows the clay's surface. Empty (no active
+/// voxels) if no cell exceeds the isovalue.
 openvdb::FloatGrid::Ptr surfaceLevelSet(const openvdb::FloatGrid& density, double isovalue);
+
+/// True if @a tree holds any tile (active or not) whose value is not 0, or any active tile: a fog the
+/// leaf-by-leaf code hands to OpenVDB.
+bool holdsTiles(const openvdb::FloatTree& tree);
+
+/// For each leaf key (origin / 8) of @a keys, the indices in @a keys of its face neighbours, in the
+/// order -x, +x, -y, +y, -z, +z (-1 where there is none).
+std::vector<std::array<int64_t, 6>> leafFaceNeighbours(const std::vector<openvdb::Coord>& keys);
+
+/// Leaf @a li of @a masks (active masks of leaves) grown by @a r voxels (0 < r < 8) along @a axis
+/// (0 x, 1 y, 2 z), reading the leaves @a lo at -axis and @a hi at +axis (-1: none, all off).
+openvdb::FloatTree::LeafNodeType::NodeMaskType
+maskGrownAlong(const std::vector<openvdb::FloatTree::LeafNodeType::NodeMaskType>& masks, size_t li,
+               int64_t lo, int64_t hi, int axis, int r);
 
 /// The leaves of a density grown by a box of @a radius voxels (SurfaceFog.cc): each leaf's origin,
 /// grown active mask, and the density's leaf there (null for a new leaf, all background).

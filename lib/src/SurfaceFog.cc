@@ -10,7 +10,9 @@
 // only adjacent leaves are reached). OpenVDB instead runs radius passes of the 26-neighbour stencil over
 // every leaf, rebuilding its leaf array each time; on a settled lump most leaves are full and gain
 // nothing. The leaves the box reaches are the density's and their 26 neighbours; each pass is
-// parallel over them and writes only its own masks; the tree is assembled serially afterwards.
+// parallel over them and writes only its own masks; the tree is assembled serially afterwards. The
+// mask shifts (maskGrownAlong) and the leaves' face-neighbour table (leafFaceNeighbours) also serve
+// the band's reach in SurfaceSweep.cc (a face step is one voxel along each axis, united).
 #include "Surface.h"
 
 #include "CoordHash.h"
@@ -20,9 +22,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace vdbclay {
@@ -50,9 +54,9 @@ uint64_t word(const std::vector<MaskT>& masks, int64_t leaf, int x)
     return leaf >= 0 ? masks[size_t(leaf)].template getWord<uint64_t>(Index(x)) : 0;
 }
 
-/// Leaf @a li of @a in grown by @a r voxels along @a axis (0 x, 1 y, 2 z), with the neighbours
-/// @a lo (at -axis) and @a hi (at +axis), -1 where none.
-MaskT grownAlong(const std::vector<MaskT>& in, size_t li, int64_t lo, int64_t hi, int axis, int r)
+} // namespace
+
+MaskT maskGrownAlong(const std::vector<MaskT>& in, size_t li, int64_t lo, int64_t hi, int axis, int r)
 {
     MaskT out;
     const int64_t self = int64_t(li);
@@ -83,21 +87,30 @@ MaskT grownAlong(const std::vector<MaskT>& in, size_t li, int64_t lo, int64_t hi
     return out;
 }
 
-bool hasTiles(const FloatTree& tree)
+std::vector<std::array<int64_t, 6>> leafFaceNeighbours(const std::vector<Coord>& keys)
 {
-    auto it = tree.cbeginValueAll();
-    it.setMaxDepth(it.getLeafDepth() - 1);
-    for (; it; ++it) {
-        if (*it != tree.background() || it.isValueOn()) return true;
-    }
-    return false;
+    const size_t n = keys.size();
+    std::vector<std::pair<Coord, size_t>> sorted(n);
+    for (size_t i = 0; i < n; ++i)
+        sorted[i] = {keys[i], i};
+    std::sort(sorted.begin(), sorted.end());
+    std::vector<std::array<int64_t, 6>> out(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            for (int f = 0; f < 6; ++f) {
+                Coord k = keys[i];
+                k[f / 2] += (f & 1) ? 1 : -1;
+                const auto it = std::lower_bound(sorted.begin(), sorted.end(), std::make_pair(k, size_t(0)));
+                out[i][size_t(f)] = it != sorted.end() && it->first == k ? int64_t(it->second) : -1;
+            }
+        }
+    });
+    return out;
 }
-
-} // namespace
 
 bool boxGrowable(const openvdb::FloatGrid& density, int radius)
 {
-    return radius > 0 && radius < kDim && !hasTiles(density.tree());
+    return radius > 0 && radius < kDim && !holdsTiles(density.tree());
 }
 
 GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
@@ -106,8 +119,8 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     // The density's leaves, then every leaf next to one (the box reaches no further).
     for (auto it = density.tree().cbeginLeaf(); it; ++it)
         g.source.push_back(&*it);
-    std::vector<Coord>& keys = g.origins; // leaf keys (origin / 8) until the end
-    std::unordered_map<Coord, uint32_t, CoordHash> index;
+    std::vector<Coord>& keys = g.origins;                 // leaf keys (origin / 8) until the end
+    std::unordered_map<Coord, uint32_t, CoordHash> index; // which keys are in, as they are added
     index.reserve(g.source.size() * 2);
     auto add = [&](const Coord& key) {
         if (index.emplace(key, uint32_t(keys.size())).second) keys.push_back(key);
@@ -125,17 +138,7 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     }
     const size_t n = keys.size();
     g.source.resize(n, nullptr);
-    std::vector<std::array<int64_t, 6>> neighbour(n); // -x, +x, -y, +y, -z, +z
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) {
-            for (int f = 0; f < 6; ++f) {
-                Coord k = keys[i];
-                k[f / 2] += (f & 1) ? 1 : -1;
-                const auto it = index.find(k);
-                neighbour[i][size_t(f)] = it == index.end() ? -1 : int64_t(it->second);
-            }
-        }
-    });
+    const std::vector<std::array<int64_t, 6>> neighbour = leafFaceNeighbours(keys);
 
     // The box, an axis at a time.
     std::vector<MaskT>& masks = g.masks;
@@ -146,8 +149,8 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     for (int axis = 0; axis < 3; ++axis) {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i != r.end(); ++i)
-                next[i] = grownAlong(masks, i, neighbour[i][size_t(2 * axis)],
-                                     neighbour[i][size_t(2 * axis + 1)], axis, radius);
+                next[i] = maskGrownAlong(masks, i, neighbour[i][size_t(2 * axis)],
+                                         neighbour[i][size_t(2 * axis + 1)], axis, radius);
         });
         masks.swap(next);
     }

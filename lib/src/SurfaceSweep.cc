@@ -79,17 +79,6 @@ inline Index offsetOf(int x, int y, int z)
     return Index((x << (2 * LeafT::LOG2DIM)) + (y << LeafT::LOG2DIM) + z);
 }
 
-/// True if the tree holds any tile (active or not) whose value is not 0, or any active tile.
-bool hasTiles(const FloatTree& tree)
-{
-    auto it = tree.cbeginValueAll();
-    it.setMaxDepth(it.getLeafDepth() - 1);
-    for (; it; ++it) {
-        if (*it != 0.f || it.isValueOn()) return true;
-    }
-    return false;
-}
-
 /// Distance to the isosurface of a voxel next to it, or +-FLT_MAX (OpenVDB's InitSdf, fog input).
 /// @a nb holds the six face neighbours' fog values in the order -x, +x, -y, +y, -z, +z.
 inline float initValue(float value, const float nb[6], float isoValue, float h, bool& boundary)
@@ -171,27 +160,13 @@ inline void updateVoxel(float& value, float n0, float n1, float n2, float n3, fl
 }
 
 /// Leaf @a li's voxels of @a masks grown by one face step, within the leaf and from its face
-/// neighbours @a nb (-x, +x, -y, +y, -z, +z; -1: none). A word of a leaf mask is one x, its bit
-/// y * 8 + z.
+/// neighbours @a nb (-x, +x, -y, +y, -z, +z; -1: none): one voxel along each axis, united.
 LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
                                 const std::array<int64_t, 6>& nb, size_t li)
 {
-    constexpr uint64_t kZ0 = 0x0101010101010101ull, kZ7 = kZ0 << 7; // the bits with z = 0, z = 7
-    auto word = [&masks](int64_t leaf, int x) -> uint64_t {
-        return leaf >= 0 ? masks[size_t(leaf)].template getWord<uint64_t>(Index(x)) : 0;
-    };
-    LeafT::NodeMaskType out;
-    for (int x = 0; x < kDim; ++x) {
-        const uint64_t m = word(int64_t(li), x);
-        uint64_t d = m | ((m << 1) & ~kZ0) | ((m >> 1) & ~kZ7) | (m << 8) | (m >> 8);
-        d |= x > 0 ? word(int64_t(li), x - 1) : word(nb[0], kDim - 1);
-        d |= x < kDim - 1 ? word(int64_t(li), x + 1) : word(nb[1], 0);
-        d |= word(nb[2], x) >> 56;        // -y neighbour's y = 7 row into y = 0
-        d |= word(nb[3], x) << 56;        // +y neighbour's y = 0 row into y = 7
-        d |= (word(nb[4], x) >> 7) & kZ0; // -z neighbour's z = 7 into z = 0
-        d |= (word(nb[5], x) << 7) & kZ7; // +z neighbour's z = 0 into z = 7
-        out.template getWord<uint64_t>(Index(x)) = d;
-    }
+    LeafT::NodeMaskType out = maskGrownAlong(masks, li, nb[0], nb[1], 0, 1);
+    out |= maskGrownAlong(masks, li, nb[2], nb[3], 1, 1);
+    out |= maskGrownAlong(masks, li, nb[4], nb[5], 2, 1);
     return out;
 }
 
@@ -267,18 +242,14 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         }
     });
 
-    // Leaf keys and the neighbour table (leaf origins -> index through a sorted list).
-    std::vector<std::pair<Coord, size_t>> byOrigin(n);
+    // Leaf keys and the face-neighbour table.
+    std::vector<Coord> keys(n);
     for (size_t i = 0; i < n; ++i) {
-        leaves[i].key = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
-                              manager.leaf(i).origin().z() >> 3);
-        byOrigin[i] = {leaves[i].key, i};
+        keys[i] = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
+                        manager.leaf(i).origin().z() >> 3);
+        leaves[i].key = keys[i];
     }
-    std::sort(byOrigin.begin(), byOrigin.end());
-    auto find = [&byOrigin](const Coord& key) -> int64_t {
-        auto it = std::lower_bound(byOrigin.begin(), byOrigin.end(), std::make_pair(key, size_t(0)));
-        return it != byOrigin.end() && it->first == key ? int64_t(it->second) : int64_t(-1);
-    };
+    const std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
 
     // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
     // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
@@ -289,14 +260,12 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         uint64_t boundary = 0, sweeping = 0;
         for (size_t li = r.begin(); li != r.end(); ++li) {
             SweepLeaf& out = leaves[li];
-            const Coord key = out.key;
             const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
                                    Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
+            out.neighbour = neighbours[li];
             const float* nbData[6];
-            for (int d = 0; d < 6; ++d) {
-                out.neighbour[d] = find(key + dirs[d]);
+            for (int d = 0; d < 6; ++d)
                 nbData[d] = out.neighbour[d] >= 0 ? input[size_t(out.neighbour[d])] : nullptr;
-            }
             const LeafT& in = manager.leaf(li);
             const float* v = input[li];
             out.sweep.setOff();
@@ -449,9 +418,19 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
 
 } // namespace
 
+bool holdsTiles(const FloatTree& tree)
+{
+    auto it = tree.cbeginValueAll();
+    it.setMaxDepth(it.getLeafDepth() - 1);
+    for (; it; ++it) {
+        if (*it != 0.f || it.isValueOn()) return true;
+    }
+    return false;
+}
+
 openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue)
 {
-    if (hasTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
+    if (holdsTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
     openvdb::FloatGrid::Ptr sdf = fog.deepCopy();
     sweepFogTree(sdf->tree(), fog.tree(), isoValue, float(fog.voxelSize()[0]), 0.f);
     return sdf;
@@ -462,7 +441,7 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& densi
 {
     if (!boxGrowable(density, radius)) {
         openvdb::FloatGrid::Ptr fog = surfaceFog(density, radius);
-        if (hasTiles(fog->tree())) {
+        if (holdsTiles(fog->tree())) {
             openvdb::FloatGrid::Ptr sdf = openvdb::tools::fogToSdf(*fog, isoValue);
             if (band > 0) clipToNarrowBand(*sdf, band);
             return sdf;
