@@ -3,6 +3,7 @@
 // and a non-zero exit code.
 
 #include "vdbclay/Automaton.h"
+#include "vdbclay/BatchHeap.h"
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 #include "vdbclay/Render.h"
@@ -291,6 +292,9 @@ int runDemo(const DemoArgs& a)
     }
     return m1 == m0 ? 0 : 3;
 }
+
+/// What configureBatchHeap() did (main sets it first thing; --stats reports it).
+vdbclay::BatchHeap gHeap;
 
 struct RunArgs {
     std::string scene, out, stats, png, mesh, rule, checkpoint, resume, memoryBudget, push, transport, sweep;
@@ -632,6 +636,7 @@ int runScene(const RunArgs& a)
     std::cout.flush();
     const uint64_t total = sculptor.totalFrames();
     auto onFrame = [&](const vdbclay::FrameReport& r) {
+        vdbclay::adviseBatchHeapGrowth(); // the frame may have grown the heap
         if (a.quiet) return;
         if (tty) {
             const int width = 30;
@@ -725,6 +730,7 @@ int runScene(const RunArgs& a)
         s.metrics.interiorMeanDensity, s.metrics.heterogeneityCV, s.metrics.compaction);
 
     const auto outputStart = std::chrono::steady_clock::now();
+    vdbclay::adviseBatchHeapGrowth();
     if (!outVdb.empty()) {
         vdbclay::writeClayFile(outVdb, *sculptor.mass(), sculptor.checkpointMeta());
         std::printf("wrote %s\n", outVdb.c_str());
@@ -751,6 +757,7 @@ int runScene(const RunArgs& a)
         j["push_seconds"] = s.pushSeconds;
         j["setup_seconds"] = setupSeconds;   // the scene's clay, obstacles and tools into grids
         j["output_seconds"] = outputSeconds; // the .vdb, picture and mesh (not this file)
+        j["heap"] = gHeap.note;              // the allocator policy (vdbclay/BatchHeap.h)
         j["push"] = vdbclay::pushModeName(scene.push);
         j["sweep"] = scene.sweep;
         j["transport"] = vdbclay::transportName(scene.transport);
@@ -808,6 +815,12 @@ int32_t thresholdOf(const vdbclay::ClayFile& f, int32_t override)
 
 int main(int argc, char** argv)
 {
+    try {
+        gHeap = vdbclay::configureBatchHeap(); // before the first large allocation
+    } catch (const vdbclay::Error& e) {
+        std::cerr << "vdbclay: error: " << printable(e.what()) << "\n";
+        return 2;
+    }
     CLI::App app{"vdbclay: virtual clay in sparse OpenVDB volumes (Druon, Crosnier, Brigandat 2003)"};
     app.require_subcommand(1);
     app.set_version_flag("--version", std::string("vdbclay ") + VDBCLAY_VERSION);

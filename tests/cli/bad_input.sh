@@ -36,6 +36,8 @@ expect_refused info-missing "missing.vdb" info missing.vdb
 expect_refused render-not-vdb "notvdb.vdb" render notvdb.vdb -o result.png
 expect_refused unknown-option "--bogus" run --bogus
 expect_refused import-bad-mass "mass" import notvdb.vdb -o result.vdb --mass 0
+# the allocator policy's variable (vdbclay/BatchHeap.h): refused before any work
+VDBCLAY_HEAP=huge expect_refused heap-choice 'VDBCLAY_HEAP must be "batch" or "system", got "huge"' run -o result.vdb --frames 1 --quiet
 # an unwritable output: the error names it and nothing is left behind
 expect_refused unwritable "/nonexistent-dir/out.vdb" run -o /nonexistent-dir/out.vdb --frames 1 --quiet
 

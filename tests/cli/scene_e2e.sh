@@ -18,6 +18,7 @@ grep -q '"settled": true' "$out.json" || { echo "FAIL $name: not settled"; cat "
 for k in seconds push_seconds setup_seconds output_seconds; do
   grep -q "^  \"$k\": [0-9]" "$out.json" || { echo "FAIL $name: stats lack $k"; cat "$out.json"; exit 1; }
 done
+grep -q '^  "heap": "\(batch\|system\) (' "$out.json" || { echo "FAIL $name: stats lack the heap policy"; cat "$out.json"; exit 1; }
 [ "$(head -c 8 "$out.png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || { echo "FAIL $name: not a PNG"; exit 1; }
 grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
 "$bin" info "$out.vdb" > "$out.info"
