@@ -29,6 +29,7 @@
 // with the ratios on stderr. See docs/PERFORMANCE.md.
 #include "RulesImpl.h"
 #include "vdbclay/Automaton.h"
+#include "vdbclay/BatchHeap.h"
 #include "vdbclay/Metrics.h"
 #include "vdbclay/Rules.h"
 #include "vdbclay/Scene.h"
@@ -1007,6 +1008,14 @@ int main(int argc, char** argv)
         return usage(argv[0]);
     }
 
+    try {
+        // The vdbclay command's allocator policy, so the stages measure what the command runs
+        // (VDBCLAY_HEAP=system for glibc's defaults); the forked runs inherit it.
+        std::fprintf(stderr, "bench_scenes: heap %s\n", vdbclay::configureBatchHeap().note.c_str());
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "bench_scenes: %s\n", e.what());
+        return 2;
+    }
     openvdb::initialize();
     std::vector<Row> rows;
     try {
