@@ -11,6 +11,7 @@
 #include "vdbclay/Metrics.h"
 
 #include "AtomicFile.h"
+#include "ClayFileMeta.h"
 #include "Rasterize.h"
 #include "Surface.h"
 #include "VdbCheck.h"
@@ -94,18 +95,18 @@ std::string damaged(const std::string& path)
     return path + " is not a .vdb file or is truncated or damaged: ";
 }
 
-const char* kMetaThreshold = "vdbclay_threshold";
-const char* kMetaRule = "vdbclay_rule";
-const char* kMetaAlpha = "vdbclay_alpha";
-const char* kMetaSeed = "vdbclay_seed";
-const char* kMetaSteps = "vdbclay_steps";
-const char* kMetaFrames = "vdbclay_frames";
-const char* kMetaFrameSteps = "vdbclay_frame_steps";
-const char* kMetaDimensions = "vdbclay_dimensions";
-const char* kMetaVoxelSize = "vdbclay_voxel_size";
-const char* kMetaVersion = "vdbclay_version";
-const char* kMetaUp = "vdbclay_up";
-const char* kMetaMaxMass = "vdbclay_max_mass";
+using io_internal::kMetaAlpha;
+using io_internal::kMetaDimensions;
+using io_internal::kMetaFrames;
+using io_internal::kMetaFrameSteps;
+using io_internal::kMetaMaxMass;
+using io_internal::kMetaRule;
+using io_internal::kMetaSeed;
+using io_internal::kMetaSteps;
+using io_internal::kMetaThreshold;
+using io_internal::kMetaUp;
+using io_internal::kMetaVersion;
+using io_internal::kMetaVoxelSize;
 
 void validateMeta(const ClayMeta& meta, const std::string& path)
 {

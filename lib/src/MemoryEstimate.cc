@@ -70,6 +70,7 @@
 
 #include "vdbclay/IO.h"
 
+#include "ClayFileMeta.h"
 #include "ClayLeaves.h"
 #include "Format.h"
 #include "MemoryEstimate.h"
@@ -356,7 +357,7 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
     }
     if (n) out.voxels = uint64_t(std::max<int64_t>(0, n->value()));
     if (mem) out.memBytes = uint64_t(std::max<int64_t>(0, mem->value()));
-    if (const auto mx = g->getMetadata<openvdb::Int64Metadata>("vdbclay_max_mass"))
+    if (const auto mx = g->getMetadata<openvdb::Int64Metadata>(io_internal::kMetaMaxMass))
         out.maxMass = std::max<int64_t>(0, mx->value());
     if (!lo || !hi || !n) {
         // A file without statistics: read it (the estimate must not be a guess).
