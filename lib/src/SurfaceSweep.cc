@@ -119,7 +119,6 @@ struct SweepLeaf {
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
     LeafT::NodeMaskType boundary;     // active and next to the isosurface
     std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
-    Coord key;                        // origin / 8
 };
 
 /// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only).
@@ -242,13 +241,11 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         }
     });
 
-    // Leaf keys and the face-neighbour table.
+    // Leaf keys (origin / 8) and the face-neighbour table.
     std::vector<Coord> keys(n);
-    for (size_t i = 0; i < n; ++i) {
+    for (size_t i = 0; i < n; ++i)
         keys[i] = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
                         manager.leaf(i).origin().z() >> 3);
-        leaves[i].key = keys[i];
-    }
     const std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
 
     // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
@@ -257,11 +254,11 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         openvdb::tree::ValueAccessor<const FloatTree> acc(source);
+        const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
+                               Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
         uint64_t boundary = 0, sweeping = 0;
         for (size_t li = r.begin(); li != r.end(); ++li) {
             SweepLeaf& out = leaves[li];
-            const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
-                                   Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
             out.neighbour = neighbours[li];
             const float* nbData[6];
             for (int d = 0; d < 6; ++d)
@@ -336,7 +333,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         for (const auto& s : signs) {
             std::vector<std::pair<int64_t, size_t>> order(n);
             for (size_t i = 0; i < n; ++i) {
-                const Coord& k = leaves[i].key;
+                const Coord& k = keys[i];
                 order[i] = {int64_t(s[0]) * k.x() + int64_t(s[1]) * k.y() + int64_t(s[2]) * k.z(), i};
             }
             std::sort(order.begin(), order.end());
