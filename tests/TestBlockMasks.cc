@@ -150,6 +150,33 @@ TEST(BlockMasks, AddressingTablesPointAtEachCorner)
     }
 }
 
+TEST(BlockMasks, NeededLeavesAreTheLeavesTheBlocksTouch)
+{
+    // Every mask of one block, and random masks: bit w iff some block of the mask touches leaf w
+    // (BlockTables::needLeaf, checked against the corners' leaves above).
+    const BlockTables& t = blockTables();
+    std::vector<uint64_t> masks;
+    for (int b = 0; b < 64; ++b)
+        masks.push_back(uint64_t(1) << b);
+    uint64_t x = 0x9E3779B97F4A7C15ull;
+    for (int i = 0; i < 2000; ++i) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        masks.push_back(x & (x >> 11) & (x >> 23)); // sparse: about 8 blocks
+        masks.push_back(x);
+    }
+    for (const uint64_t m3 : masks) {
+        for (int d3 = 0; d3 < 2; ++d3) {
+            const uint64_t m = d3 ? m3 : (m3 & 0xFFFFull);
+            uint32_t expected = 0;
+            for (int w = 0; w < 8; ++w)
+                if (m & t.needLeaf[d3][w]) expected |= 1u << w;
+            expected |= 1u; // the anchor's leaf, even for an empty mask
+            EXPECT_EQ(d3 ? neededLeaves<true>(m) : neededLeaves<false>(m), expected)
+                << std::hex << m << " " << d3;
+        }
+    }
+}
+
 namespace {
 template <int P, bool D3> void dilateCornersAt(const uint64_t act[8], uint64_t out[8])
 {

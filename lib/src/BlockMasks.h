@@ -229,6 +229,20 @@ inline const BlockTables& blockTables()
     return t;
 }
 
+/// The leaves the odd-phase blocks of @a mask read, as bits w of leafOrigin(anchor, w): bit w is set
+/// iff a block of the mask touches that leaf (BlockTables::needLeaf), i.e. lies at the low end
+/// (bx, by or bz = 0) of every axis in w. Bit 0, the anchor's own leaf, is always set.
+template <bool D3> inline uint32_t neededLeaves(uint64_t mask)
+{
+    const uint64_t x = mask & kX0, y = mask & kY0, xy = x & kY0;
+    uint32_t need = 1u | (uint32_t(x != 0) << 1) | (uint32_t(y != 0) << 2) | (uint32_t(xy != 0) << 3);
+    if constexpr (D3) {
+        need |= (uint32_t((mask & kZ0) != 0) << 4) | (uint32_t((x & kZ0) != 0) << 5) |
+                (uint32_t((y & kZ0) != 0) << 6) | (uint32_t((xy & kZ0) != 0) << 7);
+    }
+    return need;
+}
+
 /// Addressing of the over-cell filter (Kernel.cc, overBlocks), 3D. A column is the 4 blocks of one
 /// phase with the same (bx, by), numbered col = bx + 4 by (so block bit = col + 16 bz). Its cells lie
 /// in 4 z-rows of a leaf (8 consecutive int32, z = 0-7), row r = dx + 2 dy at local x = 2 bx - phase

@@ -1,11 +1,13 @@
 // The automaton's per-block kernel (see Kernel.h for the contract and its thread-safety).
 //
-// Per anchor: its leaves are fetched once (even steps: the anchor's leaf alone, whose 64 blocks it
-// holds whole; odd steps: also the lower neighbours that the straddling blocks reach), from the
-// flat leaf table when the Automaton has one (one hash lookup, then copies of the entry's pointers),
-// otherwise through value accessors (only the leaves the mask's blocks touch). In 3D the over-cell
-// filter then drops the candidates holding no cell over Tc, a column of 4 blocks at a time (AVX2 or
-// SSE2, chosen at run time; see "The over-cell filter" below). Then for each candidate block left:
+// Per anchor: its leaves are found once (even steps: the anchor's leaf alone, whose 64 blocks it
+// holds whole; odd steps: also the lower neighbours that the straddling blocks reach): the flat leaf
+// table's entry when the Automaton has one (read in place through a pointer, LeafSet), otherwise
+// through value accessors (only the leaves the mask's blocks touch). In 3D the over-cell filter then
+// drops the candidates holding no cell over Tc, a column of 4 blocks at a time (AVX2 or SSE2, chosen
+// at run time; see "The over-cell filter" below). Both are done one item ahead (a software
+// pipeline: the filter's loads, the first touch of the item's cells, are issued before the previous
+// item's block loop, not behind its branches). Then for each candidate block left:
 // load its cells (even: at constant offsets from the block's first cell; odd: through the addressing tables),
 // skip it unless a cell is over Tc, apply the rule (inlined, instantiated for this rule and cell
 // count), and write back only the cells that changed. The overload changes only where a cell
@@ -71,19 +73,26 @@ alignas(64) const int32_t kZeroLeaf[MassLeaf::SIZE] = {};
 
 } // namespace
 
+/// The leaves an anchor's blocks touch (slot w: leafOrigin(anchor, w)), as the pass reads them: a
+/// leaf table's entry, or what fetchLeaves found through accessors. The pass reads it through a
+/// pointer, never a copy, so an item touches only the lines of the slots its blocks use: read[]
+/// (the filter and the loads) first, then data[] (the stores), leaf[] (a voxel turned active) and
+/// obs[] (only where obstacles are).
+struct LeafSet {
+    const int32_t* read[8]; // data, or kZeroLeaf for a missing leaf: reads need no null test
+    int32_t* data[8];       // null for a missing leaf
+    MassLeaf* leaf[8];
+    const ObsLeaf* obs[8];
+    uint8_t missing; // slots whose mass leaf is missing
+    uint8_t obsAny;  // slots holding obstacles: an obstacle leaf, or an active obstacle tile
+    uint8_t obsTile; // slots inside an active obstacle tile (no obstacle leaf)
+};
+
 // ---- The leaf table ------------------------------------------------------------------------------
 
 struct LeafTable::Impl {
-    /// One anchor's leaves, as fetchLeaves hands them to the pass (slot w: leafOrigin(anchor, w)).
-    struct Entry {
-        MassLeaf* leaf[8];
-        int32_t* data[8];
-        const int32_t* read[8]; // data, or kZeroLeaf for a missing leaf
-        const ObsLeaf* obs[8];
-        uint8_t missing; // slots whose mass leaf is missing
-        uint8_t obsAny;  // slots holding obstacles: an obstacle leaf, or an active obstacle tile
-        uint8_t obsTile; // slots inside an active obstacle tile
-    };
+    /// One anchor's leaves, as the pass reads them.
+    using Entry = LeafSet;
     struct Slot {
         int32_t x, y, z;
         uint32_t index; // into entries; kEmpty: a free slot
@@ -685,95 +694,72 @@ inline uint64_t filterBlocks(OverFilter f, const int32_t* const read[8], uint64_
     return mask;
 }
 
-/// The leaves an anchor's blocks touch: mass data (null when the leaf is missing) and obstacles.
-struct LeafSet {
-    MassLeaf* leaf[8] = {};
-    int32_t* data[8] = {};
-    const int32_t* read[8] = {}; // data, or zeros for a missing leaf: reads need no null test
-    const ObsLeaf* obs[8] = {};
-    bool obsTile[8] = {};    // obstacle state of the whole region when obs[i] is null
-    bool anyMissing = false; // a leaf the mask's blocks touch does not exist
-    bool anyObs = false;     // a leaf they touch holds obstacles or lies in an obstacle tile
-    Origin anchor;           // the anchor these leaves were fetched for
-    uint32_t fetched = 0;    // which of the 8 slots were fetched (0: none yet)
+/// The accessor path's leaves (no table, or an anchor it lacks): the set, and what it was fetched for.
+struct FetchedLeaves {
+    LeafSet set;
+    Origin anchor;        // the anchor these leaves were fetched for
+    uint32_t fetched = 0; // which of the 8 slots were fetched (0: none yet)
 };
-
-/// The table's entry for an anchor into @a ls: its first @a kCount slots (those no block of the mask
-/// reads are harmless), the flags over the slots @a need says the mask reads.
-template <int kCount>
-__attribute__((always_inline)) inline void copyEntry(LeafSet& ls, const LeafTable::Impl::Entry& e,
-                                                     const Origin& anchor, uint32_t need)
-{
-    for (int w = 0; w < kCount; ++w) {
-        ls.leaf[w] = e.leaf[w];
-        ls.data[w] = e.data[w];
-        ls.read[w] = e.read[w];
-        ls.obs[w] = e.obs[w];
-        ls.obsTile[w] = (e.obsTile >> w) & 1u;
-    }
-    ls.anyMissing = (e.missing & need) != 0;
-    ls.anyObs = (e.obsAny & need) != 0;
-    ls.anchor = anchor;
-    ls.fetched = (1u << kCount) - 1;
-}
 
 // Out of line on purpose: inlined into the block loop it costs more than the call (register
 // pressure; callgrind, press 32: 20 M more instructions in the pass).
+/// The leaves of @a anchor whose slots are in @a need, through accessors, into @a f; the other
+/// slots read as missing leaves. @a prev holds the previous item's leaves (fetched == 0: none).
+/// Returns @a f's set.
 template <bool D3, int P>
-__attribute__((noinline)) void fetchLeaves(LeafSet& ls, const Origin& anchor, uint32_t entry, uint64_t mask,
-                                           MassAcc& acc, ObsAcc* oacc, bool reuse,
-                                           const LeafTable::Impl* table)
+__attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const FetchedLeaves& prev,
+                                                     const Origin& anchor, uint32_t need, MassAcc& acc,
+                                                     ObsAcc* oacc, bool reuse)
 {
-    const BlockTables& t = blockTables();
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
-    uint32_t need = 1;
-    for (int w = 1; w < kCount; ++w)
-        if (mask & t.needLeaf[D3][w]) need |= 1u << w;
-    if (table) {
-        if (const LeafTable::Impl::Entry* e =
-                entry != kNoEntry ? &table->entries[entry] : table->find(anchor)) {
-            copyEntry<kCount>(ls, *e, anchor, need);
-            return;
-        }
-    }
+    LeafSet& ls = f.set;
+    const LeafSet& ps = prev.set;
+    ls.missing = ls.obsAny = ls.obsTile = 0;
     // The work list runs along x (layer order): when the previous anchor is this one's -x
     // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
     uint32_t reused = 0;
-    if (P == 1 && reuse && ls.fetched && ls.anchor == Origin(anchor.x() - 8, anchor.y(), anchor.z())) {
+    if (P == 1 && reuse && prev.fetched && prev.anchor == Origin(anchor.x() - 8, anchor.y(), anchor.z())) {
         for (int w = 1; w < kCount; w += 2) {
-            if (!((need >> w) & 1u) || !((ls.fetched >> (w - 1)) & 1u)) continue;
-            ls.leaf[w] = ls.leaf[w - 1];
-            ls.data[w] = ls.data[w - 1];
-            ls.read[w] = ls.read[w - 1];
-            ls.obs[w] = ls.obs[w - 1];
-            ls.obsTile[w] = ls.obsTile[w - 1];
+            if (!((need >> w) & 1u) || !((prev.fetched >> (w - 1)) & 1u)) continue;
+            ls.leaf[w] = ps.leaf[w - 1];
+            ls.data[w] = ps.data[w - 1];
+            ls.read[w] = ps.read[w - 1];
+            ls.obs[w] = ps.obs[w - 1];
+            const uint8_t from = uint8_t(1u << (w - 1)), to = uint8_t(1u << w);
+            if (ps.missing & from) ls.missing |= to;
+            if (ps.obsAny & from) ls.obsAny |= to;
+            if (ps.obsTile & from) ls.obsTile |= to;
             reused |= 1u << w;
         }
     }
-    ls.anyMissing = false;
-    ls.anyObs = false;
-    for (int w = 0; w < kCount; ++w) {
-        if (!((reused >> w) & 1u)) {
-            ls.leaf[w] = nullptr;
-            ls.data[w] = nullptr;
-            ls.read[w] = kZeroLeaf;
-            ls.obs[w] = nullptr;
-            ls.obsTile[w] = false;
-            if (!((need >> w) & 1u)) continue;
-            const Origin lo = leafOrigin(anchor, w);
-            const Coord o(lo.x(), lo.y(), lo.z());
-            ls.leaf[w] = acc.probeLeaf(o);
-            if (ls.leaf[w]) ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
-            if (oacc) {
-                ls.obs[w] = oacc->probeConstLeaf(o);
-                if (!ls.obs[w]) ls.obsTile[w] = oacc->isValueOn(o);
-            }
+    for (int w = 0; w < 8; ++w) {
+        if ((reused >> w) & 1u) continue;
+        ls.leaf[w] = nullptr;
+        ls.data[w] = nullptr;
+        ls.read[w] = kZeroLeaf;
+        ls.obs[w] = nullptr;
+        const uint8_t bit = uint8_t(1u << w);
+        if (w >= kCount || !((need >> w) & 1u)) {
+            ls.missing |= bit;
+            continue;
         }
-        if (!ls.leaf[w]) ls.anyMissing = true;
-        ls.anyObs |= ls.obs[w] || ls.obsTile[w];
+        const Origin lo = leafOrigin(anchor, w);
+        const Coord o(lo.x(), lo.y(), lo.z());
+        ls.leaf[w] = acc.probeLeaf(o);
+        if (ls.leaf[w]) {
+            ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
+        } else {
+            ls.missing |= bit;
+        }
+        if (oacc) {
+            ls.obs[w] = oacc->probeConstLeaf(o);
+            if (!ls.obs[w] && oacc->isValueOn(o)) ls.obsTile |= bit;
+            if (ls.obs[w] || ((ls.obsTile >> w) & 1u)) ls.obsAny |= bit;
+        }
     }
-    ls.anchor = anchor;
-    ls.fetched = need;
+    f.anchor = anchor;
+    f.fetched = need;
+    return &ls;
 }
 
 /// A block's hash from the step's prefix, computed only when a remainder or a tie needs it (its
@@ -822,7 +808,8 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     const LeafTable::Impl* table = in.table && in.table->valid() ? in.table->impl() : nullptr;
     std::optional<ObsAcc> oacc;
     if (in.obstacles) oacc.emplace(*in.obstacles);
-    LeafSet ls;
+    // Two buffers for the accessor path: the next item's leaves are fetched while this item's are in use.
+    FetchedLeaves fetched[2];
     const DenseSink* sink = dryRun ? nullptr : in.sink;
     if (sink && in.sinkLanes > 1) {
         // This thread's lane: its slot in the pass's arena, which has sinkLanes slots.
@@ -841,8 +828,43 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     // Totals in locals (registers), added to tot once at the end.
     uint64_t examined = 0, overTc = 0, updated = 0;
     int64_t overloadDelta = 0, maxWritten = 0;
+    // Item wi + 1 is looked up and filtered before item wi's blocks run (a software pipeline): the
+    // filter's loads are the first touch of the item's cells, mostly from L2, and issued ahead of
+    // the block loop they no longer wait behind its branches. It reads only that item's own cells,
+    // which no other item of the pass writes (blocks of one phase are disjoint), so its result is
+    // the same either way.
+    struct Prepared {
+        const LeafSet* set;
+        uint32_t need;
+        uint64_t bits; // the candidates left by the filter; 0: nothing to do
+    };
+    auto prepare = [&](size_t wi, FetchedLeaves& buf, const FetchedLeaves& prevBuf) {
+        const WorkItem& w = work[wi];
+        Prepared p;
+        p.need = P == 1 ? neededLeaves<D3>(w.mask) : 1u;
+        p.set = nullptr;
+        if (table) p.set = w.entry != kNoEntry ? &table->entries[w.entry] : table->find(w.anchor);
+        if (p.set) {
+            buf.fetched = 0; // the next item cannot reuse this one's leaves from the buffer
+        } else {
+            p.set =
+                fetchLeaves<D3, P>(buf, prevBuf, w.anchor, p.need, acc, oacc ? &*oacc : nullptr, !portable);
+        }
+        p.bits = w.mask;
+        if (P == 0 && !p.set->data[0]) p.bits = 0; // even blocks of a missing leaf: all 0
+        if (D3 && filter != OverFilter::None && p.bits)
+            p.bits = filterBlocks<P>(filter, p.set->read, p.bits, tc32);
+        return p;
+    };
+    Prepared next{};
+    if (begin < end) next = prepare(begin, fetched[0], fetched[1]);
     for (size_t wi = begin; wi < end; ++wi) {
         WorkItem& w = work[wi];
+        const Prepared cur = next;
+        if (wi + 1 < end) {
+            const size_t k = (wi + 1 - begin) & 1;
+            next = prepare(wi + 1, fetched[k], fetched[1 - k]);
+        }
         w.changed = 0;
         uint64_t itemChanged = 0; // stored into w.changed once per item
         // For the sink (sinkActive): the updated blocks that may still hold an over and a not-over
@@ -852,15 +874,22 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             examined += uint64_t(__builtin_popcountll(w.mask)); // one POPCNT
         else
             examined += popcount64(w.mask);
-        if (P == 0 && table && w.entry != kNoEntry) {
-            copyEntry<1>(ls, table->entries[w.entry], w.anchor, 1u); // even phase: one slot, no call
-        } else {
-            fetchLeaves<D3, P>(ls, w.anchor, w.entry, w.mask, acc, oacc ? &*oacc : nullptr, !portable, table);
+        uint64_t bits = cur.bits;
+        if (!bits) continue;
+        const LeafSet& ls = *cur.set;
+        // The slots' pointers in locals (two cache lines of the set; one slot on the even phase):
+        // the loop's stores may alias memory, so read through the set they would be reloaded.
+        constexpr int kSlots = P == 1 ? (D3 ? 8 : 4) : 1;
+        const int32_t* read[8];
+        int32_t* data[8];
+        for (int k = 0; k < kSlots; ++k) {
+            read[k] = ls.read[k];
+            data[k] = ls.data[k];
         }
-        if (P == 0 && !ls.data[0]) continue; // even blocks of a missing leaf: all 0
+        // A leaf the mask's blocks touch is missing; one holds obstacles or lies in an obstacle tile.
+        const uint32_t need = cur.need;
+        const bool anyMissing = (ls.missing & need) != 0, anyObs = (ls.obsAny & need) != 0;
         const int32_t ax = w.anchor.x() - P, ay = w.anchor.y() - P, az = D3 ? w.anchor.z() - P : 0;
-        uint64_t bits = w.mask;
-        if (D3 && filter != OverFilter::None) bits = filterBlocks<P>(filter, ls.read, bits, tc32);
         while (bits) {
             const int b = __builtin_ctzll(bits);
             bits &= bits - 1;
@@ -879,11 +908,11 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             __m128i lo = _mm_setzero_si128(), hi = _mm_setzero_si128(), gtLo = hi, gtHi = hi;
             if (pairs && !portable) {
                 if (inside) {
-                    const int32_t* d = ls.read[0] + off[0];
+                    const int32_t* d = read[0] + off[0];
                     loadPairs<N>(d, d + 64, d + 8, d + 72, lo, hi);
                 } else {
-                    loadPairs<N>(ls.read[lf[0]] + off[0], ls.read[lf[1]] + off[1], ls.read[lf[2]] + off[2],
-                                 ls.read[lf[3]] + off[3], lo, hi);
+                    loadPairs<N>(read[lf[0]] + off[0], read[lf[1]] + off[1], read[lf[2]] + off[2],
+                                 read[lf[3]] + off[3], lo, hi);
                 }
                 gtLo = _mm_cmpgt_epi32(lo, tcV);
                 if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
@@ -892,16 +921,16 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             } else
 #endif
                 if (inside) {
-                if (!loadInsideScalar<N>(ls.read[0] + off[0], tc32, m)) continue;
+                if (!loadInsideScalar<N>(read[0] + off[0], tc32, m)) continue;
             } else {
 #if defined(__SSE2__)
                 if (!portable) {
                     // Straddling a z boundary: corner k and k + 4 lie in different leaves.
-                    lo = _mm_setr_epi32(ls.read[lf[0]][off[0]], ls.read[lf[1]][off[1]],
-                                        ls.read[lf[2]][off[2]], ls.read[lf[3]][off[3]]);
+                    lo = _mm_setr_epi32(read[lf[0]][off[0]], read[lf[1]][off[1]], read[lf[2]][off[2]],
+                                        read[lf[3]][off[3]]);
                     if constexpr (N == 8)
-                        hi = _mm_setr_epi32(ls.read[lf[4]][off[4]], ls.read[lf[5]][off[5]],
-                                            ls.read[lf[6]][off[6]], ls.read[lf[7]][off[7]]);
+                        hi = _mm_setr_epi32(read[lf[4]][off[4]], read[lf[5]][off[5]], read[lf[6]][off[6]],
+                                            read[lf[7]][off[7]]);
                     gtLo = _mm_cmpgt_epi32(lo, tcV);
                     if constexpr (N == 8) gtHi = _mm_cmpgt_epi32(hi, tcV);
                     overCells = laneBits<N>(gtLo, gtHi);
@@ -912,14 +941,14 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                     int32_t top = 0;
                     VDBCLAY_UNROLL
                     for (int c = 0; c < N; ++c) {
-                        m[c] = ls.read[lf[c]][off[c]];
+                        m[c] = read[lf[c]][off[c]];
                         top = std::max(top, m[c]);
                     }
                     if (top <= tc32) continue;
                 }
             }
             uint32_t valid = (1u << N) - 1;
-            if (ls.anyObs) {
+            if (anyObs) {
                 if (pairs && !portable) {
                     // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
                     uint32_t blocked = 0;
@@ -930,14 +959,14 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                         const uint32_t two =
                             ol ? uint32_t(ol->getValueMask().template getWord<uint64_t>(o >> 6) >> (o & 63)) &
                                      3u
-                               : (ls.obsTile[lf[k]] ? 3u : 0u);
+                               : (((ls.obsTile >> lf[k]) & 1u) ? 3u : 0u);
                         blocked |= ((two & 1u) << k) | ((two >> 1) << (k + 4));
                     }
                     valid &= ~blocked;
                 } else {
                     for (int c = 0; c < N; ++c) {
                         const ObsLeaf* ol = ls.obs[lf[c]];
-                        if (ol ? ol->isValueOn(off[c]) : ls.obsTile[lf[c]]) valid &= ~(1u << c);
+                        if (ol ? ol->isValueOn(off[c]) : ((ls.obsTile >> lf[c]) & 1u)) valid &= ~(1u << c);
                     }
                 }
             }
@@ -955,24 +984,24 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                         br = Branch::Done;
                 }
                 if (br == Branch::Done) {
-                    if (P == 1 && ls.anyMissing && !inside) {
+                    if (P == 1 && anyMissing && !inside) {
                         const uint32_t ch = changedCells<N>(lo, hi, sp.lo, sp.hi);
                         bool missing = false;
                         for (int c = 0; c < N; ++c)
-                            if (((ch >> c) & 1u) && !ls.data[lf[c]]) missing = true;
+                            if (((ch >> c) & 1u) && !data[lf[c]]) missing = true;
                         if (missing) {
                             tot.deferred.push_back(
                                 PassTotals::Deferred{uint32_t(wi), uint8_t(b), uint8_t(ch)});
                             continue;
                         }
                     }
-                    if (N == 8 && pairs && (inside || !ls.anyMissing)) {
+                    if (N == 8 && pairs && (inside || !anyMissing)) {
                         // Every cell of the block is this task's: write all 8, two to a store.
-                        int32_t* d0 = ls.data[0] + off[0];
+                        int32_t* d0 = data[0] + off[0];
                         int32_t *p0 = d0, *p1 = d0 + 64, *p2 = d0 + 8, *p3 = d0 + 72;
                         if (!inside) {
-                            p0 = ls.data[lf[0]] + off[0], p1 = ls.data[lf[1]] + off[1];
-                            p2 = ls.data[lf[2]] + off[2], p3 = ls.data[lf[3]] + off[3];
+                            p0 = data[lf[0]] + off[0], p1 = data[lf[1]] + off[1];
+                            p2 = data[lf[2]] + off[2], p3 = data[lf[3]] + off[3];
                         }
                         const __m128i t01 = _mm_unpacklo_epi32(sp.lo, sp.hi); // c0 c4 c1 c5
                         const __m128i t23 = _mm_unpackhi_epi32(sp.lo, sp.hi); // c2 c6 c3 c7
@@ -989,7 +1018,7 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                             ch &= ch - 1;
                             const int li = inside ? 0 : lf[c];
                             const int o = inside ? off[0] + kCornerOffset[c] : off[c];
-                            ls.data[li][o] = o32[c];
+                            data[li][o] = o32[c];
                         }
                     }
                     // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
@@ -1020,11 +1049,11 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
             // the fetched leaves to be missing (clay flowing into space the grid has not grown;
             // never on even steps, whose blocks lie in the anchor's leaf, which exists).
             bool fits = true, missing = false;
-            if (mayOverflow || (P == 1 && ls.anyMissing)) {
+            if (mayOverflow || (P == 1 && anyMissing)) {
                 for (int c = 0; c < N; ++c) {
                     if (!((changed >> c) & 1u)) continue;
                     if (out[c] > INT32_MAX) fits = false;
-                    if (!ls.data[lf[c]]) missing = true;
+                    if (!data[lf[c]]) missing = true;
                 }
             }
             if (!fits) {
@@ -1048,7 +1077,7 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
                 overloadDelta += std::max<int64_t>(out[c] - tc, 0) - std::max<int64_t>(m[c] - tc, 0);
                 const int li = inside ? 0 : lf[c];
                 const int o = inside ? off[0] + kCornerOffset[c] : off[c];
-                ls.data[li][o] = int32_t(out[c]);
+                data[li][o] = int32_t(out[c]);
                 maxWritten = std::max(maxWritten, out[c]);
                 if (m[c] == 0) {
                     // 0 -> positive: the voxel becomes active. Other tasks may set bits in the
