@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Compares builds of vdbclay on one scene, side by side: runs them in turn, ROUNDS times, each on one
+# thread pinned to one CPU, and prints the automaton's repartition time per updated block (from
+# --stats: stage_seconds.repartition / blocks_updated) and the whole run's time, as median and range.
+# Alternating the builds is what makes the ratio trustworthy on a shared, noisy machine (see
+# docs/PERFORMANCE.md); a single pair of runs is not.
+#
+# usage: bench/ab-repartition.sh SCENE ROUNDS NAME=BINARY[:LIBDIR] ...
+#   LIBDIR, when given, goes first on LD_LIBRARY_PATH (a copy of an older libvdbclay.so runs under
+#   the same binary). CPU (default 1) picks the CPU to pin to.
+# example: bench/ab-repartition.sh bench/scenes/press48-0.8tc.json 10 \
+#            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
+set -euo pipefail
+if [[ $# -lt 3 ]]; then
+    sed -n '2,12p' "$0" >&2
+    exit 2
+fi
+scene=$1 rounds=$2
+shift 2
+cpu=${CPU:-1}
+py=/usr/bin/python3
+[[ -x $py ]] || py=python3
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+for spec in "$@"; do
+    [[ $spec == *=* ]] || { echo "ab-repartition: '$spec' is not NAME=BINARY[:LIBDIR]" >&2; exit 2; }
+    rest=${spec#*=}
+    [[ -x ${rest%%:*} ]] || { echo "ab-repartition: '${rest%%:*}' is not an executable" >&2; exit 2; }
+done
+for ((r = 1; r <= rounds; ++r)); do
+    for spec in "$@"; do
+        name=${spec%%=*} rest=${spec#*=}
+        bin=${rest%%:*} lib=
+        [[ $rest == *:* ]] && lib=${rest#*:}
+        LD_LIBRARY_PATH=$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH} taskset -c "$cpu" "$bin" run "$scene" \
+            --threads 1 --quiet --stats "$tmp/s.json" >/dev/null
+        "$py" -c 'import json,sys; s=json.load(open(sys.argv[1])); print(sys.argv[2], s["stage_seconds"]["repartition"], s["blocks_updated"], s["seconds"])' \
+            "$tmp/s.json" "$name" >>"$tmp/rows"
+    done
+done
+"$py" - "$tmp/rows" "$@" <<'PY'
+import statistics, sys
+rows = [l.split() for l in open(sys.argv[1])]
+for spec in sys.argv[2:]:
+    name = spec.split('=')[0]
+    mine = [r for r in rows if r[0] == name]
+    per = sorted(float(r[1]) * 1e9 / int(r[2]) for r in mine)
+    run = sorted(float(r[3]) for r in mine)
+    print(f"{name:8s} n={len(per)} repartition/update median {statistics.median(per):.1f} ns "
+          f"({per[0]:.1f}-{per[-1]:.1f}); run median {statistics.median(run):.3f} s "
+          f"({run[0]:.3f}-{run[-1]:.3f}); updated blocks {mine[0][2]}")
+PY
