@@ -1,0 +1,136 @@
+// bench_handoff: what it costs this machine to hand work between threads, the floor under a pass on
+// several threads (docs/PERFORMANCE.md, round 12).
+//
+// Two measures, no vdbclay code:
+// - the round trip of one cache line between two threads pinned to CPUs 0 and k (one thread stores
+//   a flag, the other answers; half of it is what each line a thread reads after another wrote it
+//   costs at least), for every k the process may run on;
+// - a TBB fork/join of T equal tasks in a task_arena of T threads, as the automaton's pass forks one
+//   task per thread every step: the time per fork/join beyond the tasks' own work (each task spins
+//   for a fixed number of iterations, timed alone first).
+// usage: bench_handoff [T (default 2)] [work per task in us (default 20)]
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <pthread.h>
+#include <sched.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <thread>
+#include <vector>
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+bool pinTo(int cpu)
+{
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cpu, &set);
+    return pthread_setaffinity_np(pthread_self(), sizeof(set), &set) == 0;
+}
+
+/// Mean round trip (ns) of a flag between this thread pinned to @a a and another pinned to @a b.
+double roundTripNs(int a, int b, int trips)
+{
+    alignas(64) std::atomic<int> flag{0};
+    std::atomic<bool> ready{false};
+    std::thread other([&] {
+        pinTo(b);
+        ready.store(true);
+        for (int i = 0; i < trips; ++i) {
+            while (flag.load(std::memory_order_acquire) != 1) {
+            }
+            flag.store(0, std::memory_order_release);
+        }
+    });
+    pinTo(a);
+    while (!ready.load()) {
+    }
+    const auto t0 = Clock::now();
+    for (int i = 0; i < trips; ++i) {
+        flag.store(1, std::memory_order_release);
+        while (flag.load(std::memory_order_acquire) != 0) {
+        }
+    }
+    const auto t1 = Clock::now();
+    other.join();
+    return std::chrono::duration<double, std::nano>(t1 - t0).count() / trips;
+}
+
+/// Spins @a n iterations; returns something the compiler cannot drop.
+uint64_t spin(uint64_t n)
+{
+    volatile uint64_t x = 0;
+    for (uint64_t i = 0; i < n; ++i)
+        x = x + i;
+    return x;
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    const int threads = argc > 1 ? std::max(1, std::atoi(argv[1])) : 2;
+    const double workUs = argc > 2 ? std::atof(argv[2]) : 20.0;
+
+    cpu_set_t allowed;
+    CPU_ZERO(&allowed);
+    sched_getaffinity(0, sizeof(allowed), &allowed);
+    std::vector<int> cpus;
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+        if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    std::printf("cache-line round trip from CPU %d (ns, best of 3 runs of 100000):\n", cpus[0]);
+    for (size_t k = 1; k < cpus.size(); ++k) {
+        double best = 1e30;
+        for (int r = 0; r < 3; ++r)
+            best = std::min(best, roundTripNs(cpus[0], cpus[k], 100000));
+        std::printf("  CPU %d: %.0f\n", cpus[k], best);
+    }
+    if (cpus.size() < 2) std::printf("  (one CPU only)\n");
+    pinTo(cpus[0]);
+    // Calibrate the task's spin to workUs on one thread.
+    uint64_t n = 1000;
+    for (;;) {
+        const auto t0 = Clock::now();
+        spin(n);
+        const double us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+        if (us > 2000) {
+            n = uint64_t(double(n) * workUs / us);
+            break;
+        }
+        n *= 2;
+    }
+    CPU_ZERO(&allowed);
+    for (int c : cpus)
+        CPU_SET(c, &allowed);
+    pthread_setaffinity_np(pthread_self(), sizeof(allowed), &allowed);
+    tbb::task_arena arena(threads);
+    const int iterations = 20000;
+    std::atomic<uint64_t> sink{0};
+    for (int r = 0; r < 3; ++r) {
+        const auto t0 = Clock::now();
+        for (int i = 0; i < iterations; ++i) {
+            arena.execute([&] {
+                tbb::parallel_for(
+                    tbb::blocked_range<int>(0, threads, 1),
+                    [&](const tbb::blocked_range<int>&) {
+                        sink.fetch_add(spin(n), std::memory_order_relaxed);
+                    },
+                    tbb::simple_partitioner());
+            });
+        }
+        const double us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count() / iterations;
+        std::printf("fork/join of %d tasks of %.1f us each: %.2f us per step (%.2f us beyond the work; "
+                    "%.2fx of one thread doing them all)\n",
+                    threads, workUs, us, us - workUs, threads * workUs / us);
+    }
+    return sink.load() == 42 ? 1 : 0;
+}
