@@ -829,10 +829,10 @@ __attribute__((always_inline)) inline void processRangeBody(const PassInput& in,
     uint64_t examined = 0, overTc = 0, updated = 0;
     int64_t overloadDelta = 0, maxWritten = 0;
     // Item wi + 1 is looked up and filtered before item wi's blocks run (a software pipeline): the
-    // filter's loads are the first touch of the item's cells, mostly from L2, and issued ahead of
-    // the block loop they no longer wait behind its branches. It reads only that item's own cells,
-    // which no other item of the pass writes (blocks of one phase are disjoint), so its result is
-    // the same either way.
+    // filter's loads are the first touch of the item's cells (from L2, or L3 when the clay is spread
+    // wide), and issued ahead of item wi's block loop they no longer wait behind its branches. It reads only
+    // that item's own cells, which no other item of the pass writes (blocks of one phase are disjoint), so
+    // its result is the same either way.
     struct Prepared {
         const LeafSet* set;
         uint32_t need;
