@@ -141,9 +141,11 @@ TEST(BlockMasks, AddressingTablesPointAtEachCorner)
                     const Origin leaf = leafOrigin(anchor, t.leaf[d3][p][b][c]);
                     EXPECT_EQ(leaf, Origin(x & ~7, y & ~7, z & ~7)) << d3 << p << b << c;
                     EXPECT_EQ(t.offset[d3][p][b][c], ((x & 7) << 6) | ((y & 7) << 3) | (z & 7));
-                    // A block touches neighbour leaf w only if needLeaf says so.
+                    // A block touches neighbour leaf w only if neededLeaves says so (the even
+                    // phase's corners all lie in the anchor's leaf, w = 0, which it always holds).
                     const int w = t.leaf[d3][p][b][c];
-                    EXPECT_TRUE((t.needLeaf[d3][w] >> b) & 1u);
+                    const uint64_t one = uint64_t(1) << b;
+                    EXPECT_TRUE(((d3 ? neededLeaves<true>(one) : neededLeaves<false>(one)) >> w) & 1u);
                 }
             }
         }
@@ -152,8 +154,8 @@ TEST(BlockMasks, AddressingTablesPointAtEachCorner)
 
 TEST(BlockMasks, NeededLeavesAreTheLeavesTheBlocksTouch)
 {
-    // Every mask of one block, and random masks: bit w iff some block of the mask touches leaf w
-    // (BlockTables::needLeaf, checked against the corners' leaves above).
+    // Every mask of one block, and random masks: bit w iff a corner of some block of the mask lies
+    // in leaf w (BlockTables::leaf, checked against the corners' coordinates above).
     const BlockTables& t = blockTables();
     std::vector<uint64_t> masks;
     for (int b = 0; b < 64; ++b)
@@ -167,10 +169,10 @@ TEST(BlockMasks, NeededLeavesAreTheLeavesTheBlocksTouch)
     for (const uint64_t m3 : masks) {
         for (int d3 = 0; d3 < 2; ++d3) {
             const uint64_t m = d3 ? m3 : (m3 & 0xFFFFull);
-            uint32_t expected = 0;
-            for (int w = 0; w < 8; ++w)
-                if (m & t.needLeaf[d3][w]) expected |= 1u << w;
-            expected |= 1u; // the anchor's leaf, even for an empty mask
+            uint32_t expected = 1u; // the anchor's leaf, even for an empty mask
+            for (uint64_t left = m; left; left &= left - 1)
+                for (int c = 0; c < (d3 ? 8 : 4); ++c)
+                    expected |= 1u << t.leaf[d3][1][__builtin_ctzll(left)][c];
             EXPECT_EQ(d3 ? neededLeaves<true>(m) : neededLeaves<false>(m), expected)
                 << std::hex << m << " " << d3;
         }

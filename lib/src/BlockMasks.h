@@ -194,7 +194,6 @@ inline Origin blockOrigin(const Origin& anchor, int bit, int phase, bool is3D)
 struct BlockTables {
     uint16_t offset[2][2][64][8]; // [dims3][phase][bit][corner]
     uint8_t leaf[2][2][64][8];
-    uint64_t needLeaf[2][8]; // [dims3][leaf]: blocks (odd phase) that touch that neighbour leaf
     BlockTables()
     {
         for (int d3 = 0; d3 < 2; ++d3) {
@@ -212,13 +211,6 @@ struct BlockTables {
                     }
                 }
             }
-            for (int w = 0; w < 8; ++w) {
-                uint64_t m = ~0ull;
-                if (w & 1) m &= kX0;
-                if (w & 2) m &= kY0;
-                if (w & 4) m &= (d3 ? kZ0 : 0ull);
-                needLeaf[d3][w] = (w == 0) ? ~0ull : m;
-            }
         }
     }
 };
@@ -230,8 +222,8 @@ inline const BlockTables& blockTables()
 }
 
 /// The leaves the odd-phase blocks of @a mask read, as bits w of leafOrigin(anchor, w): bit w is set
-/// iff a block of the mask touches that leaf (BlockTables::needLeaf), i.e. lies at the low end
-/// (bx, by or bz = 0) of every axis in w. Bit 0, the anchor's own leaf, is always set.
+/// iff a corner of a block of the mask lies in that leaf (BlockTables::leaf), i.e. the block lies at
+/// the low end (bx, by or bz = 0) of every axis in w. Bit 0, the anchor's own leaf, is always set.
 template <bool D3> inline uint32_t neededLeaves(uint64_t mask)
 {
     const uint64_t x = mask & kX0, y = mask & kY0, xy = x & kY0;

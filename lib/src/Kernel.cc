@@ -696,7 +696,7 @@ inline uint64_t filterBlocks(OverFilter f, const int32_t* const read[8], uint64_
 
 /// The accessor path's leaves (no table, or an anchor it lacks): the set, and what it was fetched for.
 struct FetchedLeaves {
-    LeafSet set;
+    LeafSet set{};        // slots past the phase's count stay null: fetchLeaves never writes them
     Origin anchor;        // the anchor these leaves were fetched for
     uint32_t fetched = 0; // which of the 8 slots were fetched (0: none yet)
 };
@@ -732,14 +732,15 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
             reused |= 1u << w;
         }
     }
-    for (int w = 0; w < 8; ++w) {
+    ls.missing |= uint8_t(0xFFu << kCount); // slots the phase never reads
+    for (int w = 0; w < kCount; ++w) {
         if ((reused >> w) & 1u) continue;
         ls.leaf[w] = nullptr;
         ls.data[w] = nullptr;
         ls.read[w] = kZeroLeaf;
         ls.obs[w] = nullptr;
         const uint8_t bit = uint8_t(1u << w);
-        if (w >= kCount || !((need >> w) & 1u)) {
+        if (!((need >> w) & 1u)) {
             ls.missing |= bit;
             continue;
         }
