@@ -1,39 +1,57 @@
 #!/usr/bin/env bash
 # Compares builds of vdbclay on one scene, side by side: runs them in turn, ROUNDS times, each on one
-# thread pinned to one CPU, and prints the automaton's repartition time per updated block (from
-# --stats: stage_seconds.repartition / blocks_updated) and the whole run's time, as median and range.
+# thread pinned to one CPU (or as THREADS says), and prints the automaton's repartition time per
+# updated block (from --stats: stage_seconds.repartition / blocks_updated) and the whole run's time,
+# as median and range.
 # Alternating the builds is what makes the ratio trustworthy on a shared, noisy machine (see
 # docs/PERFORMANCE.md); a single pair of runs is not.
 #
-# usage: bench/ab-repartition.sh SCENE ROUNDS NAME=BINARY[:LIBDIR] ...
+# usage: bench/ab-repartition.sh SCENE ROUNDS NAME=[VAR=VALUE ...]BINARY[:LIBDIR] ...
 #   LIBDIR, when given, goes first on LD_LIBRARY_PATH (a copy of an older libvdbclay.so runs under
-#   the same binary). CPU (default 1) picks the CPU to pin to.
+#   the same binary). VAR=VALUE words before the binary set its environment (quote the spec).
+#   THREADS (default 1) is the --threads of every run, THREADS=N among a spec's words of its own;
+#   CPU (default 1, or 0-(THREADS-1)) the CPUs to pin to.
 # example: bench/ab-repartition.sh bench/scenes/press48-0.8tc.json 10 \
 #            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
+#          THREADS=2 bench/ab-repartition.sh bench/scenes/press128-0.8tc.json 8 \
+#            'tbb=VDBCLAY_PASS_CREW=0 build/apps/vdbclay' crew=build/apps/vdbclay
 set -euo pipefail
 if [[ $# -lt 3 ]]; then
-    sed -n '2,12p' "$0" >&2
+    sed -n '2,17p' "$0" >&2
     exit 2
 fi
 scene=$1 rounds=$2
 shift 2
-cpu=${CPU:-1}
 py=/usr/bin/python3
 [[ -x $py ]] || py=python3
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+# parse SPEC: sets name, vars (array of VAR=VALUE), bin, lib
+parse() {
+    local spec=$1 words
+    name=${spec%%=*}
+    read -r -a words <<<"${spec#*=}"
+    vars=() threads=${THREADS:-1}
+    local w
+    for w in "${words[@]:0:${#words[@]}-1}"; do
+        if [[ $w == THREADS=* ]]; then threads=${w#THREADS=}; else vars+=("$w"); fi
+    done
+    if [[ $threads == 1 ]]; then cpu=${CPU:-1}; else cpu=${CPU:-0-$((threads - 1))}; fi
+    local last=${words[${#words[@]}-1]}
+    bin=${last%%:*} lib=
+    [[ $last == *:* ]] && lib=${last#*:}
+    return 0
+}
 for spec in "$@"; do
-    [[ $spec == *=* ]] || { echo "ab-repartition: '$spec' is not NAME=BINARY[:LIBDIR]" >&2; exit 2; }
-    rest=${spec#*=}
-    [[ -x ${rest%%:*} ]] || { echo "ab-repartition: '${rest%%:*}' is not an executable" >&2; exit 2; }
+    [[ $spec == *=* ]] || { echo "ab-repartition: '$spec' is not NAME=[VAR=VALUE ...]BINARY[:LIBDIR]" >&2; exit 2; }
+    parse "$spec"
+    [[ -x $bin ]] || { echo "ab-repartition: '$bin' is not an executable" >&2; exit 2; }
 done
 for ((r = 1; r <= rounds; ++r)); do
     for spec in "$@"; do
-        name=${spec%%=*} rest=${spec#*=}
-        bin=${rest%%:*} lib=
-        [[ $rest == *:* ]] && lib=${rest#*:}
-        LD_LIBRARY_PATH=$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH} taskset -c "$cpu" "$bin" run "$scene" \
-            --threads 1 --quiet --stats "$tmp/s.json" >/dev/null
+        parse "$spec"
+        env ${vars[@]+"${vars[@]}"} LD_LIBRARY_PATH=$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH} \
+            taskset -c "$cpu" "$bin" run "$scene" --threads "$threads" --quiet --stats "$tmp/s.json" >/dev/null
         "$py" -c 'import json,sys; s=json.load(open(sys.argv[1])); print(sys.argv[2], s["stage_seconds"]["repartition"], s["blocks_updated"], s["seconds"])' \
             "$tmp/s.json" "$name" >>"$tmp/rows"
     done

@@ -57,8 +57,8 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
         -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_PYTHON=OFF >/dev/null
 fi
-cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_tool_placement test_transport \
-  test_output_stages vdbclay_cli
+cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_pass_crew test_tool_placement \
+  test_transport test_output_stages vdbclay_cli
 
 # The instrumented TBB must be the one loaded: check, rather than trust the search path.
 export LD_LIBRARY_PATH=$TBB_PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -84,6 +84,8 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 # the normal and ASan suites run it.
 "$BUILD_DIR/tests/test_automaton" --gtest_brief=1 \
   --gtest_filter='-AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles'
+# The pass's crew (lib/src/PassCrew.h) alone: its ticket, done count and sleep under contention.
+"$BUILD_DIR/tests/test_pass_crew" --gtest_brief=1
 # The push and the tools' placement on 1, 2, 3 and 8 threads; the global layer's solver likewise.
 "$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1
 "$BUILD_DIR/tests/test_transport" --gtest_brief=1 --gtest_filter='*Thread*'

@@ -326,9 +326,9 @@ TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
 TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
 {
     // The pass splits (PassSplit.h): the default weighted one (chunks of about equal candidate blocks,
-    // serial below a threshold) and round 4's auto partitioner. Every item exactly once: the same
-    // hash, and the same blocks examined and updated (a lost or doubled item changes the counts), as
-    // one thread (which takes no split).
+    // serial below a threshold; on the pass's crew, or on TBB tasks) and round 4's auto partitioner. Every
+    // item exactly once: the same hash, and the same blocks examined and updated (a lost or doubled item
+    // changes the counts), as one thread (which takes no split).
     using automaton_internal::PassSplit;
     const PassSplit saved = automaton_internal::passSplit();
     for (Rule rule : {Rule::Prorata, Rule::Arata}) {
@@ -366,6 +366,17 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
                             << ruleName(rule) << " " << dims << "D, K " << k << ", MIN " << minBlocks << ", "
                             << threads << " threads";
                 }
+            }
+            // The chunks on TBB tasks instead of the pass's crew (PassSplit::crew, PassCrew.h).
+            for (int k : {1, 3}) {
+                PassSplit p;
+                p.perThread = k;
+                p.crew = false;
+                automaton_internal::passSplit() = p;
+                for (int threads : {2, 3, 8})
+                    EXPECT_EQ(runOnce(threads), expected)
+                        << ruleName(rule) << " " << dims << "D, TBB tasks, K " << k << ", " << threads
+                        << " threads";
             }
             // Chunk 0 with a smaller share (FIRST), and without the predrain (Candidates::predrain).
             for (int first : {100, 40}) {

@@ -7,6 +7,7 @@
 //   Candidates.*   which blocks a step examines: the last two steps' changes, in layer order; while
 //                  the leaf table is valid, accumulated per table anchor (dense mode, filled by the
 //                  pass itself), otherwise merged from sorted lists
+//   PassCrew.*     the threads a pass runs on, kept from one pass to the next (no fork/join a step)
 //   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule; and
 //                  the flat leaf table (LeafTable), which hands the pass an anchor's leaves by one
 //                  hash lookup; cleared on every edit, resync and grown leaf, rebuilt lazily
@@ -18,8 +19,10 @@
 //                of horizontal layers, y up, as in the paper's p layers. (Dense mode: a scan of the
 //                anchors marked by the last passes; on several threads the part of it below the
 //                other chunks' reach was already drained by the last pass's chunk 0: predrain.)
-//   repartition  tbb::parallel_reduce over contiguous ranges of that list (layers of blocks), each
-//                range through processRange (Kernel.h: what a task may write and why it is safe);
+//   repartition  contiguous ranges of that list (layers of blocks), one chunk per thread of about
+//                equal candidate blocks, run on the pass's crew (PassCrew.h: threads kept between
+//                passes; PassSplit.h for the other splits), each range through processRange
+//                (Kernel.h: what a task may write and why it is safe);
 //                in dense mode the pass also ORs its items' changes into the candidates of the
 //                next two steps (DenseSink, order-free), each thread into its own lane
 //                (Candidates::lanes), which the gathers OR together. Includes leaf table builds.
@@ -49,6 +52,7 @@
 #include "Candidates.h"
 #include "Format.h"
 #include "Kernel.h"
+#include "PassCrew.h"
 #include "PassSplit.h"
 
 #include <openvdb/openvdb.h>
@@ -154,6 +158,7 @@ struct Automaton::Impl {
     std::vector<size_t> bounds;          // runPassWeighted's chunks
     std::vector<PassTotals> chunkTotals; // and their totals
     std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
+    std::unique_ptr<PassCrew> crew;      // runPassWeighted's threads (PassSplit::crew), made at first use
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -164,6 +169,7 @@ struct Automaton::Impl {
     {
         if (threads < 0) throw Error("threads must be >= 0, got " + std::to_string(threads));
         opts.threads = threads;
+        crew.reset();
         arena.reset();
         if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
     }
@@ -433,17 +439,32 @@ struct Automaton::Impl {
         // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
         const uint32_t firstOfRest =
             split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
-        inArena([&] {
-            tbb::parallel_for(
-                tbb::blocked_range<size_t>(0, m, 1),
-                [&](const tbb::blocked_range<size_t>& r) {
-                    for (size_t c = r.begin(); c != r.end(); ++c) {
-                        processRange(in, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
-                        if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
-                    }
-                },
-                tbb::simple_partitioner());
-        });
+        if (split.crew) {
+            // The crew's lanes are the arena's slots: lane l records into sink lane l.
+            if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
+            const PassCrew::Body body = [&](size_t c, int lane) {
+                PassInput own = in;
+                if (in.sink) {
+                    own.sink = in.sink + lane;
+                    own.sinkLanes = 1;
+                }
+                processRange(own, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+                if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+            };
+            crew->run(m, body);
+        } else {
+            inArena([&] {
+                tbb::parallel_for(
+                    tbb::blocked_range<size_t>(0, m, 1),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t c = r.begin(); c != r.end(); ++c) {
+                            processRange(in, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+                            if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+                        }
+                    },
+                    tbb::simple_partitioner());
+            });
+        }
         for (const PassTotals& t : chunkTotals)
             tot.join(t);
         return tot;
@@ -626,6 +647,8 @@ PassSplit& passSplit()
         }
         const char* pre = std::getenv("VDBCLAY_PASS_PREDRAIN");
         if (pre && std::strcmp(pre, "0") == 0) p.predrain = false;
+        const char* crew = std::getenv("VDBCLAY_PASS_CREW");
+        if (crew && std::strcmp(crew, "0") == 0) p.crew = false;
         if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
         int k = 1, first = p.firstShare;
         unsigned long long m = 0;

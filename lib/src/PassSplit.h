@@ -15,6 +15,11 @@
 // gets FIRST = 92 % of an even share of the candidate blocks (VDBCLAY_PASS_SPLIT=weighted:K:MIN:FIRST;
 // VDBCLAY_PASS_PREDRAIN=0 turns the predrain off). Shared 2-core machine, 2 threads, medians of 6-7
 // alternated runs: 2.14-2.26 s against 2.21-2.37 s without (docs/PERFORMANCE.md, "Round 7").
+// Round 13: the weighted split's chunks run on a PassCrew (PassCrew.h: the helper threads kept from
+// one pass to the next, a pass published by one atomic store) instead of a TBB fork/join per step;
+// VDBCLAY_PASS_CREW=0 restores the TBB tasks. Same chunks, same lanes (lane l records into sink lane
+// l). press 128^3 on 2 threads, this VM: the repartition 8-17 % faster in the runs where a hand-off
+// between the vCPUs is slow, level where it is fast (docs/PERFORMANCE.md, "Round 13").
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
@@ -31,6 +36,7 @@ struct PassSplit {
     uint64_t minBlocks = 0; ///< MIN: fewer candidate blocks than this run serially
     int firstShare = 92;    ///< FIRST: chunk 0's candidate blocks, in percent of an even share
     bool predrain = true;   ///< chunk 0 then drains the next step's candidates out of the others' reach
+    bool crew = true;       ///< the chunks run on a PassCrew (threads kept between passes), not TBB
 };
 
 /// The process's setting: VDBCLAY_PASS_SPLIT at the first call; tests may assign it.
