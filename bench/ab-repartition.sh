@@ -10,14 +10,15 @@
 #   LIBDIR, when given, goes first on LD_LIBRARY_PATH (a copy of an older libvdbclay.so runs under
 #   the same binary). VAR=VALUE words before the binary set its environment (quote the spec).
 #   THREADS (default 1) is the --threads of every run, THREADS=N among a spec's words of its own;
-#   CPU (default 1, or 0-(THREADS-1)) the CPUs to pin to.
+#   CPU (default 1, or 0-(THREADS-1)) the CPUs to pin to. Last, each build's ratio to the first,
+#   round by round (the same state of the machine), as median and range.
 # example: bench/ab-repartition.sh bench/scenes/press48-0.8tc.json 10 \
 #            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
 #          THREADS=2 bench/ab-repartition.sh bench/scenes/press128-0.8tc.json 8 \
 #            'tbb=VDBCLAY_PASS_CREW=0 build/apps/vdbclay' crew=build/apps/vdbclay
 set -euo pipefail
 if [[ $# -lt 3 ]]; then
-    sed -n '2,17p' "$0" >&2
+    sed -n '2,18p' "$0" >&2
     exit 2
 fi
 scene=$1 rounds=$2
@@ -67,4 +68,13 @@ for spec in sys.argv[2:]:
     print(f"{name:8s} n={len(per)} repartition/update median {statistics.median(per):.1f} ns "
           f"({per[0]:.1f}-{per[-1]:.1f}); run median {statistics.median(run):.3f} s "
           f"({run[0]:.3f}-{run[-1]:.3f}); updated blocks {mine[0][2]}")
+# Round by round against the first build (same round, so the same state of the machine).
+names = [spec.split('=')[0] for spec in sys.argv[2:]]
+base = [r for r in rows if r[0] == names[0]]
+for name in names[1:]:
+    mine = [r for r in rows if r[0] == name]
+    rep = sorted(float(b[1]) / float(m[1]) for b, m in zip(base, mine))
+    run = sorted(float(b[3]) / float(m[3]) for b, m in zip(base, mine))
+    print(f"{names[0]}/{name} per round: repartition median {statistics.median(rep):.2f}x "
+          f"({rep[0]:.2f}-{rep[-1]:.2f}), run median {statistics.median(run):.2f}x ({run[0]:.2f}-{run[-1]:.2f})")
 PY

@@ -43,11 +43,21 @@ inline void backOff(unsigned spins)
 PassCrew::PassCrew(int helpers)
 {
     mHelpers.reserve(size_t(helpers > 0 ? helpers : 0));
-    for (int i = 0; i < helpers; ++i)
-        mHelpers.emplace_back([this, lane = i + 1] { helperLoop(lane); });
+    try {
+        for (int i = 0; i < helpers; ++i)
+            mHelpers.emplace_back([this, lane = i + 1] { helperLoop(lane); });
+    } catch (...) { // a thread could not start: stop those that did (no destructor runs), rethrow
+        stop();
+        throw;
+    }
 }
 
 PassCrew::~PassCrew()
+{
+    stop();
+}
+
+void PassCrew::stop()
 {
     {
         std::lock_guard<std::mutex> lock(mMutex);

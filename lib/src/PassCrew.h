@@ -13,9 +13,15 @@
 // whether the helpers are spinning, asleep or slow to start. The caller claims chunks too, and then
 // waits only for chunks already claimed, which are running: run() never waits on a helper that has
 // not started. Helpers spin for a while after each pass (the next one is usually microseconds
-// away), then sleep on a condition variable until the next pass or the crew's end; a pass finding a
-// helper asleep wakes it and does not wait for it. A chunk's exception is caught on its lane and the
-// lowest chunk's is rethrown by run() once every chunk has finished.
+// away): with pause at first, then yielding the CPU (where there are more threads than cores, the
+// working lanes must get it), then, after 200 us idle, asleep on a condition variable until the
+// next pass or the crew's end; a pass finding a helper asleep wakes it and does not wait for it. A
+// chunk's exception is caught on its lane and the lowest chunk's is rethrown by run() once every
+// chunk has finished.
+//
+// The helpers are the crew's own threads (std::thread), made when the automaton first splits a pass
+// and joined with it; TBB's workers serve the other parallel stages (push, scans, output) and sleep
+// while a settle runs, as the crew's helpers sleep during those stages. Not fork-safe (as TBB).
 //
 // What the body may do: what a task of tbb::parallel_for may do (Kernel.h's processRange contract):
 // write only what its chunk owns, or its lane's own data. run()'s return happens after every chunk's
@@ -75,6 +81,8 @@ private:
     /// how many it ran.
     size_t work(uint64_t t, int lane);
     void helperLoop(int lane);
+    /// Tells the helpers to quit, wakes and joins them.
+    void stop();
 
     // Cache lines by who writes them, since every line both sides touch per pass costs a transfer
     // between cores (~0.25 us on a VM): the ticket and the body (the caller, once per pass; a helper

@@ -18,8 +18,9 @@
 // Round 13: the weighted split's chunks run on a PassCrew (PassCrew.h: the helper threads kept from
 // one pass to the next, a pass published by one atomic store) instead of a TBB fork/join per step;
 // VDBCLAY_PASS_CREW=0 restores the TBB tasks. Same chunks, same lanes (lane l records into sink lane
-// l). press 128^3 on 2 threads, this VM: the repartition 8-17 % faster in the runs where a hand-off
-// between the vCPUs is slow, level where it is fast (docs/PERFORMANCE.md, "Round 13").
+// l). 2 threads on the 2-vCPU VM, alternated runs, per round against one thread: press 48^3's
+// repartition 0.89x -> 0.99x, sphere-over-lump's 1.01x -> 1.18x, press 128^3's level to 7 % faster
+// (docs/PERFORMANCE.md, "Round 13"): the smaller the steps, the more the fork/join weighed.
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
