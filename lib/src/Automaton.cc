@@ -440,11 +440,13 @@ struct Automaton::Impl {
         const uint32_t firstOfRest =
             split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
         if (split.crew) {
-            // The crew's lanes are the arena's slots: lane l records into sink lane l.
+            // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
+            // into sink lane l. (Were there more, processRange would find no lane for a helper's
+            // thread and record nothing, flagged sinkMissed: record() then records every item.)
             if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
             const PassCrew::Body body = [&](size_t c, int lane) {
                 PassInput own = in;
-                if (in.sink) {
+                if (in.sink && lane < in.sinkLanes) {
                     own.sink = in.sink + lane;
                     own.sinkLanes = 1;
                 }
