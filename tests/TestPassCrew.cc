@@ -120,6 +120,17 @@ TEST(PassCrewTest, TheLowestChunksExceptionIsRethrownAfterEveryChunkFinished)
     }
 }
 
+TEST(PassCrewTest, MoreChunksThanTheTicketHoldsAreRefusedBeforeAnyRuns)
+{
+    PassCrew crew(1);
+    std::atomic<int> ran{0};
+    EXPECT_THROW(crew.run(PassCrew::kMaxChunks + 1, [&](size_t, int) { ran.fetch_add(1); }),
+                 std::length_error);
+    EXPECT_EQ(ran.load(), 0);
+    crew.run(PassCrew::kMaxChunks, [&](size_t, int) { ran.fetch_add(1); });
+    EXPECT_EQ(ran.load(), int(PassCrew::kMaxChunks));
+}
+
 TEST(PassCrewTest, DestroyedWhileSpinningOrAsleepOrNeverUsed)
 {
     for (int i = 0; i < 50; ++i) {

@@ -419,7 +419,8 @@ struct Automaton::Impl {
             return tot;
         }
         const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
-        const size_t chunks = std::min(n, size_t(std::max(threads, 1)) * size_t(split.perThread));
+        const size_t chunks =
+            std::min({n, size_t(std::max(threads, 1)) * size_t(split.perThread), PassCrew::kMaxChunks});
         // Chunk 0 gets firstShare % of an even share (it also predrains), the others the rest evenly.
         const uint64_t first = std::min(total, total * uint64_t(split.firstShare) / (100 * chunks));
         bounds.clear();
@@ -439,6 +440,11 @@ struct Automaton::Impl {
         // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
         const uint32_t firstOfRest =
             split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
+        // One chunk, as any lane or task runs it: its items, then (chunk 0) the predrain.
+        auto runChunk = [&](size_t c, const PassInput& input) {
+            processRange(input, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+            if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+        };
         if (split.crew) {
             // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
             // into sink lane l. (Were there more, processRange would find no lane for a helper's
@@ -450,8 +456,7 @@ struct Automaton::Impl {
                     own.sink = in.sink + lane;
                     own.sinkLanes = 1;
                 }
-                processRange(own, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
-                if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+                runChunk(c, own);
             };
             crew->run(m, body);
         } else {
@@ -459,10 +464,8 @@ struct Automaton::Impl {
                 tbb::parallel_for(
                     tbb::blocked_range<size_t>(0, m, 1),
                     [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t c = r.begin(); c != r.end(); ++c) {
-                            processRange(in, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
-                            if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
-                        }
+                        for (size_t c = r.begin(); c != r.end(); ++c)
+                            runChunk(c, in);
                     },
                     tbb::simple_partitioner());
             });

@@ -3,6 +3,8 @@
 #include "PassCrew.h"
 
 #include <chrono>
+#include <stdexcept>
+#include <string>
 
 #if defined(__x86_64__) || defined(__SSE2__)
 #include <immintrin.h>
@@ -121,7 +123,9 @@ void PassCrew::helperLoop(int lane)
 void PassCrew::run(size_t chunks, const Body& body)
 {
     if (chunks == 0) return;
-    if (chunks > kMaxChunks) chunks = kMaxChunks; // (callers stay far below: threads x chunks per thread)
+    if (chunks > kMaxChunks) // the ticket holds 16 bits of count: refused, never silently cut short
+        throw std::length_error("PassCrew::run: " + std::to_string(chunks) + " chunks, at most " +
+                                std::to_string(kMaxChunks));
     mErrors.assign(chunks, nullptr);
     mPub.body = &body;
     const uint64_t epoch = uint64_t(epochOf(mPub.ticket.load(std::memory_order_relaxed)) + 1) & 0xFFFFFFFFu;

@@ -54,9 +54,9 @@ public:
     int lanes() const { return int(mHelpers.size()) + 1; }
 
     using Body = std::function<void(size_t chunk, int lane)>;
-    /// Runs body(c, lane) for every c in [0, chunks) exactly once (chunks <= kMaxChunks) across the
-    /// lanes; returns when all have finished, rethrowing the lowest chunk's exception if any threw.
-    /// One run() at a time per crew.
+    /// Runs body(c, lane) for every c in [0, chunks) exactly once across the lanes; returns when all
+    /// have finished, rethrowing the lowest chunk's exception if any threw. More than kMaxChunks
+    /// chunks: std::length_error, before any runs. One run() at a time per crew.
     void run(size_t chunks, const Body& body);
 
     static constexpr size_t kMaxChunks = 0xFFFF;
