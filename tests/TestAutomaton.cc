@@ -378,17 +378,22 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
                         << ruleName(rule) << " " << dims << "D, TBB tasks, K " << k << ", " << threads
                         << " threads";
             }
-            // Chunk 0 with a smaller share (FIRST), and without the predrain (Candidates::predrain).
+            // Chunk 0 with a smaller share (FIRST), and without the predrain (Candidates::predrain);
+            // FIRST alone sets the shares with the balance off, and the first pass of each phase with
+            // it on (PassBalance.h; later passes cut where the chunks' measured speed says).
             for (int first : {100, 40}) {
                 for (bool predrain : {false, true}) {
-                    PassSplit p;
-                    p.firstShare = first;
-                    p.predrain = predrain;
-                    automaton_internal::passSplit() = p;
-                    for (int threads : {2, 3, 8})
-                        EXPECT_EQ(runOnce(threads), expected)
-                            << ruleName(rule) << " " << dims << "D, FIRST " << first << ", predrain "
-                            << predrain << ", " << threads << " threads";
+                    for (bool balance : {false, true}) {
+                        PassSplit p;
+                        p.firstShare = first;
+                        p.predrain = predrain;
+                        p.balance = balance;
+                        automaton_internal::passSplit() = p;
+                        for (int threads : {2, 3, 8})
+                            EXPECT_EQ(runOnce(threads), expected)
+                                << ruleName(rule) << " " << dims << "D, FIRST " << first << ", predrain "
+                                << predrain << ", balance " << balance << ", " << threads << " threads";
+                    }
                 }
             }
         }

@@ -52,6 +52,7 @@
 #include "Candidates.h"
 #include "Format.h"
 #include "Kernel.h"
+#include "PassBalance.h"
 #include "PassCrew.h"
 #include "PassSplit.h"
 
@@ -159,6 +160,10 @@ struct Automaton::Impl {
     std::vector<PassTotals> chunkTotals; // and their totals
     std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
     std::unique_ptr<PassCrew> crew;      // runPassWeighted's threads (PassSplit::crew), made at first use
+    PassBalance balance;                 // runPassWeighted's shares, from its chunks' measured speed
+    std::vector<uint64_t> cutTargets;    // runPassWeighted's cumulative block counts per cut
+    std::vector<double> chunkSeconds;    // runPassWeighted's chunks' measured time
+    std::vector<uint64_t> chunkBlocks;   // and their candidate blocks
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -170,6 +175,7 @@ struct Automaton::Impl {
         if (threads < 0) throw Error("threads must be >= 0, got " + std::to_string(threads));
         opts.threads = threads;
         crew.reset();
+        balance.reset();
         arena.reset();
         if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
     }
@@ -421,14 +427,18 @@ struct Automaton::Impl {
         const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
         const size_t chunks =
             std::min({n, size_t(std::max(threads, 1)) * size_t(split.perThread), PassCrew::kMaxChunks});
-        // Chunk 0 gets firstShare % of an even share (it also predrains), the others the rest evenly.
-        const uint64_t first = std::min(total, total * uint64_t(split.firstShare) / (100 * chunks));
+        // The chunks' shares of the blocks: by their measured speed in this phase (PassBalance.h),
+        // or until it is known (or with balance off) chunk 0 firstShare % of an even share (it also
+        // predrains) and the others the rest evenly.
+        if (split.balance)
+            balance.cuts(in.phase, chunks, total, split.firstShare, cutTargets);
+        else
+            PassBalance().cuts(in.phase, chunks, total, split.firstShare, cutTargets);
         bounds.clear();
         bounds.push_back(0);
         size_t cut = 1;
         for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
-            const uint64_t acc = blockSums[i];
-            if (acc >= first + (total - first) * (cut - 1) / (chunks - 1)) {
+            if (blockSums[i] >= cutTargets[cut]) {
                 bounds.push_back(i + 1);
                 ++cut;
             }
@@ -436,14 +446,17 @@ struct Automaton::Impl {
         bounds.push_back(n);
         const size_t m = bounds.size() - 1;
         chunkTotals.assign(m, PassTotals());
+        chunkSeconds.assign(m, 0.0);
         // Chunk 0, once done, drains the next step's candidates that the later chunks cannot reach
         // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
         const uint32_t firstOfRest =
             split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
         // One chunk, as any lane or task runs it: its items, then (chunk 0) the predrain.
         auto runChunk = [&](size_t c, const PassInput& input) {
+            const auto start = Clock::now();
             processRange(input, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
             if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+            chunkSeconds[c] = secondsSince(start);
         };
         if (split.crew) {
             // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
@@ -472,6 +485,12 @@ struct Automaton::Impl {
         }
         for (const PassTotals& t : chunkTotals)
             tot.join(t);
+        if (split.balance && !in.dryRun && m == chunks) {
+            chunkBlocks.resize(m);
+            for (size_t c = 0; c < m; ++c)
+                chunkBlocks[c] = chunkTotals[c].examined;
+            balance.measured(in.phase, m, chunkBlocks.data(), chunkSeconds.data());
+        }
         return tot;
     }
 
@@ -654,6 +673,8 @@ PassSplit& passSplit()
         if (pre && std::strcmp(pre, "0") == 0) p.predrain = false;
         const char* crew = std::getenv("VDBCLAY_PASS_CREW");
         if (crew && std::strcmp(crew, "0") == 0) p.crew = false;
+        const char* balance = std::getenv("VDBCLAY_PASS_BALANCE");
+        if (balance && std::strcmp(balance, "0") == 0) p.balance = false;
         if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
         int k = 1, first = p.firstShare;
         unsigned long long m = 0;

@@ -21,6 +21,11 @@
 // l). 2 threads on the 2-vCPU VM, alternated runs, per round against one thread: press 48^3's
 // repartition 0.89x -> 0.99x, sphere-over-lump's 1.01x -> 1.18x, press 128^3's level to 7 % faster
 // (docs/PERFORMANCE.md, "Round 13"): the smaller the steps, the more the fork/join weighed.
+// Round 14: the shares follow the chunks' measured speed (PassBalance.h): per phase and chunk, an
+// average of seconds per candidate block, and chunk c gets blocks in proportion to its speed (FIRST
+// sets only a phase's first pass); VDBCLAY_PASS_BALANCE=0 restores FIRST's fixed shares. Press
+// 128^3 at 0.8 Tc on 2 threads: the time one lane waits for the other at the end of a pass fell
+// from 8-9 % of the chunks' time to 5 % (docs/PERFORMANCE.md, "Round 14").
 // Either way every item is processed exactly once and the totals are joined order-free, so the
 // results are identical (tests/TestAutomaton.cc). docs/PERFORMANCE.md, round 5: why, and that its
 // speed was not measured on a quiet machine.
@@ -38,6 +43,7 @@ struct PassSplit {
     int firstShare = 92;    ///< FIRST: chunk 0's candidate blocks, in percent of an even share
     bool predrain = true;   ///< chunk 0 then drains the next step's candidates out of the others' reach
     bool crew = true;       ///< the chunks run on a PassCrew (threads kept between passes), not TBB
+    bool balance = true;    ///< shares from the chunks' measured speed (PassBalance.h), not FIRST alone
 };
 
 /// The process's setting: VDBCLAY_PASS_SPLIT at the first call; tests may assign it.

@@ -1,0 +1,75 @@
+// PassBalance (PassBalance.h): the chunks' shares from their measured seconds per block.
+#include "PassBalance.h"
+
+#include <algorithm>
+
+namespace vdbclay {
+namespace automaton_internal {
+
+void PassBalance::cuts(int phase, size_t chunks, uint64_t total, int firstShare,
+                       std::vector<uint64_t>& out) const
+{
+    out.assign(chunks + 1, 0);
+    if (chunks == 0) return;
+    out[chunks] = total;
+    if (chunks == 1) return;
+    const std::vector<double>& est = mPhase[phase & 1].perBlock;
+    const bool known =
+        est.size() == chunks && std::all_of(est.begin(), est.end(), [](double s) { return s > 0; });
+    if (!known) {
+        // Round 7's rule: chunk 0 firstShare % of an even share, the rest evenly.
+        const uint64_t first = std::min(total, total * uint64_t(firstShare) / (100 * chunks));
+        for (size_t c = 1; c < chunks; ++c)
+            out[c] = first + (total - first) * (c - 1) / (chunks - 1);
+        return;
+    }
+    // Shares proportional to speed (1 / seconds per block), each within [1/4, 4] x an even share,
+    // then scaled back to the total.
+    std::vector<double> share(chunks);
+    double speedSum = 0;
+    for (size_t c = 0; c < chunks; ++c)
+        speedSum += 1.0 / est[c];
+    const double even = 1.0 / double(chunks);
+    double sum = 0;
+    for (size_t c = 0; c < chunks; ++c) {
+        share[c] = std::clamp((1.0 / est[c]) / speedSum, even / 4, even * 4);
+        sum += share[c];
+    }
+    double acc = 0;
+    for (size_t c = 1; c < chunks; ++c) {
+        acc += share[c - 1] / sum;
+        out[c] = std::min(total, uint64_t(acc * double(total) + 0.5));
+        out[c] = std::max(out[c], out[c - 1]);
+    }
+}
+
+void PassBalance::measured(int phase, size_t chunks, const uint64_t* blocks, const double* seconds)
+{
+    std::vector<double>& est = mPhase[phase & 1].perBlock;
+    if (est.size() != chunks) est.assign(chunks, 0.0);
+    for (size_t c = 0; c < chunks; ++c) {
+        if (blocks[c] < kMinMeasured || !(seconds[c] > 0)) continue;
+        const double m = seconds[c] / double(blocks[c]);
+        double& s = est[c];
+        if (s == 0) {
+            s = m;
+            continue;
+        }
+        s += (std::clamp(m, s / 2, s * 2) - s) / 8;
+    }
+}
+
+void PassBalance::reset()
+{
+    for (Phase& p : mPhase)
+        p.perBlock.clear();
+}
+
+double PassBalance::secondsPerBlock(int phase, size_t c) const
+{
+    const std::vector<double>& est = mPhase[phase & 1].perBlock;
+    return c < est.size() ? est[c] : 0.0;
+}
+
+} // namespace automaton_internal
+} // namespace vdbclay
