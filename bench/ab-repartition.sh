@@ -10,7 +10,9 @@
 #   LIBDIR, when given, goes first on LD_LIBRARY_PATH (a copy of an older libvdbclay.so runs under
 #   the same binary). VAR=VALUE words before the binary set its environment (quote the spec).
 #   THREADS (default 1) is the --threads of every run, THREADS=N among a spec's words of its own;
-#   CPU (default 1, or 0-(THREADS-1)) the CPUs to pin to. Last, each build's ratio to the first,
+#   CPU (default 1, or 0-(THREADS-1)) the CPUs to pin to, CPU=LIST among a spec's words of its own
+#   (a virtual machine's CPUs need not be equal: bench_handoff measures each; compare one thread on
+#   each CPU with THREADS=1 CPU=0 and THREADS=1 CPU=1). Last, each build's ratio to the first,
 #   round by round (the same state of the machine), as median and range.
 # example: bench/ab-repartition.sh bench/scenes/press48-0.8tc.json 10 \
 #            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
@@ -33,11 +35,18 @@ parse() {
     name=${spec%%=*}
     read -r -a words <<<"${spec#*=}"
     vars=() threads=${THREADS:-1}
-    local w
+    local w own=
     for w in "${words[@]:0:${#words[@]}-1}"; do
-        if [[ $w == THREADS=* ]]; then threads=${w#THREADS=}; else vars+=("$w"); fi
+        if [[ $w == THREADS=* ]]; then
+            threads=${w#THREADS=}
+        elif [[ $w == CPU=* ]]; then
+            own=${w#CPU=}
+        else
+            vars+=("$w")
+        fi
     done
     if [[ $threads == 1 ]]; then cpu=${CPU:-1}; else cpu=${CPU:-0-$((threads - 1))}; fi
+    [[ -n $own ]] && cpu=$own
     local last=${words[${#words[@]}-1]}
     bin=${last%%:*} lib=
     [[ $last == *:* ]] && lib=${last#*:}

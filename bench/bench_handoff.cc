@@ -1,7 +1,12 @@
 // bench_handoff: what it costs this machine to hand work between threads, the floor under a pass on
 // several threads (docs/PERFORMANCE.md, round 12).
 //
-// Two measures, no vdbclay code:
+// Three measures, no vdbclay code:
+// - each CPU's own speed, one at a time (the others idle), on two loops: passes over a 16 KiB buffer
+//   (loads, adds and stores, all in L1, as the automaton's kernel mostly is) and a register-only add
+//   chain. On a virtual machine the CPUs need not be equal: a vCPU whose physical core serves
+//   another guest's thread too runs memory-bound code slower, and then no split of a pass can reach
+//   the CPUs' count as its speed-up (docs/PERFORMANCE.md, round 14);
 // - the round trip of one cache line between two threads pinned to CPUs 0 and k (one thread stores
 //   a flag, the other answers; half of it is what each line a thread reads after another wrote it
 //   costs at least), for every k the process may run on;
@@ -75,6 +80,38 @@ uint64_t spin(uint64_t n)
     return x;
 }
 
+/// Best of 3 (seconds) of a thread pinned to @a cpu running @a loop; negative where it cannot pin.
+template <typename Loop> double pinnedSeconds(int cpu, Loop loop)
+{
+    double best = -1;
+    std::thread t([&] {
+        if (!pinTo(cpu)) return;
+        for (int r = 0; r < 3; ++r) {
+            const auto t0 = Clock::now();
+            loop();
+            const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+            best = best < 0 ? s : std::min(best, s);
+        }
+    });
+    t.join();
+    return best;
+}
+
+/// 20,000 passes over 16 KiB: a load, an add and a store per int, all in L1.
+uint64_t l1Passes()
+{
+    static std::vector<uint32_t> buf(4096, 1);
+    uint64_t sum = 0;
+    for (int pass = 0; pass < 20000; ++pass) {
+        for (uint32_t& v : buf) {
+            sum += v;
+            v += uint32_t(sum);
+        }
+        __asm__ volatile("" : : "r"(buf.data()) : "memory");
+    }
+    return sum;
+}
+
 } // namespace
 
 int main(int argc, char** argv)
@@ -88,6 +125,16 @@ int main(int argc, char** argv)
     std::vector<int> cpus;
     for (int c = 0; c < CPU_SETSIZE; ++c)
         if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    std::printf("each CPU alone, best of 3 (s; and its speed relative to CPU %d):\n", cpus[0]);
+    std::atomic<uint64_t> keep{0};
+    double l1Base = 0, aluBase = 0;
+    for (int cpu : cpus) {
+        const double l1 = pinnedSeconds(cpu, [&] { keep.fetch_add(l1Passes()); });
+        const double alu = pinnedSeconds(cpu, [&] { keep.fetch_add(spin(200000000)); });
+        if (l1Base == 0) l1Base = l1, aluBase = alu;
+        std::printf("  CPU %d: L1 passes %.3f (%.2fx), add chain %.3f (%.2fx)\n", cpu, l1, l1Base / l1, alu,
+                    aluBase / alu);
+    }
     std::printf("cache-line round trip from CPU %d (ns, best of 3 runs of 100000):\n", cpus[0]);
     for (size_t k = 1; k < cpus.size(); ++k) {
         double best = 1e30;
@@ -133,5 +180,5 @@ int main(int argc, char** argv)
                     "%.2fx of one thread doing them all)\n",
                     threads, workUs, us, us - workUs, threads * workUs / us);
     }
-    return sink.load() == 42 ? 1 : 0;
+    return sink.load() + keep.load() == 42 ? 1 : 0;
 }
