@@ -6,10 +6,10 @@
 // item's leaves cost the same however few of its blocks are candidates), and so do the lanes (the
 // caller gathered the work list and predrains after its chunk; the helper's chunk reads lines the
 // caller wrote; and a virtual machine's CPUs need not run at one speed: docs/PERFORMANCE.md, round
-// 14, measured one vCPU at 0.54-0.73x of the other for long stretches). Logged per pass on the 2-vCPU VM, the
-// two chunks finished apart by 26 % of the passes' time, the caller's mostly last (it ran 95 TSC ticks per
-// candidate block, the helper's 67, in one run; 94 and 82-87 in the next two): a lane idle for that long
-// every step.
+// 14, measured one vCPU at 0.54-0.73x of the other for long stretches). Logged per pass on the
+// 2-vCPU VM, the two chunks finished apart by 26 % of the passes' time, the caller's mostly last
+// (it ran 95 TSC ticks per candidate block, the helper's 67, in one run; 94 and 82-87 in the next
+// two): a lane idle for that long every step.
 //
 // How. Per phase (even and odd steps touch different leaves) and per chunk, PassBalance keeps an
 // estimate of the chunk's seconds per candidate block: its whole time (its items, and chunk 0's
