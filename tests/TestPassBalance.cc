@@ -23,7 +23,10 @@ std::vector<uint64_t> cutsOf(const PassBalance& b, int phase, size_t chunks, uin
 void measure(PassBalance& b, int phase, std::vector<uint64_t> blocks, std::vector<double> seconds)
 {
     ASSERT_EQ(blocks.size(), seconds.size());
-    b.measured(phase, blocks.size(), blocks.data(), seconds.data());
+    std::vector<PassBalance::Measure> measures(blocks.size());
+    for (size_t c = 0; c < blocks.size(); ++c)
+        measures[c] = {blocks[c], seconds[c]};
+    b.measured(phase, measures.size(), measures.data());
 }
 
 } // namespace

@@ -162,8 +162,7 @@ struct Automaton::Impl {
     std::unique_ptr<PassCrew> crew;      // runPassWeighted's threads (PassSplit::crew), made at first use
     PassBalance balance;                 // runPassWeighted's shares, from its chunks' measured speed
     std::vector<uint64_t> cutTargets;    // runPassWeighted's cumulative block counts per cut
-    std::vector<double> chunkSeconds;    // runPassWeighted's chunks' measured time
-    std::vector<uint64_t> chunkBlocks;   // and their candidate blocks
+    std::vector<PassBalance::Measure> chunkMeasures; // runPassWeighted's chunks' blocks and time
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -433,7 +432,7 @@ struct Automaton::Impl {
         if (split.balance)
             balance.cuts(in.phase, chunks, total, split.firstShare, cutTargets);
         else
-            PassBalance().cuts(in.phase, chunks, total, split.firstShare, cutTargets);
+            PassBalance::fixedCuts(chunks, total, split.firstShare, cutTargets);
         bounds.clear();
         bounds.push_back(0);
         size_t cut = 1;
@@ -446,7 +445,7 @@ struct Automaton::Impl {
         bounds.push_back(n);
         const size_t m = bounds.size() - 1;
         chunkTotals.assign(m, PassTotals());
-        chunkSeconds.assign(m, 0.0);
+        chunkMeasures.assign(m, PassBalance::Measure());
         // Chunk 0, once done, drains the next step's candidates that the later chunks cannot reach
         // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
         const uint32_t firstOfRest =
@@ -456,7 +455,7 @@ struct Automaton::Impl {
             const auto start = Clock::now();
             processRange(input, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
             if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
-            chunkSeconds[c] = secondsSince(start);
+            chunkMeasures[c] = {chunkTotals[c].examined, secondsSince(start)};
         };
         if (split.crew) {
             // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
@@ -485,12 +484,7 @@ struct Automaton::Impl {
         }
         for (const PassTotals& t : chunkTotals)
             tot.join(t);
-        if (split.balance && !in.dryRun && m == chunks) {
-            chunkBlocks.resize(m);
-            for (size_t c = 0; c < m; ++c)
-                chunkBlocks[c] = chunkTotals[c].examined;
-            balance.measured(in.phase, m, chunkBlocks.data(), chunkSeconds.data());
-        }
+        if (split.balance && !in.dryRun && m == chunks) balance.measured(in.phase, m, chunkMeasures.data());
         return tot;
     }
 

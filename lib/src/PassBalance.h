@@ -40,15 +40,25 @@ public:
     /// Measures from chunks with fewer candidate blocks than this leave their estimate unchanged.
     static constexpr uint64_t kMinMeasured = 16;
 
+    /// What a chunk of a pass measured: its candidate blocks and its seconds in all.
+    struct Measure {
+        uint64_t blocks = 0;
+        double seconds = 0;
+    };
+
     /// Fills @a cuts with chunks + 1 cumulative block counts: chunk c should take the items from the
     /// one whose running block count first exceeds cuts[c] to the one that reaches cuts[c + 1];
     /// cuts[0] = 0, cuts[chunks] = @a total, nondecreasing. @a phase: 0 or 1. @a firstShare: chunk
     /// 0's share, in percent of an even share, while the phase has no estimates (1-100).
     void cuts(int phase, size_t chunks, uint64_t total, int firstShare, std::vector<uint64_t>& cuts) const;
 
-    /// What a pass of @a phase measured: chunk c had @a blocks[c] candidate blocks and took
-    /// @a seconds[c] in all. A pass with another chunk count than the last starts the phase over.
-    void measured(int phase, size_t chunks, const uint64_t* blocks, const double* seconds);
+    /// The cuts without estimates: chunk 0 @a firstShare % of an even share, the others the rest
+    /// evenly (round 7's fixed shares; cuts() while a phase has no estimates).
+    static void fixedCuts(size_t chunks, uint64_t total, int firstShare, std::vector<uint64_t>& cuts);
+
+    /// What a pass of @a phase measured, chunk by chunk (@a chunks of them). A pass with another
+    /// chunk count than the last starts the phase over.
+    void measured(int phase, size_t chunks, const Measure* measures);
 
     /// Forgets every estimate (the next passes use firstShare).
     void reset();
