@@ -3,8 +3,8 @@
 //
 // Three measures, no vdbclay code:
 // - each CPU's own speed, one at a time (the others idle), on two loops: passes over a 16 KiB buffer
-//   (loads, adds and stores, all in L1, as the automaton's kernel mostly is) and a register-only add
-//   chain. On a virtual machine the CPUs need not be equal: a vCPU whose physical core serves
+//   (loads, adds and stores, all in L1, as the automaton's kernel mostly is) and spin()'s add
+//   chain through one volatile variable (a store-to-load forwarding chain). On a virtual machine the CPUs need not be equal: a vCPU whose physical core serves
 //   another guest's thread too runs memory-bound code slower, and then no split of a pass can reach
 //   the CPUs' count as its speed-up (docs/PERFORMANCE.md, round 14);
 // - the round trip of one cache line between two threads pinned to CPUs 0 and k (one thread stores
@@ -131,6 +131,10 @@ int main(int argc, char** argv)
     for (int cpu : cpus) {
         const double l1 = pinnedSeconds(cpu, [&] { keep.fetch_add(l1Passes()); });
         const double alu = pinnedSeconds(cpu, [&] { keep.fetch_add(spin(200000000)); });
+        if (l1 < 0 || alu < 0) {
+            std::printf("  CPU %d: could not pin a thread to it\n", cpu);
+            continue;
+        }
         if (l1Base == 0) l1Base = l1, aluBase = alu;
         std::printf("  CPU %d: L1 passes %.3f (%.2fx), add chain %.3f (%.2fx)\n", cpu, l1, l1Base / l1, alu,
                     aluBase / alu);
