@@ -4,9 +4,10 @@
 // Three measures, no vdbclay code:
 // - each CPU's own speed, one at a time (the others idle), on two loops: passes over a 16 KiB buffer
 //   (loads, adds and stores, all in L1, as the automaton's kernel mostly is) and spin()'s add
-//   chain through one volatile variable (a store-to-load forwarding chain). On a virtual machine the CPUs need not be equal: a vCPU whose physical core serves
-//   another guest's thread too runs memory-bound code slower, and then no split of a pass can reach
-//   the CPUs' count as its speed-up (docs/PERFORMANCE.md, round 14);
+//   chain through one volatile variable (a store-to-load forwarding chain). On a virtual machine the CPUs
+//   need not be equal: a vCPU whose physical core serves another guest's thread too runs memory-bound code
+//   slower, and then no split of a pass can reach the CPUs' count as its speed-up (docs/PERFORMANCE.md, round
+//   14);
 // - the round trip of one cache line between two threads pinned to CPUs 0 and k (one thread stores
 //   a flag, the other answers; half of it is what each line a thread reads after another wrote it
 //   costs at least), for every k the process may run on;
