@@ -273,8 +273,10 @@ int runDemo(const DemoArgs& a)
         (unsigned long long)r.blocksVisited, (unsigned long long)r.blocksOverTc,
         (unsigned long long)r.blocksUpdated, (unsigned long long)r.blocksGrown,
         (unsigned long long)r.leavesCreated);
-    std::printf("  stages: gather %.3f s, repartition %.3f s, grow %.3f s, bookkeeping %.3f s\n",
-                r.seconds.gather, r.seconds.repartition, r.seconds.grow, r.seconds.bookkeeping);
+    std::printf("  stages: gather %.3f s, repartition %.3f s, grow %.3f s, bookkeeping %.3f s; "
+                "the passes' threads busy %.3f, idle %.3f thread-s\n",
+                r.seconds.gather, r.seconds.repartition, r.seconds.grow, r.seconds.bookkeeping,
+                r.seconds.passBusy, r.seconds.passIdle);
     std::printf("  final: mass %lld (%s), residual overload %lld, settled %s, %llu clay voxels, "
                 "%llu leaves, content hash %016llx\n",
                 (long long)m1, m1 == m0 ? "exact" : "DRIFT", (long long)r.residualOverload,
@@ -770,6 +772,9 @@ int runScene(const RunArgs& a)
                               {"repartition", s.stages.repartition},
                               {"grow", s.stages.grow},
                               {"bookkeeping", s.stages.bookkeeping}};
+        // Thread-seconds within repartition: the passes' shares ran, and their threads sat idle.
+        j["pass_busy_seconds"] = s.stages.passBusy;
+        j["pass_idle_seconds"] = s.stages.passIdle;
         j["mass_initial"] = s.massInitial;
         j["mass_final"] = s.massFinal;
         j["residual_overload"] = s.residualOverload;

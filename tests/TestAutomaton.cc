@@ -401,6 +401,56 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
     automaton_internal::passSplit() = saved;
 }
 
+TEST_F(AutomatonTest, PassIdleCountsTheThreadSecondsThePassesLeftUnused)
+{
+    // StageSeconds::passBusy (the thread-seconds the passes' shares ran) and passIdle (threads x the
+    // passes' time, minus passBusy). They are times, so only their bounds are exact: busy more than 0
+    // once a pass ran; idle 0 on one thread (no pass is shared); both within the threads' capacity
+    // over the repartition (the passes lie inside it) for every split; and, where every pass is too
+    // small to share (MIN above any pass), idle at least (threads - 1) x the passes' time, so more
+    // than 0.
+    using automaton_internal::PassSplit;
+    const PassSplit saved = automaton_internal::passSplit();
+    auto runOnce = [&](int threads, StepReport& first, StepReport& second) {
+        Rng rng(11);
+        auto mass = newMass();
+        randomScene(rng, CoordBBox(Coord(-20, -12, -20), Coord(20, 12, 20)), 3, 260, 3, *mass, nullptr,
+                    nullptr);
+        Automaton a(mass, options(Rule::Prorata, 3, 100, threads, 3));
+        first = a.run(40);
+        second = a.run(40);
+    };
+    PassSplit crew, tasks, autoSplit, serial;
+    tasks.crew = false;
+    autoSplit.weighted = false;
+    serial.minBlocks = UINT64_MAX;
+    const std::pair<const char*, PassSplit> splits[] = {
+        {"crew", crew}, {"TBB tasks", tasks}, {"auto", autoSplit}, {"serial", serial}};
+    for (const auto& [name, split] : splits) {
+        automaton_internal::passSplit() = split;
+        for (int threads : {1, 2, 3}) {
+            StepReport first, second;
+            runOnce(threads, first, second);
+            ASSERT_GT(first.blocksUpdated, 1000u);
+            StepReport sum = first;
+            sum += second;
+            EXPECT_EQ(sum.seconds.passIdle, first.seconds.passIdle + second.seconds.passIdle) << name;
+            EXPECT_EQ(sum.seconds.passBusy, first.seconds.passBusy + second.seconds.passBusy) << name;
+            const double idle = sum.seconds.passIdle, busy = sum.seconds.passBusy;
+            const double capacity = threads * sum.seconds.repartition;
+            EXPECT_GT(busy, 0.0) << name << ", " << threads << " threads";
+            EXPECT_LE(idle + busy, capacity * (1 + 1e-9)) << name << ", " << threads << " threads";
+            if (threads == 1) {
+                EXPECT_EQ(idle, 0.0) << name;
+                continue;
+            }
+            EXPECT_GE(idle, 0.0) << name << ", " << threads << " threads";
+            if (std::string(name) == "serial") EXPECT_GT(idle, 0.0) << threads << " threads";
+        }
+    }
+    automaton_internal::passSplit() = saved;
+}
+
 TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
 {
     // Candidates::predrain, as the weighted pass calls it: the items below a cut recorded (random

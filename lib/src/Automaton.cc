@@ -26,6 +26,8 @@
 //                in dense mode the pass also ORs its items' changes into the candidates of the
 //                next two steps (DenseSink, order-free), each thread into its own lane
 //                (Candidates::lanes), which the gathers OR together. Includes leaf table builds.
+//                Also measured: the thread-seconds the passes' shares ran and those their threads
+//                sat idle (StageSeconds::passBusy, passIdle: how well a pass used its threads).
 //   grow         a block that must write into a missing leaf is not written in the pass but queued;
 //                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
 //                Since blocks of a phase are disjoint, doing it later gives the identical result.
@@ -163,6 +165,7 @@ struct Automaton::Impl {
     PassBalance balance;                 // runPassWeighted's shares, from its chunks' measured speed
     std::vector<uint64_t> cutTargets;    // runPassWeighted's cumulative block counts per cut
     std::vector<PassBalance::Measure> chunkMeasures; // runPassWeighted's chunks' blocks and time
+    double passBusy = 0, passIdle = 0; // this step's passes so far: StageSeconds::passBusy, passIdle
 
     bool is3D() const { return opts.dimensions == 3; }
     int cells() const { return is3D() ? 8 : 4; }
@@ -381,31 +384,60 @@ struct Automaton::Impl {
         PassTotals tot;
         if (work.empty()) return tot;
         const PassInput in = passInput(phase, dryRun);
+        const auto start = Clock::now();
         if (opts.threads == 1) {
             processRange(in, work.data(), 0, work.size(), tot);
+            passBusy += secondsSince(start);
             return tot;
         }
-        if (passSplit().weighted) return runPassWeighted(in);
-        struct Body { // round 4's split (VDBCLAY_PASS_SPLIT=auto)
+        // The pass's thread-seconds: every lane of the arena for its whole time, of which its
+        // shares ran `busy` (StageSeconds::passIdle is the rest).
+        const int lanes = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+        double busy = 0;
+        if (passSplit().weighted) {
+            tot = runPassWeighted(in, busy);
+        } else {
+            tot = runPassAuto(in, busy);
+        }
+        const double span = secondsSince(start);
+        passBusy += busy;
+        passIdle += std::max(0.0, double(lanes) * span - busy);
+        return tot;
+    }
+
+    /// Round 4's split (VDBCLAY_PASS_SPLIT=auto): TBB's parallel_reduce over the items. Adds to
+    /// @a busy the seconds its ranges ran.
+    PassTotals runPassAuto(const PassInput& in, double& busy)
+    {
+        struct Body {
             const PassInput* in;
             WorkItem* work;
             PassTotals tot;
+            double busy = 0;
             Body(const PassInput* i, WorkItem* w) : in(i), work(w) {}
             Body(Body& o, tbb::split) : in(o.in), work(o.work) {}
             void operator()(const tbb::blocked_range<size_t>& r)
             {
+                const auto start = Clock::now();
                 processRange(*in, work, r.begin(), r.end(), tot);
+                busy += secondsSince(start);
             }
-            void join(Body& o) { tot.join(o.tot); }
+            void join(Body& o)
+            {
+                tot.join(o.tot);
+                busy += o.busy;
+            }
         };
         Body body(&in, work.data());
         inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
+        busy += body.busy;
         return std::move(body.tot);
     }
 
     /// The weighted split (passSplit). Same items, same per-item work, totals joined (sums, maxima,
     /// the first overflow, deferred blocks sorted later): the result is that of any other partition.
-    PassTotals runPassWeighted(const PassInput& in)
+    /// Adds to @a busy the seconds its chunks ran.
+    PassTotals runPassWeighted(const PassInput& in, double& busy)
     {
         const PassSplit split = passSplit();
         const size_t n = work.size();
@@ -420,7 +452,9 @@ struct Automaton::Impl {
         if (total < split.minBlocks) {
             PassInput one = in;
             one.sinkLanes = 1; // this thread records into lane 0
+            const auto start = Clock::now();
             processRange(one, work.data(), 0, n, tot);
+            busy += secondsSince(start);
             return tot;
         }
         const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
@@ -484,6 +518,8 @@ struct Automaton::Impl {
         }
         for (const PassTotals& t : chunkTotals)
             tot.join(t);
+        for (const PassBalance::Measure& c : chunkMeasures)
+            busy += c.seconds;
         if (split.balance && !in.dryRun && m == chunks) balance.measured(in.phase, m, chunkMeasures.data());
         return tot;
     }
@@ -528,12 +564,15 @@ struct Automaton::Impl {
         rep.seconds.gather = secondsSince(t0);
 
         t0 = Clock::now();
+        passBusy = passIdle = 0;
         if (maxBound > INT32_MAX / 8) {
             const PassTotals check = runPass(phase, /*dryRun=*/true);
             if (check.overflow) throwOverflow(check, phase);
         }
         PassTotals tot = runPass(phase, /*dryRun=*/false);
         rep.seconds.repartition = buildSeconds + secondsSince(t0);
+        rep.seconds.passBusy = passBusy;
+        rep.seconds.passIdle = passIdle;
         if (tot.overflow) throwOverflow(tot, phase); // unreachable while maxBound holds
 
         t0 = Clock::now();

@@ -50,6 +50,14 @@ struct StageSeconds {
     double repartition = 0; ///< the parallel pass over candidate blocks (TBB, horizontal layers)
     double grow = 0;        ///< blocks that flow into new leaves: create the leaves, then update
     double bookkeeping = 0; ///< collect changed blocks for the next steps, overflow checks
+    /// Not stages (not in total()): how well the passes, within repartition, used their threads.
+    /// passBusy: the thread-seconds the passes' shares of the work list ran (on one thread, the
+    /// passes' time). passIdle: the thread-seconds a thread of a pass ran none of its work: the
+    /// caller cutting the work list, a thread waiting for its share to reach it or for the slowest
+    /// share to end, every thread but one of a pass too small to share. Their sum is threads x the
+    /// passes' time; passIdle / (passIdle + passBusy) is the fraction of the threads lost, 0 on one.
+    double passBusy = 0;
+    double passIdle = 0;
     double total() const { return gather + repartition + grow + bookkeeping; }
     StageSeconds& operator+=(const StageSeconds& o)
     {
@@ -57,6 +65,8 @@ struct StageSeconds {
         repartition += o.repartition;
         grow += o.grow;
         bookkeeping += o.bookkeeping;
+        passBusy += o.passBusy;
+        passIdle += o.passIdle;
         return *this;
     }
 };
