@@ -98,7 +98,8 @@ std::vector<int> parseList(const std::string& s)
 // ---- CSV rows -----------------------------------------------------------------------------------
 const char* kHeader =
     "scene,size,impl,threads,seconds,steps,blocks_visited,blocks_updated,ns_per_updated_block,"
-    "gather_s,repartition_s,grow_s,bookkeeping_s,frame_median_ms,frame_p95_ms,frame_max_ms,"
+    "gather_s,repartition_s,grow_s,bookkeeping_s,pass_busy_s,pass_idle_s,frame_median_ms,frame_p95_ms,frame_"
+    "max_ms,"
     "clay_voxels,grid_bytes,bytes_per_clay_voxel,maxrss_mb,hash,identical,note";
 
 struct Row {
@@ -116,16 +117,17 @@ struct Row {
     {
         char buf[1024];
         auto opt = [](double v) { return v < 0 ? std::string() : std::to_string(v); };
-        std::snprintf(
-            buf, sizeof buf,
-            "%s,%d,%s,%d,%.6f,%llu,%llu,%llu,%.2f,%.6f,%.6f,%.6f,%.6f,%s,%s,%s,%llu,%llu,%s,%s,%016llx,%s,%s",
-            scene.c_str(), size, impl.c_str(), threads, seconds, (unsigned long long)steps,
-            (unsigned long long)visited, (unsigned long long)updated,
-            updated ? 1e9 * seconds / double(updated) : 0.0, stages.gather, stages.repartition, stages.grow,
-            stages.bookkeeping, opt(medianMs).c_str(), opt(p95Ms).c_str(), opt(maxMs).c_str(),
-            (unsigned long long)clayVoxels, (unsigned long long)gridBytes,
-            clayVoxels ? std::to_string(double(gridBytes) / double(clayVoxels)).c_str() : "",
-            opt(maxrssMb).c_str(), (unsigned long long)hash, identical.c_str(), note.c_str());
+        std::snprintf(buf, sizeof buf,
+                      "%s,%d,%s,%d,%.6f,%llu,%llu,%llu,%.2f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%s,%s,%s,%llu,%llu,"
+                      "%s,%s,%016llx,%s,%s",
+                      scene.c_str(), size, impl.c_str(), threads, seconds, (unsigned long long)steps,
+                      (unsigned long long)visited, (unsigned long long)updated,
+                      updated ? 1e9 * seconds / double(updated) : 0.0, stages.gather, stages.repartition,
+                      stages.grow, stages.bookkeeping, stages.passBusy, stages.passIdle,
+                      opt(medianMs).c_str(), opt(p95Ms).c_str(), opt(maxMs).c_str(),
+                      (unsigned long long)clayVoxels, (unsigned long long)gridBytes,
+                      clayVoxels ? std::to_string(double(gridBytes) / double(clayVoxels)).c_str() : "",
+                      opt(maxrssMb).c_str(), (unsigned long long)hash, identical.c_str(), note.c_str());
         return buf;
     }
 };
@@ -728,9 +730,9 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
     for (const Row& r : vdb)
         std::fprintf(stderr,
                      "  vdbclay t%d stages: gather %.3f repartition %.3f grow %.3f bookkeeping %.3f (sum "
-                     "%.3f of %.3f s)\n",
+                     "%.3f of %.3f s); passes' threads busy %.3f idle %.3f thread-s\n",
                      r.threads, r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping,
-                     r.stages.total(), r.seconds);
+                     r.stages.total(), r.seconds, r.stages.passBusy, r.stages.passIdle);
     if (vdb.size() > 1)
         std::fprintf(stderr, "  speedup t%d -> t%d: %.2fx\n", vdb.front().threads, vdb.back().threads,
                      vdb.front().seconds / vdb.back().seconds);
@@ -849,8 +851,9 @@ template <typename Fn> std::vector<Row> inChild(Fn fn, bool& ok)
                 os << r.scene << '\t' << r.size << '\t' << r.impl << '\t' << r.threads << '\t' << r.seconds
                    << '\t' << r.steps << '\t' << r.visited << '\t' << r.updated << '\t' << r.stages.gather
                    << '\t' << r.stages.repartition << '\t' << r.stages.grow << '\t' << r.stages.bookkeeping
-                   << '\t' << r.medianMs << '\t' << r.p95Ms << '\t' << r.maxMs << '\t' << r.clayVoxels << '\t'
-                   << r.gridBytes << '\t' << r.maxrssMb << '\t' << r.hash << '\t' << r.note << '\n';
+                   << '\t' << r.stages.passBusy << '\t' << r.stages.passIdle << '\t' << r.medianMs << '\t'
+                   << r.p95Ms << '\t' << r.maxMs << '\t' << r.clayVoxels << '\t' << r.gridBytes << '\t'
+                   << r.maxrssMb << '\t' << r.hash << '\t' << r.note << '\n';
                 const std::string s = os.str();
                 if (write(fds[1], s.data(), s.size()) != ssize_t(s.size())) code = 3;
             }
@@ -895,6 +898,8 @@ template <typename Fn> std::vector<Row> inChild(Fn fn, bool& ok)
         r.stages.repartition = std::stod(next());
         r.stages.grow = std::stod(next());
         r.stages.bookkeeping = std::stod(next());
+        r.stages.passBusy = std::stod(next());
+        r.stages.passIdle = std::stod(next());
         r.medianMs = std::stod(next());
         r.p95Ms = std::stod(next());
         r.maxMs = std::stod(next());
@@ -935,8 +940,11 @@ void stroke(const Options& opt, std::vector<Row>& rows)
                          (unsigned long long)r.updated, (unsigned long long)r.clayVoxels,
                          double(r.gridBytes) / double(r.clayVoxels), r.maxrssMb, r.identical.c_str());
             std::fprintf(
-                stderr, "        stages s: gather %.4f repartition %.4f grow %.4f bookkeeping %.4f; %s\n",
-                r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping, r.note.c_str());
+                stderr,
+                "        stages s: gather %.4f repartition %.4f grow %.4f bookkeeping %.4f; passes' threads "
+                "busy %.4f idle %.4f thread-s; %s\n",
+                r.stages.gather, r.stages.repartition, r.stages.grow, r.stages.bookkeeping, r.stages.passBusy,
+                r.stages.passIdle, r.note.c_str());
         }
         all.insert(all.end(), mine.begin(), mine.end());
     }
