@@ -141,6 +141,9 @@ py::dict stepDict(const StepReport& r)
     d["settled"] = r.settled;
     d["reason"] = stopReasonName(r.reason);
     d["seconds"] = r.seconds.total();
+    // How well the passes used their threads (StageSeconds): thread-seconds run and sat idle.
+    d["pass_busy_seconds"] = r.seconds.passBusy;
+    d["pass_idle_seconds"] = r.seconds.passIdle;
     return d;
 }
 

@@ -71,8 +71,13 @@ class AutomatonTests(unittest.TestCase):
             clay = vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 6), mass=1000)
             auto = vdbclay.Automaton(clay, threads=threads)
             auto.add_mass(np.full((2, 2, 2), 5000), origin=(0, 6, 0))
-            auto.settle()
+            r = auto.settle()
             hashes.add(clay.content_hash())
+            # the passes' thread-seconds: some ran; none idle on one thread
+            self.assertGreater(r["pass_busy_seconds"], 0.0)
+            self.assertGreaterEqual(r["pass_idle_seconds"], 0.0)
+            if threads == 1:
+                self.assertEqual(r["pass_idle_seconds"], 0.0)
             del auto  # its thread limit ends with it, before the next one's begins
         self.assertEqual(len(hashes), 1)
 

@@ -51,11 +51,13 @@ struct StageSeconds {
     double grow = 0;        ///< blocks that flow into new leaves: create the leaves, then update
     double bookkeeping = 0; ///< collect changed blocks for the next steps, overflow checks
     /// Not stages (not in total()): how well the passes, within repartition, used their threads.
-    /// passBusy: the thread-seconds the passes' shares of the work list ran (on one thread, the
-    /// passes' time). passIdle: the thread-seconds a thread of a pass ran none of its work: the
-    /// caller cutting the work list, a thread waiting for its share to reach it or for the slowest
-    /// share to end, every thread but one of a pass too small to share. Their sum is threads x the
-    /// passes' time; passIdle / (passIdle + passBusy) is the fraction of the threads lost, 0 on one.
+    /// passBusy: the thread-seconds the passes' shares of the work list ran (chunk 0's predrain of
+    /// the next step's candidates included; on one thread, the passes' time).
+    /// passIdle: the thread-seconds a thread of a pass ran none of its work: the caller cutting
+    /// the work list, a thread waiting for its share to reach it or for the slowest share to end,
+    /// every thread but one of a pass too small to share.
+    /// Their sum is threads x the passes' time: passIdle / (passIdle + passBusy) is the fraction
+    /// of the threads lost, 0 on one thread.
     double passBusy = 0;
     double passIdle = 0;
     double total() const { return gather + repartition + grow + bookkeeping; }
