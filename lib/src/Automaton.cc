@@ -168,6 +168,11 @@ struct Automaton::Impl {
     double passBusy = 0, passIdle = 0; // this step's passes so far: StageSeconds::passBusy, passIdle
 
     bool is3D() const { return opts.dimensions == 3; }
+    /// The threads a pass may use: the Automaton's arena's, or (threads = 0) the caller's arena's.
+    int passLanes() const
+    {
+        return arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+    }
     int cells() const { return is3D() ? 8 : 4; }
     MassTree& tree() { return massGrid->tree(); }
     const ObsTree* obsTree() const { return obsGrid ? &obsGrid->tree() : nullptr; }
@@ -372,8 +377,7 @@ struct Automaton::Impl {
         // recording serially after the pass left 0.4 s of 2.2 on one core).
         if (!dryRun && in.table) {
             in.sinkLanes = 1;
-            if (opts.threads != 1)
-                in.sinkLanes = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+            if (opts.threads != 1) in.sinkLanes = passLanes();
             in.sink = candidates.lanes(in.sinkLanes);
         }
         return in;
@@ -392,7 +396,7 @@ struct Automaton::Impl {
         }
         // The pass's thread-seconds: every lane of the arena for its whole time, of which its
         // shares ran `busy` (StageSeconds::passIdle is the rest).
-        const int lanes = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+        const int lanes = passLanes();
         double busy = 0;
         if (passSplit().weighted) {
             tot = runPassWeighted(in, busy);
@@ -457,7 +461,7 @@ struct Automaton::Impl {
             busy += secondsSince(start);
             return tot;
         }
-        const int threads = arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+        const int threads = passLanes();
         const size_t chunks =
             std::min({n, size_t(std::max(threads, 1)) * size_t(split.perThread), PassCrew::kMaxChunks});
         // The chunks' shares of the blocks: by their measured speed in this phase (PassBalance.h),
