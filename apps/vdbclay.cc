@@ -793,6 +793,12 @@ int runScene(const RunArgs& a)
         j["interior_mean_density"] = s.metrics.interiorMeanDensity;
         j["heterogeneity_cv"] = s.metrics.heterogeneityCV;
         j["compaction"] = s.metrics.compaction;
+        // The clay's content hash, as `vdbclay info` prints it for the written .vdb: runs on any
+        // thread count must give the same (bench/thread-curve.sh checks it).
+        char hash[17];
+        std::snprintf(hash, sizeof hash, "%016llx",
+                      (unsigned long long)vdbclay::contentHash(*sculptor.mass()));
+        j["content_hash"] = hash;
         vdbclay::writeTextFile(outStats, j.dump(2) + "\n");
         std::printf("wrote %s\n", outStats.c_str());
     }

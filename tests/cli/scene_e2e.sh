@@ -24,6 +24,10 @@ grep -q '^f ' "$out.obj" || { echo "FAIL $name: mesh has no faces"; exit 1; }
 "$bin" info "$out.vdb" > "$out.info"
 grep -q "total mass:\? $m1" "$out.info" || { echo "FAIL $name: info does not report total mass $m1"; cat "$out.info"; exit 1; }
 for g in mass density surface; do grep -q "\"$g\"" "$out.info" || { echo "FAIL $name: no grid $g"; exit 1; }; done
+# The stats' content hash is the written clay's, as info reads it back from the file.
+h=$(sed -n 's/^  "content_hash": "\([0-9a-f]\{16\}\)",\?$/\1/p' "$out.json")
+[ -n "$h" ] || { echo "FAIL $name: stats lack a 16-digit content_hash"; cat "$out.json"; exit 1; }
+grep -q "content hash: $h " "$out.info" || { echo "FAIL $name: stats' content_hash $h is not the file's"; cat "$out.info"; exit 1; }
 grep -q "heterogeneity CV" "$out.info" || { echo "FAIL $name: info does not report the clay metrics"; cat "$out.info"; exit 1; }
 # Other tools read it: OpenVDB's own vdb_print (libopenvdb-tools) lists the three grids.
 if command -v vdb_print >/dev/null; then
