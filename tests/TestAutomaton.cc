@@ -13,8 +13,14 @@
 #include <algorithm>
 #include <climits>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <vector>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include "CandidatesTesting.h"
 #include "TestRng.h"
 
@@ -399,6 +405,69 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
         }
     }
     automaton_internal::passSplit() = saved;
+}
+
+// ThreadSanitizer kills a child of a multi-threaded fork that starts threads (die_after_fork).
+#if defined(__SANITIZE_THREAD__)
+#define VDBCLAY_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define VDBCLAY_TSAN 1
+#endif
+#endif
+
+TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
+{
+#ifdef VDBCLAY_TSAN
+    GTEST_SKIP() << "ThreadSanitizer does not let a multi-threaded fork's child start threads";
+#else
+    // Python's multiprocessing forks a process that holds automata. The child has the automaton's
+    // pass crew but not its helper threads (PassCrew.h, "fork()"): it must make its own, settle to
+    // the same clay as the parent, and destroy the automaton without waiting for the parent's helpers.
+    using automaton_internal::PassSplit;
+    const PassSplit saved = automaton_internal::passSplit();
+    PassSplit every; // every pass split, so the crew exists before the fork
+    every.minBlocks = 0;
+    automaton_internal::passSplit() = every;
+    Rng rng(23);
+    auto mass = newMass();
+    auto obs = openvdb::MaskGrid::create(false);
+    randomScene(rng, CoordBBox(Coord(-20, -12, -20), Coord(20, 12, 20)), 3, 260, 3, *mass, obs.get(),
+                nullptr);
+    auto a = std::make_unique<Automaton>(mass, options(Rule::Prorata, 3, 100, 2, 3), obs);
+    const int64_t m0 = a->totalMass();
+    EXPECT_GT(a->run(4).blocksUpdated, 100u);
+    int fds[2];
+    ASSERT_EQ(pipe(fds), 0);
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+        alarm(120); // a hang ends the child (SIGALRM), which the parent reports
+        close(fds[0]);
+        const StepReport r = a->run(60);
+        const uint64_t got[3] = {contentHash(*mass), r.blocksUpdated, uint64_t(totalMass(*mass) == m0)};
+        a.reset(); // the automaton's crew, made in the parent, destroyed in the child
+        const bool sent = write(fds[1], got, sizeof got) == ssize_t(sizeof got);
+        _exit(sent ? 0 : 1);
+    }
+    close(fds[1]);
+    const StepReport r = a->run(60);
+    uint64_t got[3] = {0, 0, 0};
+    const ssize_t n = read(fds[0], got, sizeof got);
+    close(fds[0]);
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    automaton_internal::passSplit() = saved;
+    ASSERT_TRUE(WIFEXITED(status)) << "the child died of signal "
+                                   << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+    ASSERT_EQ(n, ssize_t(sizeof got));
+    EXPECT_EQ(got[0], contentHash(*mass));
+    EXPECT_EQ(got[1], r.blocksUpdated);
+    EXPECT_GT(r.blocksUpdated, 100u); // the child had work to do
+    EXPECT_EQ(got[2], 1u);            // the child's mass was exact
+    EXPECT_EQ(totalMass(*mass), m0);
+#endif
 }
 
 TEST_F(AutomatonTest, PassIdleCountsTheThreadSecondsThePassesLeftUnused)

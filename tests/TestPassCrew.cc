@@ -10,10 +10,25 @@
 #include <algorithm>
 #include <atomic>
 #include <memory>
+#include <mutex>
+#include <new>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+// ThreadSanitizer kills a child of a multi-threaded fork that starts threads (die_after_fork).
+#if defined(__SANITIZE_THREAD__)
+#define VDBCLAY_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define VDBCLAY_TSAN 1
+#endif
+#endif
 
 using vdbclay::automaton_internal::PassCrew;
 
@@ -142,4 +157,74 @@ TEST(PassCrewTest, DestroyedWhileSpinningOrAsleepOrNeverUsed)
     while (crew.sleepers() != 2)
         std::this_thread::yield();
     // (destroyed asleep at the end of scope)
+}
+
+TEST(PassCrewTest, ACrewMadeBeforeAForkIsLeftAloneInTheChild)
+{
+#ifdef VDBCLAY_TSAN
+    GTEST_SKIP() << "ThreadSanitizer does not let a multi-threaded fork's child start threads";
+#else
+    // The child has the crew's memory but not its helpers (fork copies the calling thread only), and
+    // a sleeping helper's wait is copied into the condition variable. Destroying the crew there used
+    // to wait forever for them (PassCrew.h, "fork()"). Three states at the fork: helpers asleep,
+    // spinning, and the sleep lock held by a thread that the child does not have (a helper going to
+    // sleep holds it for a moment: then the child's copy of it stays locked for ever).
+    for (const char* state : {"asleep", "spinning", "locked"}) {
+        const bool asleep = state[0] == 'a', locked = state[0] == 'l';
+        PassCrew crew(2);
+        crew.run(3, [](size_t, int) {});
+        if (asleep) {
+            while (crew.sleepers() != 2)
+                std::this_thread::yield();
+        }
+        std::atomic<int> lockState{0}; // 1: held, 2: may be released
+        std::thread holder;
+        if (locked) {
+            holder = std::thread([&] {
+                std::lock_guard<std::mutex> hold(crew.parkingLock());
+                lockState.store(1, std::memory_order_release);
+                while (lockState.load(std::memory_order_acquire) != 2)
+                    std::this_thread::yield();
+            });
+            while (lockState.load(std::memory_order_acquire) != 1)
+                std::this_thread::yield();
+        }
+        EXPECT_FALSE(crew.forked());
+        const pid_t child = fork();
+        if (locked) {
+            lockState.store(2, std::memory_order_release);
+            holder.join();
+        }
+        ASSERT_GE(child, 0);
+        if (child == 0) {
+            alarm(120); // a hang ends the child (SIGALRM), which the parent reports
+            int code = crew.forked() ? 0 : 10;
+            {
+                // A new crew in the child has helpers of its own: all three chunks start together.
+                PassCrew fresh(2);
+                std::atomic<int> started{0};
+                fresh.run(3, [&](size_t, int) {
+                    started.fetch_add(1, std::memory_order_acq_rel);
+                    awaitStarted(started, 3);
+                });
+                if (started.load() != 3) code = 11;
+            }
+            crew.~PassCrew();        // what the owner's destructor does in the child: must return
+            new (&crew) PassCrew(0); // (the scope's end destroys it once more)
+            _exit(code);
+        }
+        int status = 0;
+        ASSERT_EQ(waitpid(child, &status, 0), child);
+        ASSERT_TRUE(WIFEXITED(status))
+            << state << ": the child died of signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+        EXPECT_EQ(WEXITSTATUS(status), 0) << state;
+        // The parent's crew is untouched: its helpers still take chunks.
+        std::atomic<int> started{0};
+        crew.run(3, [&](size_t, int) {
+            started.fetch_add(1, std::memory_order_acq_rel);
+            awaitStarted(started, 3);
+        });
+        EXPECT_EQ(started.load(), 3);
+    }
+#endif
 }

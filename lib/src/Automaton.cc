@@ -499,6 +499,7 @@ struct Automaton::Impl {
             // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
             // into sink lane l. (Were there more, processRange would find no lane for a helper's
             // thread and record nothing, flagged sinkMissed: record() then records every item.)
+            if (crew && crew->forked()) crew.reset(); // a fork's child: the helpers are the parent's
             if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
             const PassCrew::Body body = [&](size_t c, int lane) {
                 PassInput own = in;

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <pthread.h>
+
 #if defined(__x86_64__) || defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -40,9 +42,22 @@ inline void backOff(unsigned spins)
         std::this_thread::yield();
 }
 
+/// How many fork()s this process descends from (since the first crew): a fork handler counts them
+/// in the child, so forked() is one load, not a getpid() system call on every pass.
+std::atomic<uint32_t> gForks{0};
+
+uint32_t forksSoFar()
+{
+    static const bool registered = [] {
+        return pthread_atfork(nullptr, nullptr, [] { gForks.fetch_add(1, std::memory_order_relaxed); }) == 0;
+    }();
+    (void)registered; // (without a handler, forked() stays false: as before fork-safety)
+    return gForks.load(std::memory_order_relaxed);
+}
+
 } // namespace
 
-PassCrew::PassCrew(int helpers)
+PassCrew::PassCrew(int helpers) : mParking(new Parking), mForks(forksSoFar())
 {
     mHelpers.reserve(size_t(helpers > 0 ? helpers : 0));
     try {
@@ -56,16 +71,30 @@ PassCrew::PassCrew(int helpers)
 
 PassCrew::~PassCrew()
 {
+    if (forked()) {
+        // A child of fork(): the helpers are the parent's threads, absent here. Joining them would
+        // wait forever, destroying a joinable std::thread terminates, and the condition variable
+        // may count a parent's sleeping helper as a waiter (destroying it would wait for that one
+        // too). So the handles and the parking are left behind: a few hundred bytes, once a fork.
+        new std::vector<std::thread>(std::move(mHelpers));
+        (void)mParking.release();
+        return;
+    }
     stop();
+}
+
+bool PassCrew::forked() const
+{
+    return gForks.load(std::memory_order_relaxed) != mForks;
 }
 
 void PassCrew::stop()
 {
     {
-        std::lock_guard<std::mutex> lock(mMutex);
+        std::lock_guard<std::mutex> lock(mParking->mutex);
         mIdle.quit.store(true, std::memory_order_seq_cst);
     }
-    mWake.notify_all();
+    mParking->wake.notify_all();
     for (std::thread& t : mHelpers)
         t.join();
 }
@@ -104,9 +133,9 @@ void PassCrew::helperLoop(int lane)
             if (epochOf(t) != seen) seen = epochOf(t); // a pass whose chunks are all taken
             backOff(spins);
             if ((spins & 255) == 255 && std::chrono::steady_clock::now() - idleSince > kSpinBeforeSleep) {
-                std::unique_lock<std::mutex> lock(mMutex);
+                std::unique_lock<std::mutex> lock(mParking->mutex);
                 mIdle.sleepers.fetch_add(1, std::memory_order_seq_cst);
-                mWake.wait(lock, [&] {
+                mParking->wake.wait(lock, [&] {
                     return mIdle.quit.load(std::memory_order_seq_cst) ||
                            epochOf(mPub.ticket.load(std::memory_order_seq_cst)) != seen;
                 });
@@ -134,8 +163,8 @@ void PassCrew::run(size_t chunks, const Body& body)
     // it sees the new epoch before it waits, or this sees it counted among the sleepers.
     mPub.ticket.store(t, std::memory_order_seq_cst);
     if (mIdle.sleepers.load(std::memory_order_seq_cst) > 0) {
-        std::lock_guard<std::mutex> lock(mMutex);
-        mWake.notify_all();
+        std::lock_guard<std::mutex> lock(mParking->mutex);
+        mParking->wake.notify_all();
     }
     const size_t mine = work(t, 0);
     // Every chunk is claimed; those on other lanes are running. Wait for them.

@@ -21,7 +21,12 @@
 //
 // The helpers are the crew's own threads (std::thread), made when the automaton first splits a pass
 // and joined with it; TBB's workers serve the other parallel stages (push, scans, output) and sleep
-// while a settle runs, as the crew's helpers sleep during those stages. Not fork-safe (as TBB).
+// while a settle runs, as the crew's helpers sleep during those stages.
+//
+// fork(). A child process has the crew's memory but none of its helpers (fork copies only the
+// calling thread), so a crew made before a fork must not be used or stopped in the child: forked()
+// says so, the automaton then makes a new crew there, and the destructor leaves the parent's
+// helpers unjoined (Python's multiprocessing forks processes holding automata).
 //
 // What the body may do: what a task of tbb::parallel_for may do (Kernel.h's processRange contract):
 // write only what its chunk owns, or its lane's own data. run()'s return happens after every chunk's
@@ -34,6 +39,7 @@
 #include <cstdint>
 #include <exception>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -50,6 +56,9 @@ public:
     PassCrew(const PassCrew&) = delete;
     PassCrew& operator=(const PassCrew&) = delete;
 
+    /// Whether this process is not the one that made the crew (a child of fork()): its helpers are
+    /// not here, so no run() may start; make a new crew (the destructor is safe).
+    bool forked() const;
     /// Lanes: the caller and the helpers.
     int lanes() const { return int(mHelpers.size()) + 1; }
 
@@ -63,6 +72,8 @@ public:
 
     /// Chunks the helpers (not the caller) have run so far (tests: whether helpers take part).
     uint64_t helperChunks() const { return mHelperChunks; }
+    /// The lock sleeping helpers take (tests: a fork while another thread holds it).
+    std::mutex& parkingLock() { return mParking->mutex; }
     /// Helpers asleep now (tests: that a pass wakes them).
     int sleepers() const { return mIdle.sleepers.load(std::memory_order_acquire); }
 
@@ -100,9 +111,13 @@ private:
     alignas(64) uint64_t mDoneSeen = 0; // the caller's: mDone when the last pass ended
     uint64_t mHelperChunks = 0;
     std::vector<std::exception_ptr> mErrors; // per chunk, written by the lane that ran it
-    std::mutex mMutex;                       // for sleeping helpers
-    std::condition_variable mWake;
+    struct Parking { // for sleeping helpers; on the heap, so that a fork's child can leave it
+        std::mutex mutex;
+        std::condition_variable wake;
+    };
+    std::unique_ptr<Parking> mParking;
     std::vector<std::thread> mHelpers;
+    uint32_t mForks; // the process's fork count when the crew was made (forked())
 };
 
 } // namespace automaton_internal

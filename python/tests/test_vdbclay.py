@@ -1,5 +1,6 @@
 """Tests of the Python module vdbclay, run by ctest with PYTHONPATH at the built module."""
 import os
+import signal
 import tempfile
 import unittest
 
@@ -80,6 +81,39 @@ class AutomatonTests(unittest.TestCase):
                 self.assertEqual(r["pass_idle_seconds"], 0.0)
             del auto  # its thread limit ends with it, before the next one's begins
         self.assertEqual(len(hashes), 1)
+
+    @unittest.skipUnless(hasattr(os, "fork"), "needs fork()")
+    def test_a_forked_child_goes_on_with_the_automaton_and_gets_the_same_clay(self):
+        # multiprocessing's "fork" start method: the child holds the parent's automaton, whose pass
+        # threads stayed in the parent. It must settle (on threads of its own) to the same clay and
+        # exit; it used to hang or abort when the automaton was destroyed there.
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (31, 31, 31)), mass=1000)
+        auto = vdbclay.Automaton(clay, rule="prorata", threads=2)
+        auto.add_mass(np.full((4, 4, 4), 3000, dtype=np.int32), origin=(14, 32, 14))
+        auto.settle(max_steps=100000)
+        auto.add_mass(np.full((4, 4, 4), 3000, dtype=np.int32), origin=(14, 36, 14))
+        read_end, write_end = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: no unittest machinery, only its answer and exit code
+            code = 1
+            try:
+                signal.alarm(120)  # a hang ends the child, which the parent reports
+                os.close(read_end)
+                auto.settle(max_steps=100000)
+                answer = f"{clay.content_hash()} {clay.total_mass()}".encode()
+                del auto
+                os.write(write_end, answer)
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(write_end)
+        auto.settle(max_steps=100000)
+        with os.fdopen(read_end, "rb") as f:
+            answer = f.read().decode()
+        _, status = os.waitpid(pid, 0)
+        self.assertTrue(os.WIFEXITED(status), f"the child died: status {status}")
+        self.assertEqual(os.WEXITSTATUS(status), 0)
+        self.assertEqual(answer, f"{clay.content_hash()} {clay.total_mass()}")
 
     def test_add_mass_refuses_negative_results_and_changes_nothing(self):
         clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (1, 1, 1)), mass=10)
