@@ -1,5 +1,5 @@
 // What the candidates' tests (TestAutomaton, TestKernel) share: a random leaf-table index (the anchors a
-// LeafTable would hold for leaves scattered in a box of leaves, in layer order, with their neighbours),
+// LeafTable would hold for leaves scattered in a box of leaves, in column order, with their neighbours),
 // and sinkChanges chosen at run time.
 #pragma once
 
@@ -50,11 +50,11 @@ struct RandomAnchorIndex {
     RandomAnchorIndex(const RandomAnchorIndex&) = delete; // index points into the vectors
     RandomAnchorIndex& operator=(const RandomAnchorIndex&) = delete;
 
-    /// Layer order (the index's and the candidates' lists' order).
+    /// Column order (the index's order, and the dense lists').
     static bool less(const vdbclay::automaton_internal::Origin& a,
                      const vdbclay::automaton_internal::Origin& b)
     {
-        return vdbclay::automaton_internal::layerLess(a, b);
+        return vdbclay::automaton_internal::indexLess(a, b);
     }
 };
 

@@ -589,7 +589,19 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                 std::vector<WorkItem> wm, wd;
                 merged.gather(phase, is3D, wm);
                 dense.gather(phase, is3D, wd);
-                // The dense list is the merged one less the anchors outside the index.
+                // The dense list is the merged one less the anchors outside the index; the dense
+                // list is in index order (columns), the merged one in layer order.
+                const auto layerOrder = [](const WorkItem& a, const WorkItem& b) {
+                    return automaton_internal::layerLess(a.anchor, b.anchor);
+                };
+                if (dense.attached()) {
+                    EXPECT_TRUE(std::is_sorted(
+                        wd.begin(), wd.end(),
+                        [](const WorkItem& a, const WorkItem& b) { return a.entry < b.entry; }))
+                        << "seed " << seed << " step " << t;
+                }
+                std::vector<WorkItem> wdl = wd;
+                std::sort(wdl.begin(), wdl.end(), layerOrder);
                 size_t j = 0;
                 for (const WorkItem& m : wm) {
                     const uint32_t e = index.find(m.anchor);
@@ -597,15 +609,15 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                         droppedBlocks += uint64_t(__builtin_popcountll(m.mask));
                         continue;
                     }
-                    ASSERT_LT(j, wd.size()) << "seed " << seed << " step " << t;
-                    ASSERT_EQ(wd[j].anchor, m.anchor) << "seed " << seed << " step " << t;
-                    ASSERT_EQ(wd[j].mask, m.mask) << "seed " << seed << " step " << t;
-                    if (wd[j].entry != kNoEntry) {
-                        EXPECT_EQ(wd[j].entry, e);
+                    ASSERT_LT(j, wdl.size()) << "seed " << seed << " step " << t;
+                    ASSERT_EQ(wdl[j].anchor, m.anchor) << "seed " << seed << " step " << t;
+                    ASSERT_EQ(wdl[j].mask, m.mask) << "seed " << seed << " step " << t;
+                    if (wdl[j].entry != kNoEntry) {
+                        EXPECT_EQ(wdl[j].entry, e);
                     }
                     ++j;
                 }
-                ASSERT_EQ(j, wd.size()) << "seed " << seed << " step " << t;
+                ASSERT_EQ(j, wdl.size()) << "seed " << seed << " step " << t;
                 denseSteps += dense.attached();
                 if (event == 3) { // a step with no over cell
                     merged.clearChanges();
@@ -615,11 +627,10 @@ TEST_F(KernelTest, DenseCandidatesMatchTheMergedLists)
                     for (WorkItem& m : wm) {
                         m.changed = index.find(m.anchor) == kNoEntry ? 0 : m.mask & (g.next() & g.next());
                     }
-                    j = 0;
                     for (WorkItem& d : wd) {
-                        while (wm[j].anchor != d.anchor)
-                            ++j;
-                        d.changed = wm[j].changed;
+                        const auto it = std::lower_bound(wm.begin(), wm.end(), d, layerOrder);
+                        ASSERT_TRUE(it != wm.end() && it->anchor == d.anchor);
+                        d.changed = it->changed;
                     }
                     // Most dense steps record through the sink, as the pass does: one sink, or 1-4
                     // lanes (a pass on several threads: each item in a random lane,

@@ -4,7 +4,7 @@
 // ======
 // The automaton is split along its concepts, one file each:
 //   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
-//   Candidates.*   which blocks a step examines: the last two steps' changes, in layer order; while
+//   Candidates.*   which blocks a step examines: the last two steps' changes, in anchor order; while
 //                  the leaf table is valid, accumulated per table anchor (dense mode, filled by the
 //                  pass itself), otherwise merged from sorted lists
 //   PassCrew.*     the threads a pass runs on, kept from one pass to the next (no fork/join a step)
@@ -15,11 +15,14 @@
 //                  edits, settle() and the no-room flood
 //
 // Stages of step(), each timed into StageSeconds:
-//   gather       Candidates::gather: one entry per anchor, in order of anchor (y, z, x): a sequence
-//                of horizontal layers, y up, as in the paper's p layers. (Dense mode: a scan of the
-//                anchors marked by the last passes; on several threads the part of it below the
-//                other chunks' reach was already drained by the last pass's chunk 0: predrain.)
-//   repartition  contiguous ranges of that list (layers of blocks), one chunk per thread of about
+//   gather       Candidates::gather: one entry per anchor. Dense mode (nearly every step): in the
+//                leaf table's column order (x, then y, then z), a scan of the anchors marked by the
+//                last passes; on several threads the part of it below the other chunks' reach was
+//                already drained by the last pass's chunk 0 (predrain). Merged mode (after edits,
+//                no table): in layer order (y, z, x: the paper's horizontal p layers).
+//   repartition  contiguous ranges of that list (slabs of columns in dense mode: two chunks meet on
+//                a y-z face, where the paper's horizontal layers met on a whole x-z face inside the
+//                thin active slab under a tool; docs/PERFORMANCE.md round 16), one chunk per thread of about
 //                equal candidate blocks, run on the pass's crew (PassCrew.h: threads kept between
 //                passes; PassSplit.h for the other splits), each range through processRange
 //                (Kernel.h: what a task may write and why it is safe);

@@ -65,6 +65,16 @@ inline bool layerLess(const Origin& a, const Origin& b)
     return a.x() < b.x();
 }
 
+/// The leaf table's anchor order (AnchorIndex; the dense candidates' work lists): columns, x first,
+/// then y, then z. Any lexicographic order with every axis ascending keeps a phase-0 pass's writes
+/// at entries at or after its items', and column order cuts a pass into slabs that meet on a y-z face.
+inline bool indexLess(const Origin& a, const Origin& b)
+{
+    if (a.x() != b.x()) return a.x() < b.x();
+    if (a.y() != b.y()) return a.y() < b.y();
+    return a.z() < b.z();
+}
+
 /// The blocks of the other phase that overlap the blocks in @a a, which belong to phase
 /// @a fromPhase. Even block b overlaps odd blocks b and b+1 along each axis (b+1 = 4 is block 0 of
 /// the +axis neighbour); odd block c overlaps even blocks c-1 and c (c-1 = -1 is block 3 of the

@@ -10,7 +10,7 @@ uint32_t AnchorIndex::find(const Origin& o) const
 {
     const Origin* e = keys + size;
     const Origin* it =
-        std::lower_bound(keys, e, o, [](const Origin& a, const Origin& b) { return layerLess(a, b); });
+        std::lower_bound(keys, e, o, [](const Origin& a, const Origin& b) { return indexLess(a, b); });
     return (it != e && *it == o) ? uint32_t(it - keys) : kNoEntry;
 }
 
@@ -119,6 +119,11 @@ void Candidates::recordLists(const std::vector<WorkItem>& work, bool listsOnly)
         addDense(mPhase, e, w.changed);                   // the step after next, same phase
         addDenseDilated(1 - mPhase, e, a, mPhase, mIs3D); // the next step
     }
+    // The merged mode merges the changed lists as runs in layer order; a list gathered densely is in
+    // index order (column order), e.g. the step's own list when its grow stage detached mid-step.
+    const auto layer = [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); };
+    if (!std::is_sorted(mChangedPrev.begin(), mChangedPrev.end(), layer))
+        std::sort(mChangedPrev.begin(), mChangedPrev.end(), layer);
     if (!listsOnly) mSunk = false;
 }
 
@@ -213,11 +218,11 @@ void Candidates::clearSlot(int slot)
 
 // The pass of a step of phase P writes the next step's slot (1 - P) only through sinkChanges's
 // dilation, into the neighbours of its items: for P = 0 the upper ones (+8 on some axes: later in
-// layer order, so at entries >= the item's), for P = 1 the lower ones (-8 on some axes: y at least
-// the item's y - 8). Items from entry `first` on thus never write below the first anchor with y >=
-// y(first) - 8 (P = 1) or below `first` (P = 0); the words wholly below that bound hold their final
-// masks once the items before `first` are done, and are drained here while later chunks still run
-// (no element is read here and written there: other threads touch only words and entries at or
+// index order, so at entries >= the item's), for P = 1 the lower ones (-8 on some axes: x at least
+// the item's x - 8, x being the index's first key). Items from entry `first` on thus never write below
+// the first anchor with x >= x(first) - 8 (P = 1) or below `first` (P = 0); the words wholly below that bound
+// hold their final masks once the items before `first` are done, and are drained here while later chunks
+// still run (no element is read here and written there: other threads touch only words and entries at or
 // above the bound). Same masks, same order as the gather's drain: the work list does not change.
 void Candidates::predrain(int passPhase, uint32_t first)
 {
@@ -226,9 +231,9 @@ void Candidates::predrain(int passPhase, uint32_t first)
     if (mPreSlot >= 0 || !mDense || first == kNoEntry || first >= mIndex.size) return;
     uint32_t bound = first;
     if (passPhase == 1) {
-        const int64_t y = int64_t(mIndex.keys[first].y()) - 8;
+        const int64_t x = int64_t(mIndex.keys[first].x()) - 8;
         bound = uint32_t(std::partition_point(mIndex.keys, mIndex.keys + first,
-                                              [&](const Origin& o) { return int64_t(o.y()) < y; }) -
+                                              [&](const Origin& o) { return int64_t(o.x()) < x; }) -
                          mIndex.keys);
     }
     const int slot = 1 - passPhase;
@@ -371,7 +376,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
     mPhase = phase;
     mIs3D = is3D;
     if (mDense && mFullScanSteps == 0 && mPending.empty()) {
-        // The accumulated candidates, in index order (= layer order); the slot is left empty for
+        // The accumulated candidates, in index order; the slot is left empty for
         // the record() of the step after next.
         work.clear();
         size_t from = 0;
@@ -407,6 +412,8 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         // holds only the last step's dilation, as the lists would.)
         mDenseRun.clear();
         drain(phase, [&](uint32_t e, uint64_t m) { mDenseRun.push_back(Anchor{mIndex.keys[e], m}); });
+        std::sort(mDenseRun.begin(), mDenseRun.end(), // index order to layer order, for the merge
+                  [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });
     }
     for (const Pending& p : mPending)
         addPending(p, phase, is3D);
@@ -475,6 +482,11 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
             const uint32_t e = mIndex.find(a->origin);
             if (e != kNoEntry) work.push_back(WorkItem{a->origin, a->mask, 0, e});
         }
+        // Dense mode's lists are in index order (the pass's cut and the predrain rely on it); the
+        // runs were merged in layer order.
+        if (mDense)
+            std::sort(work.begin(), work.end(),
+                      [](const WorkItem& x, const WorkItem& y) { return x.entry < y.entry; });
     }
     mGathered = mDense ? std::make_pair(static_cast<const WorkItem*>(work.data()), work.size())
                        : std::make_pair(static_cast<const WorkItem*>(nullptr), size_t(0));

@@ -21,10 +21,11 @@
 //
 // Two ways to build the list, same blocks:
 // - Dense (while the Automaton holds a valid leaf table, nearly every step of a settling run): the
-//   table's anchors, sorted in layer order, are numbered 0..n-1 (AnchorIndex, with each anchor's
-//   upper and lower neighbours). record() ORs each changed mask into a per-anchor accumulator of the
+//   table's anchors, sorted in column order (indexLess: x, y, z), are numbered 0..n-1 (AnchorIndex, with each
+//   anchor's upper and lower neighbours). record() ORs each changed mask into a per-anchor accumulator of the
 //   step two steps on (same phase), and its dilation into the next step's, marking the anchors in a
-//   bit set; gather() scans that bit set in index order, which is layer order. No merge, no sort:
+//   bit set; gather() scans that bit set in index order (column order: the pass's chunks are slabs
+//   of columns, which meet on small faces; round 16). No merge, no sort:
 //   the cost follows the changed anchors (plus n / 64 words of bit set). Anchors outside the table
 //   have no leaf within reach: their blocks read zeros, never hold an over cell, never change, and
 //   are dropped (so blocksVisited counts a few blocks fewer than the merged lists would).
@@ -64,7 +65,7 @@ struct WorkItem {
     uint32_t entry = kNoEntry; // the anchor's index in the leaf table (AnchorIndex), when known
 };
 
-/// The leaf table's anchors numbered in layer order, with their neighbours (no OpenVDB here).
+/// The leaf table's anchors numbered in column order (indexLess), with their neighbours (no OpenVDB here).
 /// up[8 e + s] is the index of keys[e] moved by +8 along each axis in bit set s (bit 0 = x, 1 = y,
 /// 2 = z), down[8 e + s] moved by -8; kNoEntry when the table lacks that anchor; slot 0 is e itself.
 struct AnchorIndex {
@@ -72,7 +73,7 @@ struct AnchorIndex {
     const uint32_t* up = nullptr;
     const uint32_t* down = nullptr;
     size_t size = 0;
-    /// The index of @a o (binary search in layer order), or kNoEntry.
+    /// The index of @a o (binary search in column order), or kNoEntry.
     uint32_t find(const Origin& o) const;
 };
 
@@ -140,7 +141,8 @@ public:
     void reset(std::vector<Origin> hotLeaves);
     /// The next two steps examine every block that touches @a region (grown by one voxel).
     void addRegion(const Box& region);
-    /// Fills @a work with the candidates of a step of phase @a phase, in layer order.
+    /// Fills @a work with the candidates of a step of phase @a phase: in index order while attached
+    /// (dense mode), else in layer order.
     void gather(int phase, bool is3D, std::vector<WorkItem>& work);
     /// After a step's pass: its updated blocks (work[i].changed) become the next steps' input. In
     /// dense mode, when the pass recorded every item (sink()), @a work is swapped with an older list

@@ -99,7 +99,7 @@ struct LeafTable::Impl {
     };
     static constexpr uint32_t kEmpty = UINT32_MAX;
     std::vector<Entry> entries;
-    std::vector<Origin> keys;       // entries[i]'s anchor, in layer order
+    std::vector<Origin> keys;       // entries[i]'s anchor, in column order (indexLess)
     std::vector<uint32_t> up, down; // AnchorIndex's neighbours, 8 per entry
     std::vector<Slot> slots;        // open addressing, linear probing, at most half full
     int shift = 64;
@@ -191,8 +191,8 @@ void LeafTable::build(MassTree& tree, const ObsTree* obstacles, bool is3D)
         for (int d = 0; d < nd; ++d)
             t.insert(Origin(o.x() + ((d & 1) ? 8 : 0), o.y() + ((d & 2) ? 8 : 0), o.z() + ((d & 4) ? 8 : 0)));
     }
-    // Entries in layer order (Candidates' dense mode relies on it), then the hash re-filled.
-    std::sort(t.keys.begin(), t.keys.end(), [](const Origin& a, const Origin& b) { return layerLess(a, b); });
+    // Entries in column order (Candidates' dense mode relies on it), then the hash re-filled.
+    std::sort(t.keys.begin(), t.keys.end(), [](const Origin& a, const Origin& b) { return indexLess(a, b); });
     t.resize(std::max<size_t>(64, t.slots.size())); // find() needs a free slot
     t.entries.resize(t.keys.size());
     t.up.assign(8 * t.keys.size(), kNoEntry);
@@ -715,7 +715,7 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
     LeafSet& ls = f.set;
     const LeafSet& ps = prev.set;
     ls.missing = ls.obsAny = ls.obsTile = 0;
-    // The work list runs along x (layer order): when the previous anchor is this one's -x
+    // A merged-mode list runs along x (layer order): when the previous anchor is this one's -x
     // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
     uint32_t reused = 0;
     if (P == 1 && reuse && prev.fetched && prev.anchor == Origin(anchor.x() - 8, anchor.y(), anchor.z())) {

@@ -37,11 +37,10 @@ using ObsTree = Tree543<openvdb::ValueMask>;
 /// upper neighbours' origins), the 8 leaves leafOrigin(anchor, w) its blocks read (null when
 /// missing) and their obstacle leaves or tiles, found by one hash lookup instead of up to 16
 /// accessor probes per anchor (none when the work item carries its index). Entries are numbered in
-/// layer order (Candidates' dense mode scans them in that order). It describes the topology of both
-/// trees when build() ran: the Automaton clears it whenever a leaf may have been created or removed,
-/// or the obstacles changed (edits, resync, grown leaves), and rebuilds it before a later pass. An
-/// anchor the table does not hold (all its mass leaves missing) is fetched through accessors, as
-/// without a table.
+/// column order (indexLess; Candidates' dense mode scans them in that order). It describes the topology of
+/// both trees when build() ran: the Automaton clears it whenever a leaf may have been created or removed, or
+/// the obstacles changed (edits, resync, grown leaves), and rebuilds it before a later pass. An anchor the
+/// table does not hold (all its mass leaves missing) is fetched through accessors, as without a table.
 class LeafTable {
 public:
     LeafTable();
@@ -55,7 +54,7 @@ public:
     void clear();
     bool valid() const { return mValid; }
     size_t size() const; // anchors indexed
-    /// The anchors in layer order with their neighbours; WorkItem::entry indexes them (valid tables).
+    /// The anchors in column order with their neighbours; WorkItem::entry indexes them (valid tables).
     AnchorIndex anchorIndex() const;
 
     struct Impl;
