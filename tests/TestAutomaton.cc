@@ -22,6 +22,7 @@
 #include <unistd.h>
 
 #include "CandidatesTesting.h"
+#include "SanitizerBuild.h"
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -406,15 +407,6 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
     }
     automaton_internal::passSplit() = saved;
 }
-
-// ThreadSanitizer kills a child of a multi-threaded fork that starts threads (die_after_fork).
-#if defined(__SANITIZE_THREAD__)
-#define VDBCLAY_TSAN 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define VDBCLAY_TSAN 1
-#endif
-#endif
 
 TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
 {

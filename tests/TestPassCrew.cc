@@ -4,6 +4,7 @@
 // another lane has started a chunk of the same pass, which only a helper can do while the caller
 // is inside that chunk (so a crew whose helpers never ran would hang, and ctest's timeout fails it).
 #include "PassCrew.h"
+#include "SanitizerBuild.h"
 
 #include <gtest/gtest.h>
 
@@ -20,15 +21,6 @@
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
-
-// ThreadSanitizer kills a child of a multi-threaded fork that starts threads (die_after_fork).
-#if defined(__SANITIZE_THREAD__)
-#define VDBCLAY_TSAN 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define VDBCLAY_TSAN 1
-#endif
-#endif
 
 using vdbclay::automaton_internal::PassCrew;
 

@@ -65,6 +65,12 @@ inline bool layerLess(const Origin& a, const Origin& b)
     return a.x() < b.x();
 }
 
+/// layerLess on anchors (the merged lists' order).
+inline bool anchorLayerLess(const Anchor& a, const Anchor& b)
+{
+    return layerLess(a.origin, b.origin);
+}
+
 /// The leaf table's anchor order (AnchorIndex; the dense candidates' work lists): columns, x first,
 /// then y, then z. Any lexicographic order with every axis ascending keeps a phase-0 pass's writes
 /// at entries at or after its items', and column order cuts a pass into slabs that meet on a y-z face.

@@ -121,9 +121,8 @@ void Candidates::recordLists(const std::vector<WorkItem>& work, bool listsOnly)
     }
     // The merged mode merges the changed lists as runs in layer order; a list gathered densely is in
     // index order (column order), e.g. the step's own list when its grow stage detached mid-step.
-    const auto layer = [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); };
-    if (!std::is_sorted(mChangedPrev.begin(), mChangedPrev.end(), layer))
-        std::sort(mChangedPrev.begin(), mChangedPrev.end(), layer);
+    if (!std::is_sorted(mChangedPrev.begin(), mChangedPrev.end(), anchorLayerLess))
+        std::sort(mChangedPrev.begin(), mChangedPrev.end(), anchorLayerLess);
     if (!listsOnly) mSunk = false;
 }
 
@@ -413,7 +412,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
         mDenseRun.clear();
         drain(phase, [&](uint32_t e, uint64_t m) { mDenseRun.push_back(Anchor{mIndex.keys[e], m}); });
         std::sort(mDenseRun.begin(), mDenseRun.end(), // index order to layer order, for the merge
-                  [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });
+                  anchorLayerLess);
     }
     for (const Pending& p : mPending)
         addPending(p, phase, is3D);
@@ -433,8 +432,7 @@ void Candidates::gather(int phase, bool is3D, std::vector<WorkItem>& work)
     for (const auto& sp : mPendingSpans) // mPendingAnchors is complete: its data no longer moves
         mRuns.push_back(Run{mPendingAnchors.data() + sp.first, mPendingAnchors.data() + sp.second});
     if (!mExtras.empty()) {
-        std::sort(mExtras.begin(), mExtras.end(),
-                  [](const Anchor& x, const Anchor& y) { return layerLess(x.origin, y.origin); });
+        std::sort(mExtras.begin(), mExtras.end(), anchorLayerLess);
         size_t k = 0; // fold equal origins
         for (size_t i = 1; i < mExtras.size(); ++i) {
             if (mExtras[i].origin == mExtras[k].origin)
