@@ -10,3 +10,13 @@
 #define VDBCLAY_TSAN 1
 #endif
 #endif
+
+// AddressSanitizer: its allocator's locks may be copied held into a multi-threaded fork's child,
+// which then hangs at its first allocation (seen once in CI: the crew's fork test, 120 s).
+#if defined(__SANITIZE_ADDRESS__)
+#define VDBCLAY_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define VDBCLAY_ASAN 1
+#endif
+#endif
