@@ -13,7 +13,13 @@
 //   costs at least), for every k the process may run on;
 // - a TBB fork/join of T equal tasks in a task_arena of T threads, as the automaton's pass forks one
 //   task per thread every step: the time per fork/join beyond the tasks' own work (each task spins
-//   for a fixed number of iterations, timed alone first).
+//   for a fixed number of iterations, timed alone first);
+// - T threads at once on CPUs 0..T-1, each on data of its own (a kernel-like loop of 8-int reads
+//   and writes at scattered places in a private 512 KiB buffer), meeting at a spin barrier every
+//   ~10 us as the pass's lanes do; each thread's work per pass against the same loop alone on its
+//   CPU. Nothing is shared but the barrier, so a slowdown here is the machine's (shared cores,
+//   caches, bandwidth or clock), and what a pass loses beyond it on T threads is the data its
+//   threads share (docs/PERFORMANCE.md, round 17).
 // usage: bench_handoff [T (default 2)] [work per task in us (default 20)]
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -113,6 +119,75 @@ uint64_t l1Passes()
     return sum;
 }
 
+/// A private buffer and the work the automaton's kernel does to it, roughly: 64 blocks a call, each
+/// 8 ints read at a scattered place and written back (a mostly-L2 working set).
+struct PrivateWork {
+    std::vector<int32_t> buf = std::vector<int32_t>(128 * 1024, 1);
+    uint64_t state = 1;
+    void run(int calls)
+    {
+        int32_t* b = buf.data();
+        const size_t n = buf.size() - 8;
+        for (int c = 0; c < calls; ++c) {
+            for (int k = 0; k < 64; ++k) {
+                state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+                int32_t* p = b + (state >> 33) % n;
+                int32_t sum = 0;
+                for (int j = 0; j < 8; ++j)
+                    sum += p[j];
+                for (int j = 0; j < 8; ++j)
+                    p[j] = sum - p[j];
+            }
+        }
+        __asm__ volatile("" : : "r"(b) : "memory");
+    }
+};
+
+/// Microseconds of work per pass on each of @a cpus, over @a passes passes of @a calls each: with
+/// @a together, all threads at once, meeting at a spin barrier after every pass; otherwise one CPU
+/// at a time (the others idle). Negative where a thread could not pin.
+std::vector<double> privateWorkUs(const std::vector<int>& cpus, int passes, int calls, bool together)
+{
+    const size_t t = cpus.size();
+    std::vector<double> busy(t, 0);
+    std::vector<char> pinned(t, 1);
+    std::vector<PrivateWork> work(t);
+    alignas(64) std::atomic<int> arrived{0};
+    alignas(64) std::atomic<int> generation{0};
+    auto lane = [&](size_t i) {
+        pinned[i] = pinTo(cpus[i]); // unpinned, it still runs (the barrier counts every thread)
+        work[i].run(calls);         // warm the buffer
+        for (int p = 0; p < passes; ++p) {
+            const auto t0 = Clock::now();
+            work[i].run(calls);
+            busy[i] += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+            if (!together) continue;
+            // A barrier: the last to arrive starts the next generation.
+            const int g = generation.load(std::memory_order_acquire);
+            if (arrived.fetch_add(1, std::memory_order_acq_rel) + 1 == int(t)) {
+                arrived.store(0, std::memory_order_relaxed);
+                generation.store(g + 1, std::memory_order_release);
+            } else {
+                while (generation.load(std::memory_order_acquire) == g) {
+                }
+            }
+        }
+    };
+    if (together) {
+        std::vector<std::thread> threads;
+        for (size_t i = 0; i < t; ++i)
+            threads.emplace_back(lane, i);
+        for (std::thread& th : threads)
+            th.join();
+    } else {
+        for (size_t i = 0; i < t; ++i)
+            std::thread(lane, i).join();
+    }
+    for (size_t i = 0; i < t; ++i)
+        busy[i] = pinned[i] ? busy[i] / passes : -1;
+    return busy;
+}
+
 } // namespace
 
 int main(int argc, char** argv)
@@ -184,6 +259,31 @@ int main(int argc, char** argv)
         std::printf("fork/join of %d tasks of %.1f us each: %.2f us per step (%.2f us beyond the work; "
                     "%.2fx of one thread doing them all)\n",
                     threads, workUs, us, us - workUs, threads * workUs / us);
+    }
+    // Threads at once on data of their own: does the machine slow a CPU while its neighbours work?
+    std::vector<int> team(cpus.begin(), cpus.begin() + std::min<size_t>(cpus.size(), size_t(threads)));
+    if (team.size() >= 2) {
+        const int calls = 64; // ~10 us a pass on the 2-vCPU VM this was written on
+        std::printf("%zu threads at once on private data, a barrier every pass (us of work per pass; "
+                    "alone -> together, best of 3):\n",
+                    team.size());
+        std::vector<double> alone(team.size(), 1e30), together(team.size(), 1e30);
+        for (int r = 0; r < 3; ++r) {
+            const std::vector<double> a = privateWorkUs(team, 20000, calls, false);
+            const std::vector<double> b = privateWorkUs(team, 20000, calls, true);
+            for (size_t i = 0; i < team.size(); ++i) {
+                alone[i] = std::min(alone[i], a[i]);
+                together[i] = std::min(together[i], b[i]);
+            }
+        }
+        for (size_t i = 0; i < team.size(); ++i) {
+            if (alone[i] < 0 || together[i] < 0) {
+                std::printf("  CPU %d: could not pin a thread to it\n", team[i]);
+                continue;
+            }
+            std::printf("  CPU %d: %.2f -> %.2f (%.2fx)\n", team[i], alone[i], together[i],
+                        together[i] / alone[i]);
+        }
     }
     return sink.load() + keep.load() == 42 ? 1 : 0;
 }

@@ -4,7 +4,9 @@
 # scripts/device-bundle.sh made (a Release build with its own libraries and loader), then writes to
 # OUTDIR:
 #   handoff.txt       bench_handoff: each CPU's speed, the cache-line round trip from CPU 0 to every
-#                     other CPU, and a fork/join of THREADS_MAX tasks: the floor under a pass
+#                     other CPU, a fork/join of THREADS_MAX tasks (the floor under a pass), and
+#                     THREADS_MAX threads at once on private data (what the machine itself costs a
+#                     CPU while the others work: the rest of a pass's loss is shared data)
 #   curve.txt, .csv   bench/thread-curve.sh on issue 13's scenes (press48 and press128 at 0.8 Tc,
 #                     settled every frame: small active sets, 130-670 blocks a step)
 #   press.txt, .csv   bench_scenes' press, first PRESS_STEPS steps (large active sets: ~130,000
