@@ -32,6 +32,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -261,7 +262,8 @@ int main(int argc, char** argv)
                     threads, workUs, us, us - workUs, threads * workUs / us);
     }
     // Threads at once on data of their own: does the machine slow a CPU while its neighbours work?
-    std::vector<int> team(cpus.begin(), cpus.begin() + std::min<size_t>(cpus.size(), size_t(threads)));
+    std::vector<int> team(cpus.begin(),
+                          cpus.begin() + std::ptrdiff_t(std::min<size_t>(cpus.size(), size_t(threads))));
     if (team.size() >= 2) {
         const int calls = 64; // ~10 us a pass on the 2-vCPU VM this was written on
         std::printf("%zu threads at once on private data, a barrier every pass (us of work per pass; "
