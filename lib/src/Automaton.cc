@@ -500,17 +500,19 @@ struct Automaton::Impl {
         };
         if (split.crew) {
             // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
-            // into sink lane l. (Were there more, processRange would find no lane for a helper's
-            // thread and record nothing, flagged sinkMissed: record() then records every item.)
+            // into sink lane l. (Were there more, a lane without a sink lane records nothing and
+            // flags its chunk sinkMissed: record() then records every item. It must not fall back
+            // to another lane's sink: two threads would write the same words.)
             if (crew && crew->forked()) crew.reset(); // a fork's child: the helpers are the parent's
             if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
             const PassCrew::Body body = [&](size_t c, int lane) {
                 PassInput own = in;
-                if (in.sink && lane < in.sinkLanes) {
-                    own.sink = in.sink + lane;
+                if (in.sink) {
+                    own.sink = lane < in.sinkLanes ? in.sink + lane : nullptr;
                     own.sinkLanes = 1;
                 }
                 runChunk(c, own);
+                if (in.sink && !own.sink) chunkTotals[c].sinkMissed = true;
             };
             crew->run(m, body);
         } else {
