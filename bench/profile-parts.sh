@@ -18,20 +18,16 @@
 #          CPU=1 bench/profile-parts.sh bench/scenes/press128-0.8tc.json 1 2
 set -euo pipefail
 if [[ $# -lt 2 ]]; then
-    sed -n '2,19p' "$0" >&2
+    sed -n '2,18p' "$0" >&2
     exit 2
 fi
 scene=$1 threads=$2 rounds=${3:-1}
 shift $(($# >= 3 ? 3 : 2))
 command -v perf >/dev/null || { echo "profile-parts: perf not found (apt-get install linux-perf)" >&2; exit 2; }
 [[ -f $scene ]] || { echo "profile-parts: $scene: no such scene" >&2; exit 2; }
-bin=${BIN:-}
-if [[ -z $bin ]]; then
-    for b in build-bench/apps/vdbclay build/apps/vdbclay; do
-        [[ -x $b ]] && { bin=$b; break; }
-    done
-fi
-[[ -n $bin && -x $bin ]] || { echo "profile-parts: no vdbclay (set BIN)" >&2; exit 2; }
+bin=${BIN:-build-bench/apps/vdbclay}
+[[ -n ${BIN:-} || -x $bin ]] || bin=build/apps/vdbclay
+[[ -x $bin ]] || { echo "profile-parts: $bin: not built (set BIN)" >&2; exit 2; }
 cpus=${CPU:-0-$((threads - 1))}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
