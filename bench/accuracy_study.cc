@@ -23,7 +23,7 @@
 // Every run is single-threaded (results are identical on any thread count; one thread makes the
 // times less noisy on a shared machine). Output: DIR/{squeeze,fig6,fig6-rule2,sweep,scenes}.csv and
 // a readable summary on stderr.
-#include "RulesImpl.h"
+#include "automaton/RulesImpl.h"
 #include "vdbclay/Automaton.h"
 #include "vdbclay/Metrics.h"
 #include "vdbclay/Rules.h"

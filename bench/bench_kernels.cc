@@ -21,8 +21,8 @@
 //   spread   cells 0-1000 with one in eight at 1000-4000: most blocks have room for their excess.
 //   sparse   cells 950-1000 with one in 60 at 1001-1400: most candidate blocks hold no over cell
 //            (a settling press examines ~4 such blocks per updated one: the over-cell filter's case).
-#include "Kernel.h"
-#include "RulesImpl.h"
+#include "automaton/Kernel.h"
+#include "automaton/RulesImpl.h"
 #include "vdbclay/Rules.h"
 
 #include <openvdb/openvdb.h>

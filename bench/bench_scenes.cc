@@ -27,7 +27,7 @@
 //
 // Output: CSV (one header, one row per measurement) to stdout or --csv FILE; a readable summary
 // with the ratios on stderr. See docs/PERFORMANCE.md.
-#include "RulesImpl.h"
+#include "automaton/RulesImpl.h"
 #include "vdbclay/Automaton.h"
 #include "vdbclay/BatchHeap.h"
 #include "vdbclay/Metrics.h"

@@ -84,7 +84,7 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 # the normal and ASan suites run it.
 "$BUILD_DIR/tests/test_automaton" --gtest_brief=1 \
   --gtest_filter='-AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles'
-# The pass's crew (lib/src/PassCrew.h) alone: its ticket, done count and sleep under contention.
+# The pass's crew (lib/src/automaton/PassCrew.h) alone: its ticket, done count and sleep under contention.
 "$BUILD_DIR/tests/test_pass_crew" --gtest_brief=1
 # The push and the tools' placement on 1, 2, 3 and 8 threads; the global layer's solver likewise.
 "$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1

@@ -3,7 +3,7 @@
 // and sinkChanges chosen at run time.
 #pragma once
 
-#include "Candidates.h"
+#include "automaton/Candidates.h"
 #include "TestRng.h"
 
 #include <algorithm>

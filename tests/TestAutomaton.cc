@@ -3,8 +3,8 @@
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
-#include "Candidates.h"
-#include "PassSplit.h"
+#include "automaton/Candidates.h"
+#include "automaton/PassSplit.h"
 
 #include <openvdb/openvdb.h>
 

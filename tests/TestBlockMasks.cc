@@ -1,6 +1,6 @@
 // The automaton's block-mask algebra (lib/src/BlockMasks.h) against brute force on coordinates:
 // no OpenVDB in this translation unit.
-#include "BlockMasks.h"
+#include "automaton/BlockMasks.h"
 
 #include <gtest/gtest.h>
 

@@ -5,7 +5,7 @@
 // bits), E > A and E <= A blocks, obstacle voxels and an obstacle tile, odd blocks straddling into missing
 // leaves (deferred), 2D and 3D, every rule, small and large Tc (Tc > 2^27 turns the SIMD branch off, so both
 // paths must agree there trivially too).
-#include "Kernel.h"
+#include "automaton/Kernel.h"
 
 #include <vdbclay/Automaton.h>
 #include <vdbclay/Metrics.h>

@@ -21,8 +21,8 @@
 
 #include <unistd.h>
 
-#include "AllocationCounter.h" // the byte-counting operator new and delete
-#include "MemoryEstimate.h"    // memory_internal::voxelsWithinFaceSteps
+#include "AllocationCounter.h"     // the byte-counting operator new and delete
+#include "sculpt/MemoryEstimate.h" // memory_internal::voxelsWithinFaceSteps
 #include "TestRng.h"
 
 using namespace vdbclay;

@@ -2,8 +2,8 @@
 // leaves (lib/src/SurfaceSweep.cc) against OpenVDB's own fogToSdf, and measureClay against a serial
 // reference (the previous implementation): bit-identical results on 1, 2, 3 and 8 threads; clay
 // shapes added into the scene's grid leaf by leaf.
-#include "Rasterize.h"
-#include "Surface.h"
+#include "shapes/Rasterize.h"
+#include "output/Surface.h"
 #include "TestRng.h"
 
 #include "vdbclay/Metrics.h"

@@ -1,6 +1,6 @@
 // PassBalance (lib/src/PassBalance.h): the chunks' shares from their measured seconds per block.
 // Exact expectations: the measures below are powers of two, so the estimates are exact doubles.
-#include "PassBalance.h"
+#include "automaton/PassBalance.h"
 
 #include <gtest/gtest.h>
 

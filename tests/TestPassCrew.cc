@@ -3,7 +3,7 @@
 // finish. No test waits on time: where a test needs the helpers to take part, a chunk waits until
 // another lane has started a chunk of the same pass, which only a helper can do while the caller
 // is inside that chunk (so a crew whose helpers never ran would hang, and ctest's timeout fails it).
-#include "PassCrew.h"
+#include "automaton/PassCrew.h"
 #include "SanitizerBuild.h"
 
 #include <gtest/gtest.h>

@@ -1,7 +1,7 @@
 // The repartition rules on single blocks, against values computed by hand from the paper's formulas.
 #include <vdbclay/Rules.h>
 
-#include "RulesImpl.h"
+#include "automaton/RulesImpl.h"
 
 #include <gtest/gtest.h>
 

@@ -10,7 +10,7 @@
 
 #include <gtest/gtest.h>
 
-#include "InsideBox.h" // shape_internal::insideVoxelBox
+#include "shapes/InsideBox.h" // shape_internal::insideVoxelBox
 
 #include <climits>
 #include <cmath>

@@ -6,6 +6,7 @@
 /// (as a path such as tools[0].path[1].frames) and what was expected.
 #pragma once
 
+#include "vdbclay/MemoryBudget.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Transport.h"
@@ -57,8 +58,6 @@ struct OutputSpec {
     std::string vdb, png, mesh, stats; ///< empty: not written
 };
 
-/// Scene::memoryBudget: no budget at all.
-constexpr uint64_t kNoMemoryBudget = UINT64_MAX;
 /// The voxel sizes (world units per voxel) a scene or import may use: OpenVDB refuses a transform
 /// whose scale is near zero, and beyond these a world unit is no longer a useful measure.
 constexpr double kMinVoxelSize = 1e-4;
@@ -91,13 +90,6 @@ struct Scene {
     /// kNoMemoryBudget: unlimited. Scene files: "memory_budget": "8G" (or a byte count, or "none").
     uint64_t memoryBudget = 0;
 };
-
-/// Parses a size such as "8G", "512M", "1.5GiB", "64k", "1000000" (bytes; K, M, G, T are powers of
-/// 1024, with or without "i"/"B"), or "none"/"unlimited" (kNoMemoryBudget).
-/// @throw Error naming @a text if it is not such a size or is 0.
-uint64_t parseByteSize(const std::string& text);
-/// "1.5 GiB", "512 MiB", "900 B": a size for messages.
-std::string formatBytes(uint64_t bytes);
 
 /// Parses scene JSON. Relative file names inside the scene are resolved against @a baseDir.
 /// @a memoryBudget, when not 0, replaces the scene's "memory_budget" (as `vdbclay run

@@ -1,0 +1,1008 @@
+// The virtual-clay automaton on a sparse OpenVDB grid: the public Automaton (see Automaton.h).
+//
+// Design
+// ======
+// The automaton is split along its concepts, one file each:
+//   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
+//   Candidates.*   which blocks a step examines: the last two steps' changes, in anchor order; while
+//                  the leaf table is valid, accumulated per table anchor (dense mode, filled by the
+//                  pass itself), otherwise merged from sorted lists
+//   PassCrew.*     the threads a pass runs on, kept from one pass to the next (no fork/join a step)
+//   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule; and
+//                  the flat leaf table (LeafTable), which hands the pass an anchor's leaves by one
+//                  hash lookup; cleared on every edit, resync and grown leaf, rebuilt lazily
+//   this file      the state (mass, overload, bounds), the stages of a step, validation and scans,
+//                  edits, settle() and the no-room flood
+//
+// Stages of step(), each timed into StageSeconds:
+//   gather       Candidates::gather: one entry per anchor. Dense mode (nearly every step): in the
+//                leaf table's column order (x, then y, then z), a scan of the anchors marked by the
+//                last passes; on several threads the part of it below the other chunks' reach was
+//                already drained by the last pass's chunk 0 (predrain). Merged mode (after edits,
+//                no table): in layer order (y, z, x: the paper's horizontal p layers).
+//   repartition  contiguous ranges of that list (slabs of columns in dense mode: two chunks meet on
+//                a y-z face, where the paper's horizontal layers met on a whole x-z face inside the
+//                thin active slab under a tool; docs/PERFORMANCE.md round 16), one chunk per thread of about
+//                equal candidate blocks, run on the pass's crew (PassCrew.h: threads kept between
+//                passes; PassSplit.h for the other splits), each range through processRange
+//                (Kernel.h: what a task may write and why it is safe);
+//                in dense mode the pass also ORs its items' changes into the candidates of the
+//                next two steps (DenseSink, order-free), each thread into its own lane
+//                (Candidates::lanes), which the gathers OR together. Includes leaf table builds.
+//                Also measured: the thread-seconds the passes' shares ran and those their threads
+//                sat idle (StageSeconds::passBusy, passIdle: how well a pass used its threads).
+//   grow         a block that must write into a missing leaf is not written in the pass but queued;
+//                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
+//                Since blocks of a phase are disjoint, doing it later gives the identical result.
+//   bookkeeping  the changed masks become the next steps' candidates (dense mode: only kept as
+//                lists, for a return to merged mode); counters are reduced.
+// The automaton never empties a cell (over cells keep at least Tc, or m - floor(alpha m) > 0 for
+// arata, and under cells only gain), and a leaf is only created to receive clay, so no pruning is
+// needed after a step; edit() prunes leaves a tool emptied.
+//
+// Determinism. Each block's result depends only on its cells and on blockHash(origin, step, seed).
+// Blocks of a phase are disjoint, so neither the partition nor the order matters; the reductions are
+// integer sums and maxima. Results are bit-identical for any thread count and for threads = 1,
+// which runs the same body without TBB. tests/TestGolden.cc pins whole runs per rule and dimension.
+//
+// Overflow. No result can exceed the sum of its block, which is at most 8 times the largest cell.
+// The automaton tracks an upper bound of the largest cell; while 8 x bound fits in int32 nothing can
+// overflow. Above that, each step first runs the pass read-only and refuses (throws) before writing
+// if any block's result would not fit in int32.
+
+#include "vdbclay/Automaton.h"
+#include "vdbclay/Metrics.h"
+
+#include "automaton/BlockMasks.h"
+#include "automaton/Candidates.h"
+#include "core/Format.h"
+#include "automaton/Kernel.h"
+#include "automaton/PassBalance.h"
+#include "automaton/PassCrew.h"
+#include "automaton/PassSplit.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/ValueAccessor.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <sstream>
+#include <type_traits>
+#include <vector>
+
+namespace vdbclay {
+
+static_assert(std::is_same<MassGrid, openvdb::Int32Grid>::value, "MassGrid must be openvdb::Int32Grid");
+static_assert(std::is_same<ObstacleGrid, openvdb::MaskGrid>::value, "ObstacleGrid must be openvdb::MaskGrid");
+
+namespace {
+
+using openvdb::Coord;
+using MassTree = openvdb::Int32Tree;
+using MassLeaf = MassTree::LeafNodeType;
+using ObsTree = openvdb::MaskTree;
+using ObsLeaf = ObsTree::LeafNodeType;
+using namespace automaton_internal;
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// Voxelizes the active tiles of the internal nodes that meet @a region (an edit's: the automaton
+/// holds no active tile outside a region being edited, resync() voxelizes the whole tree), so an
+/// edit costs its region, not the model (Tree::voxelizeActiveTiles walks every internal node: ~0.4 ms
+/// an edit on a 512-wide sphere). Whole nodes are voxelized, a superset of the tiles that meet it.
+void voxelizeActiveTilesIn(MassTree& tree, const Box& region)
+{
+    using Upper = MassTree::RootNodeType::ChildNodeType;
+    using Lower = Upper::ChildNodeType;
+    const int64_t u = Upper::DIM, l = Lower::DIM;
+    auto slots = [&](int64_t dim) {
+        int64_t n = 1;
+        for (int a = 0; a < 3; ++a)
+            n *= (int64_t(region.max[a]) / dim - int64_t(region.min[a]) / dim + 2);
+        return n;
+    };
+    const openvdb::CoordBBox rb(Coord(region.min[0], region.min[1], region.min[2]),
+                                Coord(region.max[0], region.max[1], region.max[2]));
+    bool rootTile = false;
+    for (auto it = tree.root().cbeginValueOn(); it && !rootTile; ++it) // a root tile spans an upper node
+        rootTile = openvdb::CoordBBox::createCube(it.getCoord(), int32_t(u)).hasOverlap(rb);
+    if (rootTile || slots(l) > 4096) {
+        tree.voxelizeActiveTiles();
+        return;
+    }
+    auto floorTo = [](int64_t v, int64_t dim) {
+        return v >= 0 ? v / dim * dim : -((-v + dim - 1) / dim) * dim;
+    };
+    for (int64_t x = floorTo(region.min[0], u); x <= region.max[0]; x += u)
+        for (int64_t y = floorTo(region.min[1], u); y <= region.max[1]; y += u)
+            for (int64_t z = floorTo(region.min[2], u); z <= region.max[2]; z += u)
+                if (Upper* n = tree.probeNode<Upper>(Coord(int32_t(x), int32_t(y), int32_t(z))))
+                    if (!n->getValueMask().isOff()) n->voxelizeActiveTiles(false);
+    for (int64_t x = floorTo(region.min[0], l); x <= region.max[0]; x += l)
+        for (int64_t y = floorTo(region.min[1], l); y <= region.max[1]; y += l)
+            for (int64_t z = floorTo(region.min[2], l); z <= region.max[2]; z += l)
+                if (Lower* n = tree.probeNode<Lower>(Coord(int32_t(x), int32_t(y), int32_t(z))))
+                    if (!n->getValueMask().isOff()) n->voxelizeActiveTiles(false);
+}
+
+} // namespace
+
+// ---- Impl ---------------------------------------------------------------------------------------
+
+struct Automaton::Impl {
+    AutomatonOptions opts;
+    CompiledRule rule;
+    MassGridPtr massGrid;
+    ObstacleGridPtr obsGrid;
+    std::unique_ptr<tbb::task_arena> arena;
+
+    uint64_t stepCount = 0;
+    int64_t totalMass = 0;
+    int64_t overload = 0;
+    int64_t maxBound = 0; // upper bound of the largest cell value
+    int quietSteps = 0;   // consecutive steps that changed nothing
+    Candidates candidates;
+    LeafTable leafTable;           // cleared whenever a leaf may appear or vanish, or the obstacles change
+    uint64_t workWithoutTable = 0; // anchors passed through the accessors since the last build
+    bool prune = true;             // setPruneCandidates
+
+    // scratch, reused between steps
+    std::vector<WorkItem> work;
+    std::vector<size_t> bounds;          // runPassWeighted's chunks
+    std::vector<PassTotals> chunkTotals; // and their totals
+    std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
+    std::unique_ptr<PassCrew> crew;      // runPassWeighted's threads (PassSplit::crew), made at first use
+    PassBalance balance;                 // runPassWeighted's shares, from its chunks' measured speed
+    std::vector<uint64_t> cutTargets;    // runPassWeighted's cumulative block counts per cut
+    std::vector<PassBalance::Measure> chunkMeasures; // runPassWeighted's chunks' blocks and time
+    double passBusy = 0, passIdle = 0; // this step's passes so far: StageSeconds::passBusy, passIdle
+
+    bool is3D() const { return opts.dimensions == 3; }
+    /// The threads a pass may use: the Automaton's arena's, or (threads = 0) the caller's arena's.
+    int passLanes() const
+    {
+        return arena ? arena->max_concurrency() : tbb::this_task_arena::max_concurrency();
+    }
+    int cells() const { return is3D() ? 8 : 4; }
+    MassTree& tree() { return massGrid->tree(); }
+    const ObsTree* obsTree() const { return obsGrid ? &obsGrid->tree() : nullptr; }
+
+    void setThreads(int threads)
+    {
+        if (threads < 0) throw Error("threads must be >= 0, got " + std::to_string(threads));
+        opts.threads = threads;
+        crew.reset();
+        balance.reset();
+        arena.reset();
+        if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
+    }
+
+    template <typename F> void inArena(F&& f)
+    {
+        if (arena)
+            arena->execute(f);
+        else
+            f();
+    }
+
+    bool obstacleAt(const openvdb::tree::ValueAccessor<const ObsTree, false>* acc, const Coord& c) const
+    {
+        return acc && acc->isValueOn(c);
+    }
+
+    /// Validates and measures the voxels of the leaves overlapping @a region (all leaves when
+    /// region is null); makes active exactly the nonzero voxels. Returns mass, overload, max.
+    struct Scan {
+        int64_t mass = 0, overload = 0, maxValue = 0;
+    };
+    /// When @a hot is given, the origins of the leaves holding an over cell are appended to it.
+    /// The leaves are scanned in parallel (one task per leaf: each writes only its own leaf and
+    /// result) and the results folded in leaf order, so the sums, the hot list and the error
+    /// reported (the first bad voxel in leaf order) are those of a serial scan.
+    Scan scanLeaves(const Box* region, const char* context, std::vector<Origin>* hot = nullptr)
+    {
+        const int64_t tc = rule.threshold;
+        const ObsTree* ot = obsTree();
+        std::vector<MassLeaf*> leaves;
+        if (!region) {
+            leaves.reserve(tree().leafCount());
+            for (auto it = tree().beginLeaf(); it; ++it)
+                leaves.push_back(&*it);
+        } else if (region->empty()) {
+            return Scan();
+        } else {
+            int64_t slots = 1;
+            for (int a = 0; a < 3 && slots <= INT64_MAX / 4096 / 1024; ++a)
+                slots *= (int64_t(region->max[a]) >> 3) - (int64_t(region->min[a]) >> 3) + 1;
+            if (slots <= int64_t(tree().leafCount())) {
+                const Coord lo(region->min[0] & ~7, region->min[1] & ~7, region->min[2] & ~7);
+                for (int64_t x = lo.x(); x <= region->max[0]; x += 8)
+                    for (int64_t y = lo.y(); y <= region->max[1]; y += 8)
+                        for (int64_t z = lo.z(); z <= region->max[2]; z += 8)
+                            if (MassLeaf* leaf = tree().probeLeaf(Coord(int32_t(x), int32_t(y), int32_t(z))))
+                                leaves.push_back(leaf);
+            } else {
+                // Fewer leaves than slots: walk them, in the slot loop's order (x, then y, then z).
+                const openvdb::CoordBBox rb(Coord(region->min[0], region->min[1], region->min[2]),
+                                            Coord(region->max[0], region->max[1], region->max[2]));
+                for (auto it = tree().beginLeaf(); it; ++it)
+                    if (it->getNodeBoundingBox().hasOverlap(rb)) leaves.push_back(&*it);
+                std::sort(leaves.begin(), leaves.end(),
+                          [](const MassLeaf* a, const MassLeaf* b) { return a->origin() < b->origin(); });
+            }
+        }
+        struct One {
+            Scan s;
+            std::string error;
+        };
+        std::vector<One> per(leaves.size());
+        auto visit = [&](size_t k) {
+            MassLeaf& leaf = *leaves[k];
+            Scan& s = per[k].s;
+            const ObsLeaf* ol = ot ? ot->probeConstLeaf(leaf.origin()) : nullptr;
+            const bool tileObs = ot && !ol && ot->isValueOn(leaf.origin());
+            int32_t* d = leaf.buffer().data();
+            for (openvdb::Index i = 0; i < MassLeaf::SIZE; ++i) {
+                const int32_t v = d[i];
+                if (v == 0) {
+                    leaf.setValueOff(i);
+                    continue;
+                }
+                if (v < 0) {
+                    per[k].error = std::string(context) + ": voxel " + coordStr(leaf.offsetToGlobalCoord(i)) +
+                                   " holds negative mass " + std::to_string(v);
+                    return;
+                }
+                if (!is3D() && leaf.offsetToGlobalCoord(i).z() != 0) { // (its coordinate only when needed)
+                    per[k].error = std::string(context) +
+                                   ": 2D clay must lie in the z = 0 layer, but voxel " +
+                                   coordStr(leaf.offsetToGlobalCoord(i)) + " holds mass " + std::to_string(v);
+                    return;
+                }
+                leaf.setValueOn(i);
+                s.mass += v;
+                s.maxValue = std::max<int64_t>(s.maxValue, v);
+                const bool isObs = ol ? ol->isValueOn(i) : tileObs;
+                if (!isObs && v > tc) s.overload += v - tc;
+            }
+        };
+        if (opts.threads == 1 || leaves.size() < 64) {
+            for (size_t k = 0; k < leaves.size(); ++k) {
+                visit(k);
+                if (!per[k].error.empty()) break;
+            }
+        } else {
+            inArena([&] {
+                tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size(), 16),
+                                  [&](const tbb::blocked_range<size_t>& r) {
+                                      for (size_t k = r.begin(); k != r.end(); ++k)
+                                          visit(k);
+                                  });
+            });
+        }
+        Scan s;
+        for (size_t k = 0; k < leaves.size(); ++k) {
+            if (!per[k].error.empty()) throw Error(per[k].error);
+            s.mass += per[k].s.mass;
+            s.overload += per[k].s.overload;
+            s.maxValue = std::max(s.maxValue, per[k].s.maxValue);
+            if (hot && per[k].s.overload != 0) {
+                const Coord o = leaves[k]->origin();
+                hot->push_back(Origin(o.x(), o.y(), o.z()));
+            }
+        }
+        return s;
+    }
+
+    void resync()
+    {
+        MassTree& t = tree();
+        if (t.background() != 0) {
+            throw Error("mass grid \"" + massGrid->getName() + "\": background must be 0, got " +
+                        std::to_string(t.background()));
+        }
+        t.voxelizeActiveTiles();
+        auto it = t.cbeginValueOff();
+        it.setMaxDepth(MassTree::ValueOffCIter::LEAF_DEPTH - 1); // tiles only
+        for (; it; ++it) {
+            if (*it != 0) {
+                openvdb::CoordBBox bb;
+                it.getBoundingBox(bb);
+                throw Error("mass grid \"" + massGrid->getName() + "\": inactive tile " + coordStr(bb.min()) +
+                            "-" + coordStr(bb.max()) + " holds mass " + std::to_string(*it) +
+                            "; voxelize it or make it active");
+            }
+        }
+        std::vector<Origin> hot;
+        const Scan s = scanLeaves(nullptr, "mass grid", &hot);
+        totalMass = s.mass;
+        overload = s.overload;
+        maxBound = s.maxValue;
+        quietSteps = 0;
+        clearLeafTable();
+        candidates.reset(std::move(hot));
+    }
+
+    /// Forgets the leaf table (a leaf may appear or vanish, or the obstacles change); the candidates
+    /// leave its index for the merged lists.
+    void clearLeafTable()
+    {
+        leafTable.clear();
+        candidates.detach();
+    }
+
+    /// After an edit of @a region (edit(), setMasses()): prunes the region's leaves it emptied (the grid
+    /// holds active exactly its nonzero cells), then wakes every block touching the region.
+    void pruneAndWake(const Box& region)
+    {
+        std::vector<Coord> empty;
+        const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
+        for (int x = lo.x(); x <= region.max[0]; x += 8)
+            for (int y = lo.y(); y <= region.max[1]; y += 8)
+                for (int z = lo.z(); z <= region.max[2]; z += 8)
+                    if (const MassLeaf* l = tree().probeConstLeaf(Coord(x, y, z)))
+                        if (l->isEmpty()) empty.push_back(l->origin());
+        for (const Coord& c : empty)
+            delete tree().stealNode<MassLeaf>(c, 0, false);
+        candidates.addRegion(region);
+        quietSteps = 0;
+    }
+
+    PassInput passInput(int phase, bool dryRun)
+    {
+        PassInput in;
+        in.tree = &tree();
+        in.obstacles = obsTree();
+        in.rule = rule;
+        in.is3D = is3D();
+        in.phase = phase;
+        in.step = stepCount;
+        in.seed = opts.seed;
+        in.mayOverflow = maxBound > INT32_MAX / 8;
+        in.dryRun = dryRun;
+        in.table = leafTable.valid() ? &leafTable : nullptr;
+        in.prune = prune;
+        // The pass records its items' changes as it goes; with several threads each into its own
+        // lane (atomic ORs into shared words cost the pass its second thread: press 128^3 1.1x, and
+        // recording serially after the pass left 0.4 s of 2.2 on one core).
+        if (!dryRun && in.table) {
+            in.sinkLanes = 1;
+            if (opts.threads != 1) in.sinkLanes = passLanes();
+            in.sink = candidates.lanes(in.sinkLanes);
+        }
+        return in;
+    }
+
+    PassTotals runPass(int phase, bool dryRun)
+    {
+        PassTotals tot;
+        if (work.empty()) return tot;
+        const PassInput in = passInput(phase, dryRun);
+        const auto start = Clock::now();
+        if (opts.threads == 1) {
+            processRange(in, work.data(), 0, work.size(), tot);
+            passBusy += secondsSince(start);
+            return tot;
+        }
+        // The pass's thread-seconds: every lane of the arena for its whole time, of which its
+        // shares ran `busy` (StageSeconds::passIdle is the rest).
+        const int lanes = passLanes();
+        double busy = 0;
+        if (passSplit().weighted) {
+            tot = runPassWeighted(in, busy);
+        } else {
+            tot = runPassAuto(in, busy);
+        }
+        const double span = secondsSince(start);
+        passBusy += busy;
+        passIdle += std::max(0.0, double(lanes) * span - busy);
+        return tot;
+    }
+
+    /// Round 4's split (VDBCLAY_PASS_SPLIT=auto): TBB's parallel_reduce over the items. Adds to
+    /// @a busy the seconds its ranges ran.
+    PassTotals runPassAuto(const PassInput& in, double& busy)
+    {
+        struct Body {
+            const PassInput* in;
+            WorkItem* work;
+            PassTotals tot;
+            double busy = 0;
+            Body(const PassInput* i, WorkItem* w) : in(i), work(w) {}
+            Body(Body& o, tbb::split) : in(o.in), work(o.work) {}
+            void operator()(const tbb::blocked_range<size_t>& r)
+            {
+                const auto start = Clock::now();
+                processRange(*in, work, r.begin(), r.end(), tot);
+                busy += secondsSince(start);
+            }
+            void join(Body& o)
+            {
+                tot.join(o.tot);
+                busy += o.busy;
+            }
+        };
+        Body body(&in, work.data());
+        inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
+        busy += body.busy;
+        return std::move(body.tot);
+    }
+
+    /// The weighted split (passSplit). Same items, same per-item work, totals joined (sums, maxima,
+    /// the first overflow, deferred blocks sorted later): the result is that of any other partition.
+    /// Adds to @a busy the seconds its chunks ran.
+    PassTotals runPassWeighted(const PassInput& in, double& busy)
+    {
+        const PassSplit split = passSplit();
+        const size_t n = work.size();
+        // Candidate blocks per item, counted once (the cut below reads them again).
+        blockSums.resize(n);
+        uint64_t total = 0;
+        for (size_t i = 0; i < n; ++i) {
+            total += popcount64(work[i].mask);
+            blockSums[i] = total;
+        }
+        PassTotals tot;
+        if (total < split.minBlocks) {
+            PassInput one = in;
+            one.sinkLanes = 1; // this thread records into lane 0
+            const auto start = Clock::now();
+            processRange(one, work.data(), 0, n, tot);
+            busy += secondsSince(start);
+            return tot;
+        }
+        const int threads = passLanes();
+        const size_t chunks =
+            std::min({n, size_t(std::max(threads, 1)) * size_t(split.perThread), PassCrew::kMaxChunks});
+        // The chunks' shares of the blocks: by their measured speed in this phase (PassBalance.h),
+        // or until it is known (or with balance off) chunk 0 firstShare % of an even share (it also
+        // predrains) and the others the rest evenly.
+        if (split.balance)
+            balance.cuts(in.phase, chunks, total, split.firstShare, cutTargets);
+        else
+            PassBalance::fixedCuts(chunks, total, split.firstShare, cutTargets);
+        bounds.clear();
+        bounds.push_back(0);
+        size_t cut = 1;
+        for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
+            if (blockSums[i] >= cutTargets[cut]) {
+                bounds.push_back(i + 1);
+                ++cut;
+            }
+        }
+        bounds.push_back(n);
+        const size_t m = bounds.size() - 1;
+        chunkTotals.assign(m, PassTotals());
+        chunkMeasures.assign(m, PassBalance::Measure());
+        // Chunk 0, once done, drains the next step's candidates that the later chunks cannot reach
+        // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
+        const uint32_t firstOfRest =
+            split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
+        // One chunk, as any lane or task runs it: its items, then (chunk 0) the predrain.
+        auto runChunk = [&](size_t c, const PassInput& input) {
+            const auto start = Clock::now();
+            processRange(input, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
+            if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
+            chunkMeasures[c] = {chunkTotals[c].examined, secondsSince(start)};
+        };
+        if (split.crew) {
+            // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
+            // into sink lane l. (Were there more, a lane without a sink lane records nothing and
+            // flags its chunk sinkMissed: record() then records every item. It must not fall back
+            // to another lane's sink: two threads would write the same words.)
+            if (crew && crew->forked()) crew.reset(); // a fork's child: the helpers are the parent's
+            if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
+            const PassCrew::Body body = [&](size_t c, int lane) {
+                PassInput own = in;
+                if (in.sink) {
+                    own.sink = lane < in.sinkLanes ? in.sink + lane : nullptr;
+                    own.sinkLanes = 1;
+                }
+                runChunk(c, own);
+                if (in.sink && !own.sink) chunkTotals[c].sinkMissed = true;
+            };
+            crew->run(m, body);
+        } else {
+            inArena([&] {
+                tbb::parallel_for(
+                    tbb::blocked_range<size_t>(0, m, 1),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t c = r.begin(); c != r.end(); ++c)
+                            runChunk(c, in);
+                    },
+                    tbb::simple_partitioner());
+            });
+        }
+        for (const PassTotals& t : chunkTotals)
+            tot.join(t);
+        for (const PassBalance::Measure& c : chunkMeasures)
+            busy += c.seconds;
+        if (split.balance && !in.dryRun && m == chunks) balance.measured(in.phase, m, chunkMeasures.data());
+        return tot;
+    }
+
+    [[noreturn]] void throwOverflow(const PassTotals& tot, int phase)
+    {
+        const Origin o = blockOrigin(work[tot.overflowItem].anchor, tot.overflowBit, phase, is3D());
+        throw Error("step " + std::to_string(stepCount) + ": the block at " + coordStr(o) +
+                    " would put more than INT32_MAX (" + std::to_string(INT32_MAX) +
+                    ") clay in one cell; the state was refused and left unchanged "
+                    "(lower the masses or raise the threshold)");
+    }
+
+    StepReport step()
+    {
+        StepReport rep;
+        rep.steps = 1;
+        const int phase = int(stepCount & 1);
+        if (overload == 0) {
+            // No cell is over Tc: no block can change.
+            candidates.clearChanges();
+            finishStep(rep, 0);
+            return rep;
+        }
+
+        auto t0 = Clock::now();
+        double buildSeconds = 0; // counted in the repartition, as the accessor fetches it replaces
+        if (!leafTable.valid() && workWithoutTable >= 4 * tree().leafCount()) {
+            // Rebuilt only once the passes since the last build have fetched at least 4 anchors per
+            // leaf through the accessors: a build costs about what fetching a few anchors per leaf
+            // saves, so frequent edits of a large grid cost at most a constant factor more than
+            // without a table, and settling runs use it for nearly every step.
+            leafTable.build(tree(), obsTree(), is3D());
+            workWithoutTable = 0;
+            buildSeconds = secondsSince(t0);
+            t0 = Clock::now();
+        }
+        if (leafTable.valid() && !candidates.attached())
+            candidates.attach(leafTable.anchorIndex(), phase, is3D());
+        candidates.gather(phase, is3D(), work);
+        if (!leafTable.valid()) workWithoutTable += work.size();
+        rep.seconds.gather = secondsSince(t0);
+
+        t0 = Clock::now();
+        passBusy = passIdle = 0;
+        if (maxBound > INT32_MAX / 8) {
+            const PassTotals check = runPass(phase, /*dryRun=*/true);
+            if (check.overflow) throwOverflow(check, phase);
+        }
+        PassTotals tot = runPass(phase, /*dryRun=*/false);
+        rep.seconds.repartition = buildSeconds + secondsSince(t0);
+        rep.seconds.passBusy = passBusy;
+        rep.seconds.passIdle = passIdle;
+        if (tot.overflow) throwOverflow(tot, phase); // unreachable while maxBound holds
+
+        t0 = Clock::now();
+        if (!tot.deferred.empty()) {
+            std::sort(tot.deferred.begin(), tot.deferred.end(),
+                      [](const PassTotals::Deferred& a, const PassTotals::Deferred& b) {
+                          return a.item != b.item ? a.item < b.item : a.bit < b.bit;
+                      });
+            for (const PassTotals::Deferred& d : tot.deferred) {
+                rep.leavesCreated += growAndUpdate(d, phase, tot);
+            }
+            rep.blocksGrown = tot.deferred.size();
+        }
+        rep.seconds.grow = secondsSince(t0);
+
+        t0 = Clock::now();
+        if (tot.sinkMissed) candidates.sinkMissed();
+        candidates.record(work);
+        rep.blocksVisited = tot.examined;
+        rep.blocksOverTc = tot.overTc;
+        rep.blocksUpdated = tot.updated;
+        overload += tot.overloadDelta;
+        maxBound = std::max(maxBound, tot.maxWritten);
+        rep.seconds.bookkeeping = secondsSince(t0);
+        finishStep(rep, tot.updated);
+        return rep;
+    }
+
+    void finishStep(StepReport& rep, uint64_t updated)
+    {
+        ++stepCount;
+        quietSteps = updated ? 0 : quietSteps + 1;
+        candidates.endStep();
+        rep.residualOverload = overload;
+        rep.settled = settled();
+    }
+
+    /// A block whose update flows into missing leaves: create the leaves of the cells it changes
+    /// (each receives clay, so no leaf is left empty), then update it. Serial. Returns leaves made.
+    uint64_t growAndUpdate(const PassTotals::Deferred& d, int phase, PassTotals& tot)
+    {
+        WorkItem& w = work[d.item];
+        const BlockTables& tab = blockTables();
+        const int n = cells();
+        const uint8_t* lf = tab.leaf[is3D()][phase][d.bit];
+        uint64_t created = 0;
+        for (int c = 0; c < n; ++c) {
+            if (!((d.cells >> c) & 1u)) continue;
+            const Origin lo = leafOrigin(w.anchor, lf[c]);
+            const Coord o(lo.x(), lo.y(), lo.z());
+            if (!tree().probeLeaf(o)) {
+                tree().touchLeaf(o);
+                clearLeafTable(); // the pass below must see the new leaf
+                ++created;
+            }
+        }
+        // Re-run the block through the same kernel, restricted to this one block.
+        const uint64_t savedMask = w.mask, savedChanged = w.changed;
+        w.mask = uint64_t(1) << d.bit;
+        PassTotals one;
+        processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
+        w.mask = savedMask;
+        w.changed = savedChanged | w.changed;
+        if (!one.deferred.empty() || one.overflow) {
+            throw Error("internal error: a grown block could not be updated");
+        }
+        tot.updated += one.updated;
+        tot.overloadDelta += one.overloadDelta;
+        tot.maxWritten = std::max(tot.maxWritten, one.maxWritten);
+        return created;
+    }
+
+    bool settled() const { return overload == 0 || quietSteps >= 2; }
+
+    /// True when the overload provably cannot vanish: flooding from every over cell through the
+    /// non-obstacle cells (face neighbours; 2D: in z = 0) closes on walled-in regions that hold more
+    /// than Tc per cell. Gives up (false) as soon as the cells reached have room for the whole
+    /// overload, or are more than ceil(total mass / Tc) (they could hold all the clay there is):
+    /// the cost is bounded by the clay's volume.
+    bool overloadHasNoRoom()
+    {
+        if (overload == 0) return false;
+        const int64_t tc = rule.threshold;
+        const uint64_t limit = uint64_t((totalMass + tc - 1) / tc);
+        const ObsTree* ot = obsTree();
+        std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
+        if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
+        openvdb::MaskTree seen(false);
+        openvdb::tree::ValueAccessor<openvdb::MaskTree> sacc(seen);
+        openvdb::tree::ValueAccessor<const MassTree, false> macc(tree());
+        std::vector<Coord> stack;
+        for (auto it = tree().cbeginValueOn(); it; ++it) {
+            if (int64_t(*it) <= tc || obstacleAt(oacc.get(), it.getCoord())) continue;
+            stack.push_back(it.getCoord());
+            sacc.setValueOn(it.getCoord());
+        }
+        static const Coord kFace[6] = {Coord(1, 0, 0),  Coord(-1, 0, 0), Coord(0, 1, 0),
+                                       Coord(0, -1, 0), Coord(0, 0, 1),  Coord(0, 0, -1)};
+        const int faces = is3D() ? 6 : 4;
+        uint64_t cellsSeen = 0;
+        int64_t massSeen = 0, room = 0;
+        while (!stack.empty()) {
+            const Coord c = stack.back();
+            stack.pop_back();
+            if (++cellsSeen > limit) return false;
+            const int64_t m = macc.getValue(c);
+            massSeen += m;
+            if (m < tc && (room += tc - m) >= overload) return false;
+            for (int f = 0; f < faces; ++f) {
+                const Coord q = c + kFace[f];
+                if (sacc.isValueOn(q) || obstacleAt(oacc.get(), q)) continue;
+                sacc.setValueOn(q);
+                stack.push_back(q);
+            }
+        }
+        return massSeen > tc * int64_t(cellsSeen);
+    }
+};
+
+namespace automaton_internal {
+PassSplit& passSplit()
+{
+    static PassSplit split = [] {
+        PassSplit p;
+        const char* env = std::getenv("VDBCLAY_PASS_SPLIT");
+        if (env && std::strcmp(env, "auto") == 0) {
+            p.weighted = false;
+            return p;
+        }
+        const char* pre = std::getenv("VDBCLAY_PASS_PREDRAIN");
+        if (pre && std::strcmp(pre, "0") == 0) p.predrain = false;
+        const char* crew = std::getenv("VDBCLAY_PASS_CREW");
+        if (crew && std::strcmp(crew, "0") == 0) p.crew = false;
+        const char* balance = std::getenv("VDBCLAY_PASS_BALANCE");
+        if (balance && std::strcmp(balance, "0") == 0) p.balance = false;
+        if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
+        int k = 1, first = p.firstShare;
+        unsigned long long m = 0;
+        const int got = std::sscanf(env, "weighted:%d:%llu:%d", &k, &m, &first);
+        if (got >= 1 && k >= 1 && k <= 64) p.perThread = k;
+        p.minBlocks = m;
+        if (got >= 3 && first >= 1 && first <= 100) p.firstShare = first;
+        return p;
+    }();
+    return split;
+}
+} // namespace automaton_internal
+
+// ---- public API ----------------------------------------------------------------------------------
+
+const char* stopReasonName(StopReason r)
+{
+    switch (r) {
+    case StopReason::Settled: return "settled";
+    case StopReason::Tolerance: return "tolerance";
+    case StopReason::StepBudget: return "step-budget";
+    case StopReason::NoRoom: return "no-room";
+    case StopReason::Stopped: return "stopped";
+    }
+    return "unknown";
+}
+
+StepReport& StepReport::operator+=(const StepReport& o)
+{
+    steps += o.steps;
+    blocksVisited += o.blocksVisited;
+    blocksOverTc += o.blocksOverTc;
+    blocksUpdated += o.blocksUpdated;
+    blocksGrown += o.blocksGrown;
+    leavesCreated += o.leavesCreated;
+    residualOverload = o.residualOverload;
+    settled = o.settled;
+    seconds += o.seconds;
+    return *this;
+}
+
+Automaton::Automaton(MassGridPtr mass, const AutomatonOptions& options, ObstacleGridPtr obstacles)
+    : mImpl(std::make_unique<Impl>())
+{
+    if (!mass) throw Error("Automaton: the mass grid is null");
+    if (options.dimensions != 2 && options.dimensions != 3) {
+        throw Error("dimensions must be 2 or 3, got " + std::to_string(options.dimensions));
+    }
+    mImpl->opts = options;
+    mImpl->rule = compileRule(options.rule);
+    mImpl->massGrid = std::move(mass);
+    mImpl->obsGrid = std::move(obstacles);
+    mImpl->setThreads(options.threads);
+    mImpl->resync();
+}
+
+Automaton::~Automaton() = default;
+Automaton::Automaton(Automaton&&) noexcept = default;
+Automaton& Automaton::operator=(Automaton&&) noexcept = default;
+
+StepReport Automaton::step()
+{
+    return mImpl->step();
+}
+
+StepReport Automaton::run(uint64_t n)
+{
+    StepReport total;
+    total.residualOverload = mImpl->overload;
+    total.settled = mImpl->settled();
+    for (uint64_t i = 0; i < n; ++i)
+        total += mImpl->step();
+    return total;
+}
+
+bool Automaton::overloadHasNoRoom()
+{
+    return mImpl->overloadHasNoRoom();
+}
+
+StepReport Automaton::settle(uint64_t maxSteps, int64_t tolerance)
+{
+    SettleOptions o;
+    o.maxSteps = maxSteps;
+    o.tolerance = tolerance;
+    return settle(o);
+}
+
+StepReport Automaton::settle(const SettleOptions& so)
+{
+    StepReport total;
+    total.residualOverload = mImpl->overload;
+    total.settled = mImpl->settled();
+    // After 8192 steps of one settle (counted with so.stepsDone), then at each doubling: is there
+    // room for the overload at all? A flood can cost as much as a few hundred steps of a large lump
+    // (measured: 0.17 s for a 48^3 lump, ~500 steps' worth), so it waits until settling is long;
+    // callers settling in short chunks never pay it (noRoomCheckDue).
+    const uint64_t tolerance = uint64_t(std::max<int64_t>(so.tolerance, 0));
+    for (;;) {
+        const uint64_t done = so.stepsDone + total.steps;
+        if (mImpl->settled()) {
+            // Quiet with overload left: every over cell is walled in by obstacles and over cells.
+            total.reason = mImpl->overload > 0 ? StopReason::NoRoom : StopReason::Settled;
+            break;
+        }
+        if (tolerance > 0 && uint64_t(mImpl->overload) <= tolerance) {
+            total.reason = StopReason::Tolerance;
+            break;
+        }
+        if (noRoomCheckDue(done)) {
+            if (mImpl->overloadHasNoRoom()) {
+                total.reason = StopReason::NoRoom;
+                break;
+            }
+        }
+        if (done >= so.maxSteps) {
+            total.reason = StopReason::StepBudget;
+            break;
+        }
+        total += mImpl->step();
+        if (so.stop && so.stop(*this)) {
+            total.reason = StopReason::Stopped;
+            break;
+        }
+    }
+    total.residualOverload = mImpl->overload;
+    total.settled = mImpl->settled();
+    return total;
+}
+
+void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn)
+{
+    if (region.empty()) return;
+    Impl& im = *mImpl;
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
+    const Impl::Scan before = im.scanLeaves(&region, "edit");
+    fn(*im.massGrid);
+    voxelizeActiveTilesIn(im.tree(), region);
+    const Impl::Scan after = im.scanLeaves(&region, "edit");
+    im.totalMass += after.mass - before.mass;
+    im.overload += after.overload - before.overload;
+    im.maxBound = std::max(im.maxBound, after.maxValue);
+    im.pruneAndWake(region);
+}
+
+void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
+{
+    Impl& im = *mImpl;
+    for (const CellMass& c : cells) { // validate first: nothing half-written
+        const Coord at(c.at[0], c.at[1], c.at[2]);
+        for (int a = 0; a < 3; ++a)
+            if (c.at[size_t(a)] < region.min[size_t(a)] || c.at[size_t(a)] > region.max[size_t(a)])
+                throw Error("setMasses: voxel " + coordStr(at) + " lies outside the region");
+        if (c.mass < 0)
+            throw Error("setMasses: voxel " + coordStr(at) + " would hold negative mass " +
+                        std::to_string(c.mass));
+        if (!im.is3D() && c.at[2] != 0)
+            throw Error("setMasses: 2D clay must lie in the z = 0 layer, but voxel " + coordStr(at) +
+                        " would hold mass " + std::to_string(c.mass));
+    }
+    if (cells.empty()) return;
+    im.clearLeafTable(); // leaves may appear or vanish
+    const int64_t tc = im.rule.threshold;
+    const ObsTree* ot = im.obsTree();
+    std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
+    if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
+    int64_t mass = 0, overload = 0, maxValue = 0;
+    {
+        openvdb::tree::ValueAccessor<MassTree> acc(im.tree()); // gone before the pruning below
+        for (const CellMass& c : cells) {
+            const Coord at(c.at[0], c.at[1], c.at[2]);
+            const int64_t before = acc.getValue(at), after = c.mass;
+            if (after > 0)
+                acc.setValueOn(at, c.mass);
+            else
+                acc.setValueOff(at, 0);
+            mass += after - before;
+            maxValue = std::max(maxValue, after);
+            if (!im.obstacleAt(oacc.get(), at))
+                overload += std::max<int64_t>(0, after - tc) - std::max<int64_t>(0, before - tc);
+        }
+    }
+    im.totalMass += mass;
+    im.overload += overload;
+    im.maxBound = std::max(im.maxBound, maxValue);
+    im.pruneAndWake(region);
+}
+
+void Automaton::editObstacles(const Box& region, const std::function<void(ObstacleGrid&)>& fn)
+{
+    if (region.empty()) return;
+    Impl& im = *mImpl;
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
+    if (!im.obsGrid) {
+        im.obsGrid = openvdb::MaskGrid::create(false);
+        im.obsGrid->setName("obstacles");
+    }
+    // The overload counts only cells that are not obstacles: re-derive it over the region.
+    const Impl::Scan before = im.scanLeaves(&region, "editObstacles");
+    fn(*im.obsGrid);
+    const Impl::Scan after = im.scanLeaves(&region, "editObstacles");
+    im.overload += after.overload - before.overload;
+    im.candidates.addRegion(region);
+    im.quietSteps = 0;
+}
+
+void Automaton::extendObstacles(const std::function<void(ObstacleGrid&)>& fn)
+{
+    Impl& im = *mImpl;
+    im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
+    if (!im.obsGrid) {
+        im.obsGrid = openvdb::MaskGrid::create(false);
+        im.obsGrid->setName("obstacles");
+    }
+    // No cell turned on holds clay (no overload changes) or shares a block with clay (no block
+    // that can change sees it before the next wake-up reaches it): nothing to rescan or wake.
+    fn(*im.obsGrid);
+}
+
+void Automaton::resync()
+{
+    mImpl->resync();
+}
+
+void Automaton::setRule(const RuleParams& rule)
+{
+    mImpl->rule = compileRule(rule);
+    mImpl->opts.rule = rule;
+    mImpl->resync();
+}
+
+void Automaton::setSeed(uint64_t seed)
+{
+    mImpl->opts.seed = seed;
+}
+void Automaton::setStepCount(uint64_t steps)
+{
+    mImpl->stepCount = steps;
+    mImpl->resync();
+}
+void Automaton::setThreads(int threads)
+{
+    mImpl->setThreads(threads);
+}
+const AutomatonOptions& Automaton::options() const
+{
+    return mImpl->opts;
+}
+void Automaton::setPruneCandidates(bool on)
+{
+    mImpl->prune = on;
+}
+
+bool Automaton::pruneCandidates() const
+{
+    return mImpl->prune;
+}
+
+uint64_t Automaton::stepCount() const
+{
+    return mImpl->stepCount;
+}
+int64_t Automaton::totalMass() const
+{
+    return mImpl->totalMass;
+}
+int64_t Automaton::residualOverload() const
+{
+    return mImpl->overload;
+}
+bool Automaton::settled() const
+{
+    return mImpl->settled();
+}
+int Automaton::quietSteps() const
+{
+    return mImpl->quietSteps;
+}
+const MassGridPtr& Automaton::mass() const
+{
+    return mImpl->massGrid;
+}
+const ObstacleGridPtr& Automaton::obstacles() const
+{
+    return mImpl->obsGrid;
+}
+
+} // namespace vdbclay

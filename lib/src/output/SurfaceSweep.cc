@@ -1,0 +1,477 @@
+// The fast sweeping method from a fog volume to a signed distance field, leaf by leaf.
+//
+// fogToSdfByLeaves() returns exactly (bit for bit) what openvdb::tools::fogToSdf(fog, iso) returns
+// for a fog without tiles, in a fraction of its time: OpenVDB computes, for each of its 8 sweeps,
+// the voxel diagonals (x+y+z = k ...) of every leaf into maps of node masks, then runs one parallel
+// loop per diagonal with a tree accessor per neighbour read. Here the same values are computed in
+// flat per-leaf buffers with a table of face-neighbour leaves:
+//
+// - Initialisation (OpenVDB's InitSdf): a voxel next to the isosurface (a face neighbour on the other
+//   side of the isovalue) gets the distance from the crossings on its axes, h / sqrt(sum 1/d^2);
+//   every other voxel +-FLT_MAX by its side; the same expressions in the same order.
+// - Sweeps (SweepingKernel::sweep): OpenVDB orders a sweep by the diagonal key (e.g. x+y-z
+//   ascending), so when a voxel is updated its three upwind face neighbours have been updated in
+//   this sweep and its three downwind ones have not; voxels of one key are never face neighbours.
+//   Any order with that property reads the same values, so gives the same result: here the leaves
+//   go by their own diagonal key (leaf coordinates, same signs), leaves of one key in parallel (they
+//   share no face), and inside a leaf the voxels in nested loops running along the sweep's signs.
+//   The Godunov update is OpenVDB's, expression for expression (three cases, same tests).
+// - Finalisation (MinMaxKernel, PruneMinMaxFltKernel): every value left at +-FLT_MAX (voxels
+//   active or not, tiles, the background) takes the largest / smallest finite active value, as
+//   OpenVDB's pass leaves them (checked bit for bit by tests/TestSurface.cc).
+//
+// Results do not depend on the thread count (each voxel's update reads only values fixed by the
+// order above). A fog with tiles (not what densityGrid builds: it voxelizes the automaton's clay,
+// but a file may carry tiles) goes to OpenVDB's own fogToSdf.
+//
+// The narrow band (narrowBandSdfFromDensity, what surfaceLevelSet keeps: |value| < band). A voxel's
+// update that yields u < band reads only neighbours holding less than u, and compares u with the
+// others (u <= d2, u <= d3), which hold as long as those are at least band: the Godunov update's
+// three cases all give u > every neighbour they use (1: d1 + h; 2: u > d2 is tested; 3: taken only
+// when the 2-case u > d3, and then its root exceeds d3). So, update by update in the same order,
+// the values below band are the same whichever voxels holding band or more are swept. And each
+// such update adds at least h / sqrt(3) to its smallest neighbour (u - d1 >= h, h / sqrt 2, h / sqrt 3
+// in the three cases), so a value below band lies fewer than band sqrt(3) / h face steps from a
+// voxel next to the isosurface (at most 5 for the surface's band of 3 voxels): sweeping the voxels
+// within ceil(band sqrt(3) / h) steps (6: one to spare) gives every value below band bit for bit,
+// and the voxels deeper inside or further out (most of a large lump) are not swept. Those keep
+// +-FLT_MAX, which the finalisation turns into the extreme finite values: of band or more whenever
+// some swept value is (checked; otherwise, clay thinner than the band, the whole fog is swept), as
+// in the full sweep; clipped to the band, they are what the full sweep gives. The clipping itself
+// (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestOutputStages.cc
+// checks the band against OpenVDB's fogToSdf, clipped alike, bit for bit.
+#include "output/Surface.h"
+
+#include <openvdb/math/Math.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <utility>
+#include <vector>
+
+namespace vdbclay {
+namespace io_internal {
+
+namespace {
+
+using FloatTree = openvdb::FloatTree;
+using LeafT = FloatTree::LeafNodeType;
+using openvdb::Coord;
+using openvdb::Index;
+
+constexpr int kDim = int(LeafT::DIM); // 8
+constexpr float kMax = std::numeric_limits<float>::max();
+
+inline Index offsetOf(int x, int y, int z)
+{
+    return Index((x << (2 * LeafT::LOG2DIM)) + (y << LeafT::LOG2DIM) + z);
+}
+
+/// Distance to the isosurface of a voxel next to it, or +-FLT_MAX (OpenVDB's InitSdf, fog input).
+/// @a nb holds the six face neighbours' fog values in the order -x, +x, -y, +y, -z, +z.
+inline float initValue(float value, const float nb[6], float isoValue, float h, bool& boundary)
+{
+    // InitSdf with mAboveSign = -1 (a fog): above = -FLT_MAX, h = -voxelSize.
+    const float above = -kMax;
+    const bool isAbove = value > isoValue;
+    const bool less = value < isoValue;
+    bool mask[6];
+    bool any = false;
+    for (int i = 0; i < 6; ++i) {
+        mask[i] = less ^ (nb[i] < isoValue);
+        any = any || mask[i];
+    }
+    boundary = any;
+    if (!any) return isAbove ? above : -above;
+    const float delta = value - isoValue;
+    if (openvdb::math::isApproxZero(delta)) return 0;
+    float sum = 0;
+    for (int i = 0; i < 6;) {
+        float d = kMax, d2;
+        if (mask[i]) d = openvdb::math::Abs(delta / (value - nb[i]));
+        ++i;
+        if (mask[i]) {
+            d2 = openvdb::math::Abs(delta / (value - nb[i]));
+            if (d2 < d) d = d2;
+        }
+        ++i;
+        if (d < kMax) sum += 1 / (d * d);
+    }
+    return isAbove ? h / openvdb::math::Sqrt(sum) : -h / openvdb::math::Sqrt(sum);
+}
+
+/// One leaf's state for the sweeps: its values (the output leaf's buffer), the voxels the sweeps
+/// update, its face neighbours.
+struct SweepLeaf {
+    float* values;
+    LeafT::NodeMaskType sweep;        // active and not next to the isosurface
+    LeafT::NodeMaskType boundary;     // active and next to the isosurface
+    std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
+};
+
+/// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only).
+inline void updateVoxel(float& value, float n0, float n1, float n2, float n3, float n4, float n5, float h,
+                        float sqrt2h)
+{
+    // NN: |neighbour value|, valid below 1000; std::min keeps the first of equals.
+    auto pick = [](float a, float b) { return b < a ? b : a; };
+    float d1 = pick(openvdb::math::Abs(n0), openvdb::math::Abs(n1));
+    float d2 = pick(openvdb::math::Abs(n2), openvdb::math::Abs(n3));
+    float d3 = pick(openvdb::math::Abs(n4), openvdb::math::Abs(n5));
+    const float valid = 1000.f;
+    if (!(d1 < valid || d2 < valid || d3 < valid)) return;
+    const float sign = value >= 0.f ? 1.f : -1.f;
+    const float absV = openvdb::math::Abs(value);
+    if (d2 < d1) std::swap(d1, d2);
+    if (d3 < d2) std::swap(d2, d3);
+    if (d2 < d1) std::swap(d1, d2);
+    float update = d1 + h;
+    if (update <= d2) {
+        if (update < absV) value = sign * update;
+        return;
+    }
+    if (d2 <= sqrt2h + d1) {
+        const float D = 2.f * h * h - openvdb::math::Pow2(d1 - d2);
+        update = 0.5f * (d1 + d2 + std::sqrt(D));
+        if (update > d2 && update <= d3) {
+            if (update < absV) value = sign * update;
+            return;
+        }
+    }
+    const float d123 = d1 + d2 + d3;
+    const float D = d123 * d123 - 3.f * (d1 * d1 + d2 * d2 + d3 * d3 - h * h);
+    if (D >= 0.f) {
+        update = float(1.0 / 3.0) * (d123 + std::sqrt(D));
+        if (update < absV) value = sign * update;
+    }
+}
+
+/// Leaf @a li's voxels of @a masks grown by one face step, within the leaf and from its face
+/// neighbours @a nb (-x, +x, -y, +y, -z, +z; -1: none): one voxel along each axis, united.
+LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
+                                const std::array<int64_t, 6>& nb, size_t li)
+{
+    LeafT::NodeMaskType out = maskGrownAlong(masks, li, nb[0], nb[1], 0, 1);
+    out |= maskGrownAlong(masks, li, nb[2], nb[3], 1, 1);
+    out |= maskGrownAlong(masks, li, nb[4], nb[5], 2, 1);
+    return out;
+}
+
+/// One sweep with signs (sx, sy, sz) over every leaf, in the order described at the top.
+void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64_t, size_t>>& order,
+               const std::vector<size_t>& sliceStart, int sx, int sy, int sz, float h, float sqrt2h,
+               bool reverse)
+{
+    const size_t slices = sliceStart.size() - 1;
+    for (size_t s = 0; s < slices; ++s) {
+        const size_t slice = reverse ? slices - 1 - s : s;
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(sliceStart[slice], sliceStart[slice + 1]),
+            [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t k = r.begin(); k != r.end(); ++k) {
+                    SweepLeaf& leaf = leaves[order[k].second];
+                    if (leaf.sweep.isOff()) continue;
+                    float* v = leaf.values;
+                    const float* nb[6]; // -x, +x, -y, +y, -z, +z (null: no leaf)
+                    for (int f = 0; f < 6; ++f)
+                        nb[f] = leaf.neighbour[f] >= 0 ? leaves[leaf.neighbour[f]].values : nullptr;
+                    auto at = [](const float* b, Index i) { return b ? b[i] : kMax; };
+                    for (int a = 0; a < kDim; ++a) {
+                        const int x = sx > 0 ? a : kDim - 1 - a;
+                        const uint64_t word = leaf.sweep.template getWord<uint64_t>(Index(x));
+                        if (!word) continue; // no voxel of this x to update (the order of the others holds)
+                        for (int b = 0; b < kDim; ++b) {
+                            const int y = sy > 0 ? b : kDim - 1 - b;
+                            if (!((word >> (kDim * y)) & 0xFFu)) continue;
+                            for (int c = 0; c < kDim; ++c) {
+                                const int z = sz > 0 ? c : kDim - 1 - c;
+                                const Index i = offsetOf(x, y, z);
+                                if (!leaf.sweep.isOn(i)) continue;
+                                const float vx0 =
+                                    x > 0 ? v[i - kDim * kDim] : at(nb[0], offsetOf(kDim - 1, y, z));
+                                const float vx1 =
+                                    x < kDim - 1 ? v[i + kDim * kDim] : at(nb[1], offsetOf(0, y, z));
+                                const float vy0 = y > 0 ? v[i - kDim] : at(nb[2], offsetOf(x, kDim - 1, z));
+                                const float vy1 = y < kDim - 1 ? v[i + kDim] : at(nb[3], offsetOf(x, 0, z));
+                                const float vz0 = z > 0 ? v[i - 1] : at(nb[4], offsetOf(x, y, kDim - 1));
+                                const float vz1 = z < kDim - 1 ? v[i + 1] : at(nb[5], offsetOf(x, y, 0));
+                                updateVoxel(v[i], vx0, vx1, vy0, vy1, vz0, vz1, h, sqrt2h);
+                            }
+                        }
+                    }
+                }
+            });
+    }
+}
+
+/// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
+/// values become the distances; the fog's values are read from @a source (a tree without tiles
+/// holding them: the fog itself, or the density it was grown from, whose missing leaves read as its
+/// background). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
+/// the voxels within reach of the band (top of the file), or everything where that cannot be told
+/// apart (returns after sweeping all when the band's sweep left no value of band or more), and the
+/// result clipped to the band as clipToNarrowBand does (not pruned).
+/// Returns the number of voxels the sweeps updated (each once per sweep), 0 if no sweep ran.
+uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, float h, float band,
+                      bool reachOnly = true)
+{
+    openvdb::tree::LeafManager<FloatTree> manager(tree);
+    const size_t n = manager.leafCount();
+    std::vector<SweepLeaf> leaves(n);
+    std::vector<const float*> input(n); // each leaf's fog values: its source leaf's, or the background
+    std::array<float, LeafT::SIZE> background;
+    background.fill(source.background());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            leaves[i].values = manager.leaf(i).buffer().data();
+            const LeafT* in = source.probeConstLeaf(manager.leaf(i).origin());
+            input[i] = in ? in->buffer().data() : background.data();
+        }
+    });
+
+    // Leaf keys (origin / 8) and the face-neighbour table.
+    std::vector<Coord> keys(n);
+    for (size_t i = 0; i < n; ++i)
+        keys[i] = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
+                        manager.leaf(i).origin().z() >> 3);
+    const std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
+
+    // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
+    // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
+    // from its input; one in a missing leaf through an accessor (the source's tile or background).
+    std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        openvdb::tree::ValueAccessor<const FloatTree> acc(source);
+        const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
+                               Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
+        uint64_t boundary = 0, sweeping = 0;
+        for (size_t li = r.begin(); li != r.end(); ++li) {
+            SweepLeaf& out = leaves[li];
+            out.neighbour = neighbours[li];
+            const float* nbData[6];
+            for (int d = 0; d < 6; ++d)
+                nbData[d] = out.neighbour[d] >= 0 ? input[size_t(out.neighbour[d])] : nullptr;
+            const LeafT& in = manager.leaf(li);
+            const float* v = input[li];
+            out.sweep.setOff();
+            out.boundary.setOff();
+            for (Index i = 0; i < LeafT::SIZE; ++i) {
+                const float value = v[i];
+                if (!in.isValueOn(i)) {
+                    out.values[i] = value > isoValue ? -kMax : kMax;
+                    continue;
+                }
+                const int x = int(i >> (2 * LeafT::LOG2DIM)), y = int((i >> LeafT::LOG2DIM) & (kDim - 1)),
+                          z = int(i & (kDim - 1));
+                // The neighbour across face d at offset j of leaf nbData[d], or through the accessor.
+                auto across = [&](int d, Index j) {
+                    return nbData[d] ? nbData[d][j] : acc.getValue(in.offsetToGlobalCoord(i) + dirs[d]);
+                };
+                float nb[6];
+                nb[0] = x > 0 ? v[i - kDim * kDim] : across(0, offsetOf(kDim - 1, y, z));
+                nb[1] = x < kDim - 1 ? v[i + kDim * kDim] : across(1, offsetOf(0, y, z));
+                nb[2] = y > 0 ? v[i - kDim] : across(2, offsetOf(x, kDim - 1, z));
+                nb[3] = y < kDim - 1 ? v[i + kDim] : across(3, offsetOf(x, 0, z));
+                nb[4] = z > 0 ? v[i - 1] : across(4, offsetOf(x, y, kDim - 1));
+                nb[5] = z < kDim - 1 ? v[i + 1] : across(5, offsetOf(x, y, 0));
+                bool isBoundary = false;
+                out.values[i] = initValue(value, nb, isoValue, -h, isBoundary);
+                if (isBoundary) {
+                    out.boundary.setOn(i);
+                    ++boundary;
+                } else {
+                    out.sweep.setOn(i);
+                    ++sweeping;
+                }
+            }
+        }
+        boundaryCount += boundary;
+        sweepCount += sweeping;
+    });
+
+    // fogToSdf sweeps only when it found voxels to sweep and voxels to sweep from.
+    float tileValue = kMax;
+    uint64_t swept = 0;
+    if (boundaryCount.load() > 0 && sweepCount.load() > 0) {
+        if (band > 0 && reachOnly) {
+            // Only the voxels within reach of the band: the boundary grown by that many face steps,
+            // a step at a time through the leaves' face neighbours (a value passes from voxel to
+            // voxel only through active ones, all in the fog's leaves).
+            const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
+            std::vector<LeafT::NodeMaskType> reach(n), next(n);
+            for (size_t li = 0; li < n; ++li)
+                reach[li] = leaves[li].boundary;
+            for (int step = 0; step < steps; ++step) {
+                tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+                    for (size_t li = r.begin(); li != r.end(); ++li)
+                        next[li] = faceDilated(reach, leaves[li].neighbour, li);
+                });
+                reach.swap(next);
+            }
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t li = r.begin(); li != r.end(); ++li)
+                    leaves[li].sweep &= reach[li];
+            });
+        }
+        for (const SweepLeaf& leaf : leaves)
+            swept += leaf.sweep.countOn();
+        // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
+        const float sqrt2h = openvdb::math::Sqrt(2.f) * h;
+        const int signs[4][3] = {{1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}};
+        for (const auto& s : signs) {
+            std::vector<std::pair<int64_t, size_t>> order(n);
+            for (size_t i = 0; i < n; ++i) {
+                const Coord& k = keys[i];
+                order[i] = {int64_t(s[0]) * k.x() + int64_t(s[1]) * k.y() + int64_t(s[2]) * k.z(), i};
+            }
+            std::sort(order.begin(), order.end());
+            std::vector<size_t> sliceStart;
+            for (size_t i = 0; i < n; ++i) {
+                if (i == 0 || order[i].first != order[i - 1].first) sliceStart.push_back(i);
+            }
+            sliceStart.push_back(n);
+            sweepOnce(leaves, order, sliceStart, s[0], s[1], s[2], h, sqrt2h, false);
+            sweepOnce(leaves, order, sliceStart, -s[0], -s[1], -s[2], h, sqrt2h, true);
+        }
+        // Finalisation: active voxels still at +-FLT_MAX take the extreme finite active values.
+        struct MinMax {
+            float lo = kMax, hi = -kMax;
+        };
+        const MinMax e = tbb::parallel_reduce(
+            tbb::blocked_range<size_t>(0, n), MinMax(),
+            [&](const tbb::blocked_range<size_t>& r, MinMax m) {
+                for (size_t li = r.begin(); li != r.end(); ++li) {
+                    const LeafT& leaf = manager.leaf(li);
+                    for (auto it = leaf.getValueMask().beginOn(); it; ++it) {
+                        const float v = leaves[li].values[it.pos()];
+                        if (v != -kMax && v < m.lo) m.lo = v;
+                        if (v != kMax && v > m.hi) m.hi = v;
+                    }
+                }
+                return m;
+            },
+            [](MinMax a, const MinMax& b) {
+                a.lo = std::min(a.lo, b.lo);
+                a.hi = std::max(a.hi, b.hi);
+                return a;
+            });
+        // The unswept voxels must end beyond the band on their side, as in the full sweep: not
+        // so when no swept value reached the band (clay thinner than it): sweep everything.
+        if (band > 0 && reachOnly && !(e.lo <= -band && e.hi >= band))
+            return sweepFogTree(tree, source, isoValue, h, band, /*reachOnly=*/false);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t li = r.begin(); li != r.end(); ++li) {
+                for (float* v = leaves[li].values; v != leaves[li].values + LeafT::SIZE; ++v) {
+                    if (*v == -kMax) *v = e.lo;
+                    if (*v == kMax) *v = e.hi;
+                }
+            }
+        });
+        tileValue = e.hi;
+    }
+    if (band > 0) {
+        // The band, as clipToNarrowBand leaves it: active values at or beyond +-band become inactive
+        // +-band, inactive ones +-band by their sign (changeLevelSetBackground), the tiles likewise.
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t li = r.begin(); li != r.end(); ++li) {
+                float* v = leaves[li].values;
+                LeafT::NodeMaskType& active = manager.leaf(li).getValueMask();
+                for (Index i = 0; i < LeafT::SIZE; ++i) {
+                    if (!active.isOn(i)) {
+                        v[i] = v[i] < 0 ? -band : band;
+                    } else if (v[i] >= band) {
+                        v[i] = band;
+                        active.setOff(i);
+                    } else if (v[i] <= -band) {
+                        v[i] = -band;
+                        active.setOff(i);
+                    }
+                }
+            }
+        });
+        tileValue = tileValue < 0 ? -band : band;
+    }
+    // Tiles (only the fog's background 0 here) are outside: +FLT_MAX after InitSdf, then the largest
+    // finite value if the sweeps ran (the root's background too; the band's outside when clipped).
+    auto it = tree.beginValueAll();
+    it.setMaxDepth(it.getLeafDepth() - 1);
+    for (; it; ++it)
+        it.setValue(tileValue);
+    tree.root().setBackground(band > 0 ? band : tileValue, /*updateChildNodes=*/false);
+    return swept;
+}
+
+} // namespace
+
+bool holdsTiles(const FloatTree& tree)
+{
+    auto it = tree.cbeginValueAll();
+    it.setMaxDepth(it.getLeafDepth() - 1);
+    for (; it; ++it) {
+        if (*it != 0.f || it.isValueOn()) return true;
+    }
+    return false;
+}
+
+openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float isoValue)
+{
+    if (holdsTiles(fog.tree())) return openvdb::tools::fogToSdf(fog, isoValue);
+    openvdb::FloatGrid::Ptr sdf = fog.deepCopy();
+    sweepFogTree(sdf->tree(), fog.tree(), isoValue, float(fog.voxelSize()[0]), 0.f);
+    return sdf;
+}
+
+openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
+                                                 float isoValue, float band, uint64_t* swept)
+{
+    if (!boxGrowable(density, radius)) {
+        openvdb::FloatGrid::Ptr fog = surfaceFog(density, radius);
+        if (holdsTiles(fog->tree())) {
+            openvdb::FloatGrid::Ptr sdf = openvdb::tools::fogToSdf(*fog, isoValue);
+            if (band > 0) clipToNarrowBand(*sdf, band);
+            return sdf;
+        }
+        openvdb::FloatGrid::Ptr sdf = fog->deepCopy();
+        const uint64_t count =
+            sweepFogTree(sdf->tree(), fog->tree(), isoValue, float(fog->voxelSize()[0]), band);
+        if (swept) *swept = count;
+        if (band > 0) openvdb::tools::pruneLevelSet(sdf->tree());
+        return sdf;
+    }
+    // The fog's leaves and active voxels, with room for the distances: no value is copied, the
+    // initialisation reads the fog's values from the density (the grown voxels hold its background).
+    const GrownLeaves g = growByBox(density, radius);
+    const size_t n = g.origins.size();
+    std::vector<LeafT*> made(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
+            made[i]->buffer().allocate();
+            made[i]->setValueMask(g.masks[i]);
+        }
+    });
+    auto tree = std::make_shared<FloatTree>(density.tree().background());
+    for (LeafT* leaf : made)
+        tree->addLeaf(leaf);
+    openvdb::FloatGrid::Ptr sdf = density.copyWithNewTree();
+    sdf->setTree(tree);
+    const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
+    if (swept) *swept = count;
+    if (band > 0) openvdb::tools::pruneLevelSet(*tree);
+    return sdf;
+}
+
+} // namespace io_internal
+} // namespace vdbclay

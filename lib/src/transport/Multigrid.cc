@@ -1,0 +1,423 @@
+// Aggregation multigrid (Multigrid.h: the design). Split out of Transport.cc in round 6, unchanged
+// but for the rows' coordinates (RowCoord, not openvdb::Coord): the same operations in the same order.
+
+#include "transport/Multigrid.h"
+#include "transport/Chunks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <utility>
+
+namespace vdbclay {
+namespace transport_internal {
+
+void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                      const std::vector<RowCoord>& coord, bool serial)
+{
+    mSerial = serial;
+    mUsed = 1;
+    if (mLevels.empty()) mLevels.emplace_back();
+    Level& f = mLevels.front();
+    setMatrix(f, n, nb, diag, true);
+    f.block.assign(coord.begin(), coord.end());
+    while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
+    }
+    Level& c = mLevels[mUsed - 1];
+    c.agg.clear();
+    c.dense = false;
+    if (c.n <= kDense) factor(c);
+    for (size_t li = 0; li < mUsed; ++li)
+        colour(mLevels[li], mLevels[li].block);
+}
+
+void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                       const std::vector<RowCoord>& coord, const std::vector<int32_t>& oldRow, bool serial)
+{
+    mSerial = serial;
+    Level& f = mLevels.front();
+    Level& c = mLevels[1];
+    std::vector<int32_t>& agg = mScratch;
+    agg.resize(n);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k)
+            agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
+    });
+    setMatrix(f, n, nb, diag, false);
+    colour(f, coord);
+    f.agg.swap(agg);
+    c.memberStart.assign(c.n + 1, 0);
+    for (size_t k = 0; k < n; ++k)
+        if (f.agg[k] >= 0) ++c.memberStart[size_t(f.agg[k]) + 1];
+    for (size_t i = 0; i < c.n; ++i)
+        c.memberStart[i + 1] += c.memberStart[i];
+    c.members.resize(c.memberStart[c.n]);
+    std::vector<uint32_t> fill(c.memberStart.begin(), c.memberStart.end() - 1);
+    for (size_t k = 0; k < n; ++k)
+        if (f.agg[k] >= 0) c.members[fill[size_t(f.agg[k])]++] = int32_t(k);
+}
+
+void Multigrid::apply(const std::vector<double>& in, std::vector<double>& out)
+{
+    Level& f = mLevels.front();
+    f.rhs = in.data(); // read in place (round 6: the copy into f.r was 1.8 % of a stroke frame)
+    cycle(0);
+    out.swap(f.x);
+    out.resize(f.n);
+    f.x.resize(f.n + 1);
+    f.x[f.n] = -0.0; // the sentinel of the finest level's missing faces
+}
+
+void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+                          bool csr)
+{
+    f.n = n;
+    f.nb6.resize(n * 6);
+    f.diag.resize(n);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k) {
+            for (int d = 0; d < 6; ++d) {
+                const int32_t j = nb[k * 6 + size_t(d)];
+                f.nb6[k * 6 + size_t(d)] = j >= 0 ? j : int32_t(n);
+            }
+            f.diag[k] = diag[k];
+        }
+    });
+    if (!csr) {
+        f.start.clear();
+        f.col.clear();
+    } else {
+        setCsr(f, n, nb);
+    }
+    finish(f);
+    f.x.resize(n + 1);
+    f.x[n] = -0.0;
+}
+
+void Multigrid::setCsr(Level& f, size_t n, const std::vector<int32_t>& nb)
+{
+    f.start.resize(n + 1);
+    // Row lengths per fixed chunk, their offsets in chunk order, then the columns: in parallel.
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    mCounts.assign(chunks + 1, 0);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        size_t c = 0;
+        for (size_t k = lo; k < hi; ++k)
+            for (int d = 0; d < 6; ++d)
+                c += nb[k * 6 + size_t(d)] >= 0 ? 1 : 0;
+        mCounts[lo / kChunk + 1] = c;
+    });
+    for (size_t c = 0; c < chunks; ++c)
+        mCounts[c + 1] += mCounts[c];
+    f.col.resize(mCounts[chunks]);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        size_t e = mCounts[lo / kChunk];
+        for (size_t k = lo; k < hi; ++k) {
+            f.start[k] = uint32_t(e);
+            for (int d = 0; d < 6; ++d)
+                if (nb[k * 6 + size_t(d)] >= 0) f.col[e++] = nb[k * 6 + size_t(d)];
+        }
+    });
+    f.start[n] = uint32_t(mCounts[chunks]);
+}
+
+void Multigrid::colour(Level& l, const std::vector<RowCoord>& block)
+{
+    const size_t n = l.n, chunks = (n + kChunk - 1) / kChunk;
+    std::vector<size_t>& red = mCounts; // per chunk: its red rows, then their offsets
+    red.assign(chunks + 1, 0);
+    mParity.resize(n);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        size_t c = 0;
+        for (size_t k = lo; k < hi; ++k) {
+            const uint8_t odd = uint8_t((block[k].x + block[k].y + block[k].z) & 1);
+            mParity[k] = odd;
+            c += odd ? 0 : 1;
+        }
+        red[lo / kChunk + 1] = c;
+    });
+    for (size_t c = 0; c < chunks; ++c)
+        red[c + 1] += red[c];
+    l.colour[0].resize(red[chunks]);
+    l.colour[1].resize(n - red[chunks]);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        size_t o[2] = {red[lo / kChunk], lo - red[lo / kChunk]}; // black rows before lo: lo - red ones
+        for (size_t k = lo; k < hi; ++k)
+            l.colour[mParity[k]][o[mParity[k]]++] = int32_t(k);
+    });
+}
+
+void Multigrid::finish(Level& l)
+{
+    l.invDiag.resize(l.n);
+    l.x.resize(l.n);
+    l.r.resize(l.n);
+    l.t.resize(l.n);
+    forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k) {
+            l.invDiag[k] = 1.0 / l.diag[k];
+            l.x[k] = l.r[k] = l.t[k] = 0.0;
+        }
+    });
+}
+
+inline int32_t Multigrid::find(std::vector<int32_t>& parent, int32_t a)
+{
+    while (parent[size_t(a)] != a) {
+        parent[size_t(a)] = parent[size_t(parent[size_t(a)])];
+        a = parent[size_t(a)];
+    }
+    return a;
+}
+
+bool Multigrid::coarsen()
+{
+    if (mUsed == mLevels.size()) mLevels.emplace_back(); // before taking references into mLevels
+    Level& f = mLevels[mUsed - 1];
+    const size_t n = f.n;
+    std::vector<int32_t>& parent = mScratch;
+    parent.resize(n);
+    std::iota(parent.begin(), parent.end(), 0);
+    auto half = [](const RowCoord& c) { return RowCoord{c.x >> 1, c.y >> 1, c.z >> 1}; };
+    for (size_t k = 0; k < n; ++k) {
+        const RowCoord bk = half(f.block[k]);
+        for (uint32_t e = f.start[k]; e < f.start[k + 1]; ++e) {
+            const int32_t j = f.col[e];
+            if (j >= int32_t(k) || half(f.block[size_t(j)]) != bk) continue;
+            const int32_t a = find(parent, int32_t(k)), b = find(parent, j);
+            if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+        }
+    }
+    f.agg.assign(n, -1);
+    int32_t nc = 0;
+    for (size_t k = 0; k < n; ++k) {
+        const int32_t root = find(parent, int32_t(k));
+        f.agg[k] = root == int32_t(k) ? nc++ : f.agg[size_t(root)];
+    }
+    if (size_t(nc) * 4 > n * 3) {
+        f.agg.clear();
+        return false;
+    }
+    Level& c = mLevels[mUsed];
+    c.n = size_t(nc);
+    c.col.clear();
+    c.w.clear();
+    c.memberStart.assign(c.n + 1, 0);
+    for (size_t k = 0; k < n; ++k)
+        ++c.memberStart[size_t(f.agg[k]) + 1];
+    for (size_t i = 0; i < c.n; ++i)
+        c.memberStart[i + 1] += c.memberStart[i];
+    c.members.resize(n);
+    {
+        std::vector<uint32_t> fill(c.memberStart.begin(), c.memberStart.end() - 1);
+        for (size_t k = 0; k < n; ++k)
+            c.members[fill[size_t(f.agg[k])]++] = int32_t(k);
+    }
+    c.diag.assign(c.n, 0.0);
+    c.block.resize(c.n);
+    c.start.resize(c.n + 1);
+    std::vector<std::pair<int32_t, float>> row;
+    std::vector<int32_t>& where = mWhere; // coarse row -> its place in row, or -1 (reset per row)
+    where.assign(c.n, -1);
+    for (size_t i = 0; i < c.n; ++i) {
+        c.start[i] = uint32_t(c.col.size());
+        c.block[i] = half(f.block[size_t(c.members[c.memberStart[i]])]);
+        row.clear();
+        double dg = 0;
+        for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m) {
+            const size_t k = size_t(c.members[m]);
+            dg += f.diag[k];
+            for (uint32_t e = f.start[k]; e < f.start[k + 1]; ++e) {
+                const float wt = f.w.empty() ? 1.0f : f.w[e];
+                const int32_t J = f.agg[size_t(f.col[e])];
+                if (J == int32_t(i)) {
+                    dg -= double(wt);
+                    continue;
+                }
+                int32_t& at = where[size_t(J)];
+                if (at < 0) {
+                    at = int32_t(row.size());
+                    row.emplace_back(J, wt);
+                } else {
+                    row[size_t(at)].second += wt;
+                }
+            }
+        }
+        c.diag[i] = dg;
+        for (const auto& q : row) {
+            c.col.push_back(q.first);
+            c.w.push_back(q.second);
+            where[size_t(q.first)] = -1;
+        }
+    }
+    c.start[c.n] = uint32_t(c.col.size());
+    finish(c);
+    ++mUsed;
+    return true;
+}
+
+void Multigrid::factor(Level& l)
+{
+    const size_t n = l.n;
+    std::vector<double>& a = l.chol;
+    a.assign(n * n, 0.0);
+    for (size_t k = 0; k < n; ++k) {
+        a[k * n + k] = l.diag[k];
+        for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
+            a[k * n + size_t(l.col[e])] -= l.w.empty() ? 1.0 : double(l.w[e]);
+    }
+    for (size_t j = 0; j < n; ++j) { // lower Cholesky factor, in place
+        double d = a[j * n + j];
+        for (size_t k = 0; k < j; ++k)
+            d -= a[j * n + k] * a[j * n + k];
+        if (!(d > 0)) return; // not SPD (never expected): Jacobi sweeps instead
+        d = std::sqrt(d);
+        a[j * n + j] = d;
+        for (size_t i = j + 1; i < n; ++i) {
+            double s = a[i * n + j];
+            for (size_t k = 0; k < j; ++k)
+                s -= a[i * n + k] * a[j * n + k];
+            a[i * n + j] = s / d;
+        }
+    }
+    l.dense = true;
+}
+
+inline double Multigrid::residual(const Level& l, size_t k, double own)
+{
+    double s = l.rhs[k] - l.diag[k] * own;
+    if (l.w.empty())
+        for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
+            s += l.x[size_t(l.col[e])];
+    else
+        for (uint32_t e = l.start[k]; e < l.start[k + 1]; ++e)
+            s += double(l.w[e]) * l.x[size_t(l.col[e])];
+    return s;
+}
+
+inline double Multigrid::residual0(const Level& l, size_t k, double own)
+{
+    const int32_t* nb = &l.nb6[k * 6];
+    const double* x = l.x.data();
+    double s = l.rhs[k] - l.diag[k] * own;
+    s += x[nb[0]];
+    s += x[nb[1]];
+    s += x[nb[2]];
+    s += x[nb[3]];
+    s += x[nb[4]];
+    s += x[nb[5]];
+    return s;
+}
+
+void Multigrid::sweep(Level& l)
+{
+    forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k) {
+            l.t[k] = l.x[k] + kOmega * l.invDiag[k] * residual(l, k, l.x[k]);
+        }
+    });
+    l.x.swap(l.t);
+}
+
+void Multigrid::halfSweep(Level& l, int c, bool fromZero)
+{
+    const std::vector<int32_t>& rows = l.colour[c];
+    const bool finest = &l == &mLevels.front();
+    forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+        if (fromZero) {
+            // x_k was 0 (not yet written): x_k = +0 + D^-1 (r - A x)_k with x_k = 0 in the residual,
+            // the very operations of the update from a zero-filled x; and t_k = 0 (this colour's
+            // residual after the half-sweep) for the restriction.
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(rows[q]);
+                l.x[k] = 0.0 + l.invDiag[k] * (finest ? residual0(l, k, 0.0) : residual(l, k, 0.0));
+                l.t[k] = 0.0;
+            }
+            return;
+        }
+        if (finest) {
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(rows[q]);
+                l.x[k] += l.invDiag[k] * residual0(l, k, l.x[k]);
+            }
+            return;
+        }
+        for (size_t q = lo; q < hi; ++q) {
+            const size_t k = size_t(rows[q]);
+            l.x[k] += l.invDiag[k] * residual(l, k, l.x[k]);
+        }
+    });
+}
+
+void Multigrid::cycle(size_t li)
+{
+    Level& l = mLevels[li];
+    if (li > 0) l.rhs = l.r.data(); // the finest level's: apply()'s input
+    if (li + 1 == mUsed) {
+        forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+            for (size_t k = lo; k < hi; ++k)
+                l.x[k] = kOmega * l.invDiag[k] * l.rhs[k];
+        });
+        if (l.dense) {
+            const size_t n = l.n;
+            const std::vector<double>& a = l.chol;
+            for (size_t i = 0; i < n; ++i) {
+                double s = l.rhs[i];
+                for (size_t k = 0; k < i; ++k)
+                    s -= a[i * n + k] * l.x[k];
+                l.x[i] = s / a[i * n + i];
+            }
+            for (size_t i = n; i-- > 0;) {
+                double s = l.x[i];
+                for (size_t k = i + 1; k < n; ++k)
+                    s -= a[k * n + i] * l.x[k];
+                l.x[i] = s / a[i * n + i];
+            }
+        } else {
+            for (int s = 1; s < kCoarseSweeps; ++s)
+                sweep(l);
+        }
+        return;
+    }
+    // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
+    // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t. (Every
+    // row's x and t is written here before it is read: no zero fill, round 6.)
+    {
+        const std::vector<int32_t>& red = l.colour[0];
+        forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(red[q]);
+                l.x[k] = l.invDiag[k] * l.rhs[k];
+            }
+        });
+        halfSweep(l, 1, true);
+        const bool finest = li == 0;
+        forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+            for (size_t q = lo; q < hi; ++q) {
+                const size_t k = size_t(red[q]);
+                l.t[k] = finest ? residual0(l, k, l.x[k]) : residual(l, k, l.x[k]);
+            }
+        });
+    }
+    Level& c = mLevels[li + 1];
+    // The residual restricted: c.r[i] = sum over i's members of t.
+    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            double s = 0;
+            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
+                s += l.t[size_t(c.members[m])];
+            c.r[i] = s;
+        }
+    });
+    cycle(li + 1);
+    forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k)
+            if (l.agg[k] >= 0) l.x[k] += kAlpha * c.x[size_t(l.agg[k])];
+    });
+    // Post-smoothing in the adjoint order (black, then red): a symmetric V-cycle.
+    halfSweep(l, 1, false);
+    halfSweep(l, 0, false);
+}
+
+} // namespace transport_internal
+} // namespace vdbclay
