@@ -99,7 +99,7 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 tsan_work=$BUILD_DIR/tsan-scene
 rm -rf "$tsan_work"; mkdir -p "$tsan_work"
 for t in 2 3; do
-  "$BUILD_DIR/apps/vdbclay" run data/scenes/cube-small-plate.json --frames 3 --threads $t --quiet \
+  "$BUILD_DIR/apps/vdbclay" run data/scenes/paper/cube-small-plate.json --frames 3 --threads $t --quiet \
     -o "$tsan_work/t$t.vdb" > /dev/null
 done
 echo "test-tsan: no data race reported"
