@@ -2,7 +2,7 @@
 # Installs what the library and the CLI need, builds them (nothing else), then runs the main job.
 # With no arguments: the built-in default scene (a 32^3 cube pressed by a plate), written to
 # build/default.vdb with a picture, a mesh and statistics beside it.
-# With arguments: `vdbclay ARGS...` (e.g. scripts/run.sh run data/scenes/cube-big-plate.json -o out.vdb).
+# With arguments: `vdbclay ARGS...` (e.g. scripts/run.sh run data/scenes/paper/cube-big-plate.json -o out.vdb).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DEPS=cli TARGETS=vdbclay_cli bash scripts/build.sh
