@@ -26,6 +26,7 @@
 #include "shapes/InsideBox.h"
 #include "core/Format.h"
 #include "sculpt/MemoryEstimate.h"
+#include "sculpt/MemoryWatchdog.h"
 #include "core/ParallelFor.h"
 #include "shapes/Rasterize.h"
 #include "sculpt/SculptTuning.h"
@@ -175,6 +176,10 @@ struct Sculptor::Impl {
     bool stopped = false;
     ClayMeta startMeta;
     std::unique_ptr<MemoryEstimate> estimate; ///< estimateSceneMemory(scene), once computed
+    // The memory watchdog (none without a budget), and what the run needed when it last asked to
+    // stop (0 when the last stop poll was the caller's, or asked nothing).
+    std::unique_ptr<sculpt_internal::MemoryWatchdog> watchdog;
+    uint64_t budgetStop = 0;
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -184,7 +189,15 @@ struct Sculptor::Impl {
         return tools;
     }
 
-    bool stopRequested() const { return stopPoll && stopPoll(); }
+    /// The caller's stop poll, then the memory watchdog (budgetStop says whether it asked).
+    bool stopRequested()
+    {
+        budgetStop = 0;
+        if (stopPoll && stopPoll()) return true;
+        if (!watchdog || !watchdog->outgrown(*mass)) return false;
+        budgetStop = watchdog->needs();
+        return true;
+    }
 
     /// The voxels placeTools(@a tools) would edit: the tools' bounds (2D: only z = 0).
     Box regionOf(const std::vector<ShapePtr>& tools) const
@@ -531,6 +544,9 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     if (scene.memoryBudget != kNoMemoryBudget) {
         im.estimate = std::make_unique<MemoryEstimate>(estimateSceneMemory(scene));
         checkMemoryBudget(scene, *im.estimate);
+        im.watchdog = std::make_unique<sculpt_internal::MemoryWatchdog>(
+            scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget(),
+            im.estimate->obstacleBytes + im.estimate->toolBytes);
     }
     im.scene = scene;
     AutomatonOptions opt;
@@ -666,6 +682,14 @@ void Sculptor::setStopRequest(std::function<bool()> poll)
 bool Sculptor::stopped() const
 {
     return mImpl->stopped;
+}
+uint64_t Sculptor::memoryBudget() const
+{
+    return mImpl->watchdog ? mImpl->watchdog->budget() : kNoMemoryBudget;
+}
+uint64_t Sculptor::outgrewBudget() const
+{
+    return mImpl->stopped ? mImpl->budgetStop : 0;
 }
 const ClayMeta& Sculptor::startMeta() const
 {
