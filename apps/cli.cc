@@ -1,6 +1,7 @@
 // The command-line tool's shared parts (cli.h): argument checks, output checks, signal handling.
 #include "cli.h"
 
+#include "vdbclay/AtomicWrite.h"
 #include "vdbclay/IO.h"
 
 #include <signal.h>

@@ -2,6 +2,7 @@
 #include "cli.h"
 
 #include "vdbclay/IO.h"
+#include "vdbclay/SurfaceMesh.h"
 
 #include <climits>
 #include <cstdio>

@@ -3,6 +3,7 @@
 // that --resume continues exactly.
 #include "cli.h"
 
+#include "vdbclay/AtomicWrite.h"
 #include "vdbclay/BatchHeap.h"
 #include "vdbclay/IO.h"
 #include "vdbclay/MemoryEstimate.h"
@@ -10,6 +11,7 @@
 #include "vdbclay/RunReport.h"
 #include "vdbclay/Scene.h"
 #include "vdbclay/Sculpt.h"
+#include "vdbclay/SurfaceMesh.h"
 
 #include <signal.h>
 #include <tbb/global_control.h>

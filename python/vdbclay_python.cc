@@ -18,6 +18,7 @@
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
+#include <vdbclay/SurfaceMesh.h>
 
 #include <openvdb/openvdb.h>
 

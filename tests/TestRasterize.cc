@@ -2,6 +2,7 @@
 // scene's obstacles): the voxels, values and leaves of a plain loop over every voxel inside, on any
 // thread count, into empty trees and into trees that already hold leaves and tiles.
 #include "shapes/Rasterize.h"
+#include "shapes/Voxels.h"
 
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
@@ -56,7 +57,7 @@ TEST_F(RasterizeTest, InsideByLeavesSetsTheVoxelsOfTheVoxelLoopOnAnyThreadCount)
                 uint64_t inside = 0;
                 {
                     openvdb::tree::ValueAccessor<openvdb::Int32Tree> acc(expected);
-                    forEachVoxelInside(shape, dims, [&](int32_t x, int32_t y, int32_t z) {
+                    shapes_internal::forEachVoxelInside(shape, dims, [&](int32_t x, int32_t y, int32_t z) {
                         acc.setValueOn(Coord(x, y, z), 42);
                         ++inside;
                     });

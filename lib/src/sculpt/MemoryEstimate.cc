@@ -78,7 +78,7 @@
 #include "sculpt/SculptTuning.h"
 #include "transport/SolverTuning.h"
 #include "core/TreeBytes.h"
-#include "io/VdbCheck.h"
+#include "core/VdbCheck.h"
 
 #include <openvdb/openvdb.h>
 

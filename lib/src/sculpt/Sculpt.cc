@@ -405,7 +405,7 @@ struct Sculptor::Impl {
             if (is2D) tb = intersect(tb, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
             // An unrotated box tool (a plate): its cells are a box (InsideBox.h), no distance per cell.
             Box cellsBox;
-            const bool boxed = shape_internal::insideVoxelBox(*t, cellsBox);
+            const bool boxed = shapes_internal::insideVoxelBox(*t, cellsBox);
             if (boxed) tb = intersect(tb, cellsBox);
             // Per slot, the mask of its cells inside the tool (merged whole leaves at a time below,
             // instead of a cell at a time through the accessor: press 128^3, ~0.1 M cells a frame).

@@ -43,7 +43,7 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
     }
     // An unrotated box: its inside voxels are a box, every voxel of it inside (InsideBox.h).
     Box cells;
-    const bool boxed = shape_internal::insideVoxelBox(shape, cells);
+    const bool boxed = shapes_internal::insideVoxelBox(shape, cells);
     if (boxed) b = intersect(b, cells);
     if (b.empty()) return 0;
     const int64_t lo[3] = {int64_t(b.min[0]) >> 3, int64_t(b.min[1]) >> 3, int64_t(b.min[2]) >> 3};

@@ -268,7 +268,7 @@ private:
 
 // ---- Boxes ---------------------------------------------------------------------------------------
 
-namespace shape_internal {
+namespace shapes_internal {
 
 bool insideVoxelBox(const Shape& shape, Box& voxels)
 {
@@ -304,7 +304,7 @@ bool insideVoxelBox(const Shape& shape, Box& voxels)
     return true;
 }
 
-} // namespace shape_internal
+} // namespace shapes_internal
 
 // ---- Pose, Shape ---------------------------------------------------------------------------------
 
