@@ -516,7 +516,7 @@ TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
     const std::string typed = errorOf([&] { readClayFile(forged); });
     EXPECT_TRUE(contains(typed, forged) && contains(typed, "vdbclay_max_mass") && contains(typed, "int64"))
         << typed;
-    // A file with no record reads as before.
+    // A file with no record of its largest cell reads.
     g->removeMeta("vdbclay_max_mass");
     openvdb::io::File(forged).write({g});
     EXPECT_EQ(errorOf([&] { readClayFile(forged); }), "");

@@ -516,7 +516,7 @@ TEST_F(InteropTest, MeshClayHoldsTheMeshVolume)
 }
 
 namespace {
-/// The previous round's estimate, for comparison: 4^3 sign samples of a shape's distance().
+/// A sampled estimate, for comparison: 4^3 sign samples of a shape's distance().
 double supersampledVolume(const Shape& s)
 {
     const Box b = s.bounds();
@@ -634,7 +634,7 @@ void cubeMesh(double h, double degZ, double degX, const openvdb::Vec3d& t,
     quads = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
 }
 
-/// The volume the previous rule gave: the sum of clamp(1/2 - d, 0, 1) at voxel centres.
+/// The volume of the plain ramp, for comparison: the sum of clamp(1/2 - d, 0, 1) at voxel centres.
 double rampVolume(const Shape& s)
 {
     const Box b = s.bounds();

@@ -143,7 +143,7 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                         int threads)
 {
     checkArgs("measureClay", threshold, dims);
-    // Tiles first (only the levels above the leaves): a nonzero one is refused, as before any sum.
+    // Tiles first (only the levels above the leaves): a nonzero one is refused before any sum.
     {
         auto it = mass.tree().cbeginValueAll();
         it.setMaxDepth(it.getLeafDepth() - 1);

@@ -16,8 +16,8 @@
 // the columns and slabs they pass through; the interior is filled by the running sum. The same sum
 // over a non-manifold but consistently oriented mesh is the winding number's integral, clamped to 1.
 // A trilinear level set cannot give this: interpolating the distance across a convex edge or corner
-// rounds it inward (the previous attempt, 4^3 sign samples of the mesh's level set, lost 2.4 % at
-// edges; tests/TestInterop.cc measures it against this).
+// rounds it inward (4^3 sign samples of the mesh's level set lose 2.4 % at edges; tests/TestInterop.cc
+// measures them against this).
 //
 // Everything else (level sets, meshes that are open or inconsistently oriented, shapes placed by a
 // transform, 2D clay): clamp(1/2 - d, 0, 1) from the signed distance d at the voxel centre, the part
