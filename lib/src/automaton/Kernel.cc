@@ -8,9 +8,9 @@
 // no cell over Tc. Both are done one item ahead (a software pipeline: the filter's loads, the first
 // touch of the item's cells, are issued before the previous item's block loop, not behind its
 // branches). Then runItem takes each candidate block left through runBlock:
-//   loadBlock          its cells (even: at constant offsets from the block's first cell; odd: through
-//                      the addressing tables), in two SSE2 registers, or in memory on the portable
-//                      path; a block with no cell over Tc stops here
+//   loadRegisters      its cells (even: at constant offsets from the block's first cell; odd: through
+//                      the addressing tables) in two SSE2 registers, or loadScalar in memory on the
+//                      portable path; a block with no cell over Tc stops here
 //   validCells         the cells not blocked by an obstacle (only where the item's leaves hold any)
 //   updateInRegisters  prorata's and sorted's branches in registers (BlockSimd.h), written back by
 //                      storeRegisters: all 8 cells by four 8-byte stores for blocks in one leaf
@@ -234,23 +234,23 @@ struct Tally {
     int64_t overloadDelta = 0, maxWritten = 0;
 };
 
-/// The item whose blocks are running: its leaves' pointers in locals (two cache lines of the set;
-/// one slot on the even phase: the loop's stores may alias memory, so read through the set they
-/// would be reloaded), and what its updated blocks leave for the sink.
+/// The item whose blocks are running (scalars only, so that it lives in registers). Its leaves'
+/// pointers and what its updated blocks leave for the sink are runItem's locals, passed to the
+/// helpers by reference.
 struct Item {
     size_t wi; // its index in the work list
     const LeafSet* ls;
-    const int32_t* read[8];
-    int32_t* data[8];
     bool anyMissing;    // a leaf the mask's blocks touch is missing
     bool anyObs;        // one holds obstacles or lies in an obstacle tile
     int32_t ax, ay, az; // the anchor's first block corner
-    uint64_t changed;   // blocks updated
-    // For sinkActive: the updated blocks that may still hold an over and a not-over cell, and per
-    // updated block its cells that were or went over Tc (corners: their union).
-    uint64_t again;
-    uint64_t act[8];
 };
+
+/// An item's leaves' pointers, read and written (LeafSet::read, data), copied into runItem's locals.
+using ReadSlots = const int32_t* [8];
+using DataSlots = int32_t* [8];
+
+/// Per corner, the updated blocks of an item whose cell at that corner was or went over Tc (sinkActive).
+using ActiveCorners = uint64_t[8];
 
 /// Where a block's cells lie in the item's leaves.
 struct BlockCells {
@@ -269,48 +269,47 @@ struct Regs {
 };
 #endif
 
-/// Loads block @a at's cells; false when none is over Tc (the block cannot change). On the SIMD
-/// paths they go to @a r and @a overCells gets the corners over Tc (obstacles not excluded); on the
-/// portable path they go to @a m.
-template <int N>
-VDBCLAY_INLINE bool loadBlock(const PassConsts& k, const Item& item, const BlockCells& at,
 #if defined(__SSE2__)
-                              Regs& r,
-#endif
-                              uint32_t& overCells, int32_t* m)
+/// Loads block @a at's cells into @a r (the SIMD paths); returns the corners over Tc (obstacles not
+/// excluded), 0 when the block cannot change.
+template <int N>
+VDBCLAY_INLINE uint32_t loadRegisters(const PassConsts& k, const ReadSlots& read, const BlockCells& at,
+                                      Regs& r)
 {
-    const int32_t* const* read = item.read;
     const uint16_t* off = at.off;
     const uint8_t* lf = at.lf;
-#if defined(__SSE2__)
-    if (!k.portable) {
-        if (at.pairs) {
-            if (at.inside) {
-                const int32_t* d = read[0] + off[0];
-                loadPairs<N>(d, d + 64, d + 8, d + 72, r.lo, r.hi);
-            } else {
-                loadPairs<N>(read[lf[0]] + off[0], read[lf[1]] + off[1], read[lf[2]] + off[2],
-                             read[lf[3]] + off[3], r.lo, r.hi);
-            }
+    if (at.pairs) {
+        if (at.inside) {
+            const int32_t* d = read[0] + off[0];
+            loadPairs<N>(d, d + 64, d + 8, d + 72, r.lo, r.hi);
         } else {
-            // Straddling a z boundary: corner k and k + 4 lie in different leaves.
-            r.lo = _mm_setr_epi32(read[lf[0]][off[0]], read[lf[1]][off[1]], read[lf[2]][off[2]],
-                                  read[lf[3]][off[3]]);
-            if constexpr (N == 8)
-                r.hi = _mm_setr_epi32(read[lf[4]][off[4]], read[lf[5]][off[5]], read[lf[6]][off[6]],
-                                      read[lf[7]][off[7]]);
+            loadPairs<N>(read[lf[0]] + off[0], read[lf[1]] + off[1], read[lf[2]] + off[2],
+                         read[lf[3]] + off[3], r.lo, r.hi);
         }
-        r.gtLo = _mm_cmpgt_epi32(r.lo, k.tcV);
-        if constexpr (N == 8) r.gtHi = _mm_cmpgt_epi32(r.hi, k.tcV);
-        overCells = laneBits<N>(r.gtLo, r.gtHi);
-        return overCells != 0;
+    } else {
+        // Straddling a z boundary: corner k and k + 4 lie in different leaves.
+        r.lo = _mm_setr_epi32(read[lf[0]][off[0]], read[lf[1]][off[1]], read[lf[2]][off[2]],
+                              read[lf[3]][off[3]]);
+        if constexpr (N == 8)
+            r.hi = _mm_setr_epi32(read[lf[4]][off[4]], read[lf[5]][off[5]], read[lf[6]][off[6]],
+                                  read[lf[7]][off[7]]);
     }
+    r.gtLo = _mm_cmpgt_epi32(r.lo, k.tcV);
+    if constexpr (N == 8) r.gtHi = _mm_cmpgt_epi32(r.hi, k.tcV);
+    return laneBits<N>(r.gtLo, r.gtHi);
+}
 #endif
-    if (at.inside) return loadInsideScalar<N>(read[0] + off[0], k.tc32, m);
+
+/// Loads block @a at's cells into @a m (the portable path); false when none is over Tc (the block
+/// cannot change).
+template <int N>
+VDBCLAY_INLINE bool loadScalar(const PassConsts& k, const ReadSlots& read, const BlockCells& at, int32_t* m)
+{
+    if (at.inside) return loadInsideScalar<N>(read[0] + at.off[0], k.tc32, m);
     int32_t top = 0;
     VDBCLAY_UNROLL
     for (int c = 0; c < N; ++c) {
-        m[c] = read[lf[c]][off[c]];
+        m[c] = read[at.lf[c]][at.off[c]];
         top = std::max(top, m[c]);
     }
     return top > k.tc32;
@@ -318,9 +317,8 @@ VDBCLAY_INLINE bool loadBlock(const PassConsts& k, const Item& item, const Block
 
 /// The cells of block @a at not blocked by an obstacle (bit c: corner c).
 template <int N>
-VDBCLAY_INLINE uint32_t validCells(const PassConsts& k, const Item& item, const BlockCells& at)
+VDBCLAY_INLINE uint32_t validCells(const PassConsts& k, const LeafSet& ls, const BlockCells& at)
 {
-    const LeafSet& ls = *item.ls;
     uint32_t valid = (1u << N) - 1;
     if (at.pairs && !k.portable) {
         // Corner k and k + 4 are neighbouring bits of one word of the obstacle mask.
@@ -347,15 +345,16 @@ VDBCLAY_INLINE uint32_t validCells(const PassConsts& k, const Item& item, const 
 #if defined(__SSE2__)
 /// Writes the block's new cells (@a s) back and turns active those that went from 0 to positive.
 template <int N>
-VDBCLAY_INLINE void storeRegisters(const Item& item, const BlockCells& at, const Regs& r, const Surplus& s)
+VDBCLAY_INLINE void storeRegisters(const Item& item, const DataSlots& data, const BlockCells& at,
+                                   const Regs& r, const Surplus& s)
 {
     if (N == 8 && at.pairs && (at.inside || !item.anyMissing)) {
         // Every cell of the block is this task's: write all 8, two to a store.
-        int32_t* d0 = item.data[0] + at.off[0];
+        int32_t* d0 = data[0] + at.off[0];
         int32_t *p0 = d0, *p1 = d0 + 64, *p2 = d0 + 8, *p3 = d0 + 72;
         if (!at.inside) {
-            p0 = item.data[at.lf[0]] + at.off[0], p1 = item.data[at.lf[1]] + at.off[1];
-            p2 = item.data[at.lf[2]] + at.off[2], p3 = item.data[at.lf[3]] + at.off[3];
+            p0 = data[at.lf[0]] + at.off[0], p1 = data[at.lf[1]] + at.off[1];
+            p2 = data[at.lf[2]] + at.off[2], p3 = data[at.lf[3]] + at.off[3];
         }
         const __m128i t01 = _mm_unpacklo_epi32(s.lo, s.hi); // c0 c4 c1 c5
         const __m128i t23 = _mm_unpackhi_epi32(s.lo, s.hi); // c2 c6 c3 c7
@@ -370,7 +369,7 @@ VDBCLAY_INLINE void storeRegisters(const Item& item, const BlockCells& at, const
         while (ch) {
             const int c = __builtin_ctz(ch);
             ch &= ch - 1;
-            item.data[at.slot(c)][at.offset(c)] = o32[c];
+            data[at.slot(c)][at.offset(c)] = o32[c];
         }
     }
     // 0 -> positive: the voxel becomes active (rare: clay flowing into empty cells).
@@ -387,9 +386,10 @@ VDBCLAY_INLINE void storeRegisters(const Item& item, const BlockCells& at, const
 /// done with (unchanged, written, or deferred: its update flows into a missing leaf); false when it
 /// is in a branch only the scalar rule runs.
 template <Rule R, int N, int P, typename Hash>
-VDBCLAY_INLINE bool updateInRegisters(const PassConsts& k, Item& item, const BlockCells& at, const Regs& r,
-                                      uint32_t overCells, uint32_t valid, const Hash& hash, int b, Tally& t,
-                                      PassTotals& tot)
+VDBCLAY_INLINE bool updateInRegisters(const PassConsts& k, const Item& item, const DataSlots& data,
+                                      const BlockCells& at, const Regs& r, uint32_t overCells, uint32_t valid,
+                                      const Hash& hash, int b, uint64_t& changed, uint64_t& again,
+                                      ActiveCorners& act, Tally& t, PassTotals& tot)
 {
     Surplus sp;
     Branch br = surplusBranch<N>(r.lo, r.hi, r.gtLo, r.gtHi, overCells, valid, k.tc32, hash, sp);
@@ -403,26 +403,28 @@ VDBCLAY_INLINE bool updateInRegisters(const PassConsts& k, Item& item, const Blo
         const uint32_t ch = changedCells<N>(r.lo, r.hi, sp.lo, sp.hi);
         bool missing = false;
         for (int c = 0; c < N; ++c)
-            if (((ch >> c) & 1u) && !item.data[at.lf[c]]) missing = true;
+            if (((ch >> c) & 1u) && !data[at.lf[c]]) missing = true;
         if (missing) {
             tot.deferred.push_back(PassTotals::Deferred{uint32_t(item.wi), uint8_t(b), uint8_t(ch)});
             return true;
         }
     }
-    storeRegisters<N>(item, at, r, sp);
+    storeRegisters<N>(item, data, at, r, sp);
     t.overloadDelta += sp.overDelta;
     t.maxWritten = std::max(t.maxWritten, sp.maxOut);
     ++t.updated;
-    item.changed |= uint64_t(1) << b;
-    if (k.noting) noteUpdated(b, sp.active, sp.again, item.act, item.again);
+    changed |= uint64_t(1) << b;
+    if (k.noting) noteUpdated(b, sp.active, sp.again, act, again);
     return true;
 }
 #endif
 
 /// Block @a b (cells @a m, in memory) through the scalar rule: checked, deferred, or written back.
 template <Rule R, int N, int P, typename Hash>
-VDBCLAY_INLINE void updateScalar(const PassConsts& k, Item& item, const BlockCells& at, const int32_t* m,
-                                 uint32_t valid, const Hash& hash, int b, Tally& t, PassTotals& tot)
+VDBCLAY_INLINE void updateScalar(const PassConsts& k, const Item& item, const DataSlots& data,
+                                 const BlockCells& at, const int32_t* m, uint32_t valid, const Hash& hash,
+                                 int b, uint64_t& changedBlocks, uint64_t& again, ActiveCorners& act,
+                                 Tally& t, PassTotals& tot)
 {
     int64_t out[8];
     const uint32_t changed = rules_internal::repartitionT<R, N>(k.rule, m, valid, hash, out);
@@ -436,7 +438,7 @@ VDBCLAY_INLINE void updateScalar(const PassConsts& k, Item& item, const BlockCel
         for (int c = 0; c < N; ++c) {
             if (!((changed >> c) & 1u)) continue;
             if (out[c] > INT32_MAX) fits = false;
-            if (!item.data[at.lf[c]]) missing = true;
+            if (!data[at.lf[c]]) missing = true;
         }
     }
     if (!fits) {
@@ -459,12 +461,12 @@ VDBCLAY_INLINE void updateScalar(const PassConsts& k, Item& item, const BlockCel
         ch &= ch - 1;
         t.overloadDelta += std::max<int64_t>(out[c] - k.tc, 0) - std::max<int64_t>(m[c] - k.tc, 0);
         const int li = at.slot(c), o = at.offset(c);
-        item.data[li][o] = int32_t(out[c]);
+        data[li][o] = int32_t(out[c]);
         t.maxWritten = std::max(t.maxWritten, out[c]);
         if (m[c] == 0) activate(item.ls->leaf[li], o);
     }
     ++t.updated;
-    item.changed |= uint64_t(1) << b;
+    changedBlocks |= uint64_t(1) << b;
     if (k.noting) {
         uint32_t overBefore = 0, overAfter = 0;
         for (int c = 0; c < N; ++c) {
@@ -472,13 +474,15 @@ VDBCLAY_INLINE void updateScalar(const PassConsts& k, Item& item, const BlockCel
             overAfter |= uint32_t(out[c] > k.tc) << c;
         }
         noteUpdated(b, overBefore | overAfter, (overAfter & valid) && (valid & ~overAfter & ((1u << N) - 1)),
-                    item.act, item.again);
+                    act, again);
     }
 }
 
 /// Candidate block @a b of the item: loaded, skipped unless a cell is over Tc, updated.
 template <Rule R, bool D3, int P>
-VDBCLAY_INLINE void runBlock(const PassConsts& k, Item& item, int b, Tally& t, PassTotals& tot)
+VDBCLAY_INLINE void runBlock(const PassConsts& k, const Item& item, const ReadSlots& read,
+                             const DataSlots& data, int b, uint64_t& changed, uint64_t& again,
+                             ActiveCorners& act, Tally& t, PassTotals& tot)
 {
     constexpr int N = D3 ? 8 : 4;
     constexpr uint64_t kInsideOdd = D3 ? kInsideOdd3 : kInsideOdd2;
@@ -493,24 +497,35 @@ VDBCLAY_INLINE void runBlock(const PassConsts& k, Item& item, int b, Tally& t, P
     at.pairs = at.inside || !D3 || (b >> 4) != 0;
     alignas(16) int32_t m[8];
     uint32_t overCells = 0; // corners over Tc (obstacles not yet excluded); 0 on the portable path
+    uint32_t valid;
 #if defined(__SSE2__)
     Regs r;
     r.lo = r.hi = r.gtLo = r.gtHi = _mm_setzero_si128();
-    if (!loadBlock<N>(k, item, at, r, overCells, m)) return;
-#else
-    if (!loadBlock<N>(k, item, at, overCells, m)) return;
+    if (!k.portable) {
+        overCells = loadRegisters<N>(k, read, at, r);
+        if (!overCells) return;
+        valid = item.anyObs ? validCells<N>(k, *item.ls, at) : (1u << N) - 1;
+        ++t.overTc;
+        // A block with no valid over cell or no valid under cell is unchanged under every rule
+        // (Rules.h): the compare already tells, before the hash or the rule is set up.
+        if (!(overCells & valid) || !(valid & ~overCells & ((1u << N) - 1))) return;
+    } else
 #endif
-    const uint32_t valid = item.anyObs ? validCells<N>(k, item, at) : (1u << N) - 1;
-    ++t.overTc;
+    {
+        if (!loadScalar<N>(k, read, at, m)) return;
+        valid = item.anyObs ? validCells<N>(k, *item.ls, at) : (1u << N) - 1;
+        ++t.overTc;
+    }
     const BlockHash<D3> hash{k.prefix, item.ax, item.ay, item.az, b};
 #if defined(__SSE2__)
     constexpr bool kSurplusRule = R == Rule::Prorata || R == Rule::Sorted;
     if (kSurplusRule && k.simd &&
-        updateInRegisters<R, N, P>(k, item, at, r, overCells, valid, hash, b, t, tot))
+        updateInRegisters<R, N, P>(k, item, data, at, r, overCells, valid, hash, b, changed, again, act, t,
+                                   tot))
         return;
     if (!k.portable) storeCorners<N>(r.lo, r.hi, m); // the rule reads the cells from memory
 #endif
-    updateScalar<R, N, P>(k, item, at, m, valid, hash, b, t, tot);
+    updateScalar<R, N, P>(k, item, data, at, m, valid, hash, b, changed, again, act, t, tot);
 }
 
 /// Item @a w's candidate blocks (@a cur, prepared): updated, then its changes recorded in @a sink.
@@ -520,30 +535,33 @@ VDBCLAY_INLINE void runItem(const PassConsts& k, WorkItem& w, size_t wi, const P
 {
     constexpr int kSlots = P == 1 ? (D3 ? 8 : 4) : 1;
     const LeafSet& ls = *cur.set;
+    // The slots' pointers in locals (two cache lines of the set; one slot on the even phase): the
+    // loop's stores may alias memory, so read through the set they would be reloaded.
+    const int32_t* read[8];
+    int32_t* data[8];
+    for (int s = 0; s < kSlots; ++s) {
+        read[s] = ls.read[s];
+        data[s] = ls.data[s];
+    }
     Item item;
     item.wi = wi;
     item.ls = &ls;
-    for (int s = 0; s < kSlots; ++s) {
-        item.read[s] = ls.read[s];
-        item.data[s] = ls.data[s];
-    }
     item.anyMissing = (ls.missing & cur.need) != 0;
     item.anyObs = (ls.obsAny & cur.need) != 0;
     item.ax = w.anchor.x() - P;
     item.ay = w.anchor.y() - P;
     item.az = D3 ? w.anchor.z() - P : 0;
-    item.changed = 0;
-    item.again = 0;
-    for (uint64_t& a : item.act)
-        a = 0;
+    // The blocks updated; for the sink (sinkActive) those that may still hold an over and a not-over
+    // cell, and per updated block its cells that were or went over Tc (corners: their union).
+    uint64_t changed = 0, again = 0, act[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     for (uint64_t bits = cur.bits; bits; bits &= bits - 1)
-        runBlock<R, D3, P>(k, item, __builtin_ctzll(bits), t, tot);
-    w.changed = item.changed;
-    if (item.changed && sink && w.entry != kNoEntry) {
+        runBlock<R, D3, P>(k, item, read, data, __builtin_ctzll(bits), changed, again, act, t, tot);
+    w.changed = changed;
+    if (changed && sink && w.entry != kNoEntry) {
         if (k.noting)
-            sinkActive<P, D3>(*sink, w.entry, item.again, item.act);
+            sinkActive<P, D3>(*sink, w.entry, again, act);
         else
-            sinkChanges<P, D3>(*sink, w.entry, item.changed);
+            sinkChanges<P, D3>(*sink, w.entry, changed);
     }
 }
 
