@@ -112,11 +112,7 @@ static_assert(std::is_same<ObstacleGrid, openvdb::MaskGrid>::value, "ObstacleGri
 namespace {
 
 using openvdb::Coord;
-using MassTree = openvdb::Int32Tree;
-using MassLeaf = MassTree::LeafNodeType;
-using ObsTree = openvdb::MaskTree;
-using ObsLeaf = ObsTree::LeafNodeType;
-using namespace automaton_internal;
+using namespace automaton_internal; // MassTree, MassLeaf, ObsTree, ObsLeaf (LeafTable.h) among them
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)

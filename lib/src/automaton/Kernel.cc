@@ -11,7 +11,9 @@
 //   loadRegisters      its cells (even: at constant offsets from the block's first cell; odd: through
 //                      the addressing tables) in two SSE2 registers, or loadScalar in memory on the
 //                      portable path; a block with no cell over Tc stops here
-//   validCells         the cells not blocked by an obstacle (only where the item's leaves hold any)
+//   validCells         the cells not blocked by an obstacle (only where the item's leaves hold any);
+//                      on the SIMD paths a block without a valid over cell and a valid under cell
+//                      stops here too (every rule leaves it unchanged)
 //   updateInRegisters  prorata's and sorted's branches in registers (BlockSimd.h), written back by
 //                      storeRegisters: all 8 cells by four 8-byte stores for blocks in one leaf
 //   updateScalar       every other case (E <= A outside prorata's room branch, the other rules, a pass
