@@ -13,8 +13,8 @@
 # usage: bench/profile-parts.sh SCENE THREADS [ROUNDS (default 1)] [VAR=VALUE ...]
 #   BIN (default build-bench/apps/vdbclay, else build/apps/vdbclay) is the vdbclay to run; CPU
 #   (default 0-(THREADS-1)) the CPUs to pin to. VAR=VALUE words set the run's environment.
-# example: bench/profile-parts.sh bench/scenes/press128-0.8tc.json 2 2
-#          CPU=1 bench/profile-parts.sh bench/scenes/press128-0.8tc.json 1 2
+# example: bench/profile-parts.sh data/scenes/bench/press128-0.8tc.json 2 2
+#          CPU=1 bench/profile-parts.sh data/scenes/bench/press128-0.8tc.json 1 2
 set -euo pipefail
 if [[ $# -lt 2 ]]; then
     sed -n '2,18p' "$0" >&2

@@ -76,8 +76,9 @@
 #include "core/Format.h"
 #include "sculpt/MemoryEstimate.h"
 #include "sculpt/SculptTuning.h"
+#include "transport/SolverTuning.h"
 #include "core/TreeBytes.h"
-#include "io/VdbCheck.h"
+#include "core/VdbCheck.h"
 
 #include <openvdb/openvdb.h>
 
@@ -131,10 +132,10 @@ constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
 using memory_internal::voxelsWithinFaceSteps;
 using sculpt_internal::growBox;
-using sculpt_internal::kDenseIndexMax;
 using sculpt_internal::kReachPerContact;
 using sculpt_internal::kTryChunk;
 using sculpt_internal::kTrySteps;
+using transport_internal::kDenseIndexMax;
 
 /// Scene::transport global: bytes per cell of the layer's domain (estimateSceneMemory says which).
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;

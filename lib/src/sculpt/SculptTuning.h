@@ -1,6 +1,6 @@
 // The Sculptor's tuning constants (Sculpt.cc) that the memory estimate (MemoryEstimate.cc) must follow:
-// the sweep's sub-steps, the global layer's reach, its dense cell index (Transport.cc) and the
-// automaton's try before it; and growBox, which both use to grow the push's region by the reach.
+// the sweep's sub-steps, the global layer's reach and the automaton's try before it; and growBox,
+// which both use to grow the push's region by the reach.
 #pragma once
 
 #include "vdbclay/Types.h"
@@ -16,9 +16,6 @@ namespace sculpt_internal {
 constexpr int kMaxSweepSubsteps = 256;
 /// Scene::transport global: the reach (plastic zone) in contact sizes of the push.
 constexpr double kReachPerContact = 1.0;
-/// Scene::transport global: the layer's dense cell index (Transport.cc) holds at most this many
-/// entries of 4 bytes (32 MiB); a larger box uses the tree alone.
-constexpr int64_t kDenseIndexMax = int64_t(1) << 23;
 /// Scene::transport global, the automaton's try before the layer (Sculptor::Impl::settleBounded).
 /// Measured on the 48^3 press at 0.8 Tc (surface push): its frames need up to ~200 visited blocks
 /// per block of the clay (~600 steps); with 256 and 4096 every frame settles in the try (as local);

@@ -2,7 +2,7 @@
 // Tree/RootNode/InternalNode/LeafNode::readTopology and readBuffers, io::readCompressedValues,
 // MetaMap::readMeta, DelayedLoadMetadata::readValue), checking every recorded size against the
 // bytes that are really there. Nothing is allocated by a recorded size.
-#include "io/VdbCheck.h"
+#include "core/VdbCheck.h"
 
 #include "vdbclay/Types.h"
 
