@@ -16,8 +16,8 @@
 #   round by round (the same state of the machine), as median and range.
 # example: bench/ab-repartition.sh data/scenes/bench/press48-0.8tc.json 10 \
 #            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
-#          THREADS=2 bench/ab-repartition.sh data/scenes/bench/press128-0.8tc.json 8 \
-#            'tbb=VDBCLAY_PASS_CREW=0 build/apps/vdbclay' crew=build/apps/vdbclay
+#          bench/ab-repartition.sh data/scenes/bench/press128-0.8tc.json 8 \
+#            'one=THREADS=1 build/apps/vdbclay' 'two=THREADS=2 build/apps/vdbclay'
 set -euo pipefail
 if [[ $# -lt 3 ]]; then
     sed -n '2,18p' "$0" >&2

@@ -14,7 +14,7 @@
 #   -r  rounds (default 3)
 #   -b  the vdbclay to run (default build/apps/vdbclay); a wrapper script is fine
 #   -c  also write every run as CSV to this file
-#   SCENE  default: data/scenes/bench/press48-0.8tc.json data/scenes/bench/press128-0.8tc.json (issue 13's)
+#   SCENE  default: data/scenes/bench/press48-0.8tc.json data/scenes/bench/press128-0.8tc.json
 set -euo pipefail
 cpus=$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 threads=

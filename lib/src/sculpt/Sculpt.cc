@@ -21,6 +21,7 @@
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 
+#include "automaton/AutomatonInternal.h"
 #include "push/ClayLeaves.h"
 #include "core/CoordHash.h"
 #include "shapes/InsideBox.h"
@@ -303,11 +304,11 @@ struct Sculptor::Impl {
         struct FullVisits {
             Automaton& a;
             const bool was;
-            explicit FullVisits(Automaton& x) : a(x), was(x.pruneCandidates())
+            explicit FullVisits(Automaton& x) : a(x), was(automaton_internal::pruneCandidates(x))
             {
-                a.setPruneCandidates(false);
+                automaton_internal::setPruneCandidates(a, false);
             }
-            ~FullVisits() { a.setPruneCandidates(was); }
+            ~FullVisits() { automaton_internal::setPruneCandidates(a, was); }
         } fullVisits(*automaton);
         for (;;) {
             const StepReport r =
