@@ -1,5 +1,5 @@
-// The memory estimate against the heap a run really takes (issue 12: the global layer's estimate
-// follows the tools' reach, not the whole body; round 5).
+// The memory estimate against the heap a run really takes (the global layer's estimate follows the
+// tools' reach, not the whole body).
 //
 // This executable counts the heap through tests/AllocationCounter.h: the live bytes malloc handed out
 // and their peak. Aligned new keeps the library's own implementation and is not counted. The figures

@@ -537,7 +537,7 @@ TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
                    "s.json", "");
     const MemoryEstimate a = estimateSceneMemory(still);
     EXPECT_EQ(a.clayLeaves, 64u);
-    EXPECT_EQ(a.clayLeavesGrown, 64u); // at 800 < Tc with no tool it never moves (issue 11, item 5)
+    EXPECT_EQ(a.clayLeavesGrown, 64u); // at 800 < Tc with no tool it never moves
     EXPECT_EQ(a.obstacleLeaves, 21u * 21u);
     EXPECT_EQ(a.toolVoxels, 0u);
     EXPECT_GE(a.clayBytes, 64u * (512u * 4u));
@@ -621,7 +621,7 @@ TEST_F(SceneTest, ASceneOverItsMemoryBudgetIsRefusedBeforeAnyWork)
     EXPECT_NO_THROW(Sculptor{def});
 }
 
-// ---- issue 11: bad input in scene files, and the memory estimate from what is built -------------
+// ---- bad input in scene files, and the memory estimate from what is built ----------------------
 
 TEST_F(SceneTest, TypesDuplicatesAndEmptyStringsAreRefusedWithTheField)
 {
