@@ -75,7 +75,8 @@
 #include "push/ClayLeaves.h"
 #include "core/Format.h"
 #include "sculpt/MemoryEstimate.h"
-#include "sculpt/SculptTuning.h"
+#include "sculpt/FramePolicy.h"
+#include "transport/CellIndex.h"
 #include "core/TreeBytes.h"
 #include "io/VdbCheck.h"
 
@@ -129,12 +130,9 @@ constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
 /// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
 constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
 
+using frame_policy::growBox;
 using memory_internal::voxelsWithinFaceSteps;
-using sculpt_internal::growBox;
-using sculpt_internal::kDenseIndexMax;
-using sculpt_internal::kReachPerContact;
-using sculpt_internal::kTryChunk;
-using sculpt_internal::kTrySteps;
+using transport_internal::kDenseIndexMax;
 
 /// Scene::transport global: bytes per cell of the layer's domain (estimateSceneMemory says which).
 constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
@@ -537,18 +535,6 @@ struct LayerBound {
     bool buried = false;    ///< no corner of a tool's sweep lies outside the clay: it starts inside
 };
 
-/// The most steps the automaton's try (Sculptor::Impl::settleBounded) can have run when the global
-/// layer runs after it, under a step budget of @a maxSteps per frame: its chunks of kTryChunk steps
-/// end at multiples of kTryChunk, it gives up (and the layer runs) at the first one >= kTrySteps, and
-/// a chunk that reaches @a maxSteps finishes the frame without the layer. So none when @a maxSteps
-/// <= kTryChunk. (layerReach counts no more of them than cross the push's region: round 7.)
-uint64_t trySteps(uint64_t maxSteps)
-{
-    if (maxSteps == 0) return 0;
-    const uint64_t giveUp = (kTrySteps + kTryChunk - 1) / kTryChunk * kTryChunk;
-    return std::min(giveUp, (maxSteps - 1) / kTryChunk * kTryChunk);
-}
-
 /// Where the global layer's domain lies around a tool's sweep (file comment): its seeds within the
 /// sweep grown by `seeds` voxels on every axis, its cells within `faceSteps` face steps of a seed.
 struct LayerReach {
@@ -563,7 +549,7 @@ LayerReach layerReach(const LayerBound& b)
     if (b.clayMoves || b.covers || b.buried) return r;
     r.bounded = true;
     const double contact = b.dims == 2 ? double(b.toolMost) : std::sqrt(double(b.toolMost));
-    const int64_t reach = int64_t(std::ceil(kReachPerContact * contact)) + 2;
+    const int64_t reach = frame_policy::layerReach(contact);
     const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
     if (b.push == PushMode::Compress) {
         r.seeds = int64_t(std::ceil(contact)); // the chains' depth
@@ -575,7 +561,7 @@ LayerReach layerReach(const LayerBound& b)
     // the region (round 7), so the try moved them at most `region` voxels from the tool, whatever its
     // steps.
     const int64_t region = int64_t(PushOptions().maxSearch) + 2;
-    const int64_t steps = std::min(int64_t(trySteps(b.maxSteps)), region);
+    const int64_t steps = std::min(int64_t(frame_policy::tryStepsBeforeLayer(b.maxSteps)), region);
     r.seeds = region;
     r.faceSteps = std::max(reach, 2 * (room + 3 * steps)) + 4 + 1;
     return r;
@@ -857,7 +843,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // index is then the dense array over the seeds' bounds grown by the reach + 2 (at most
     // kDenseIndexMax entries) and a tree over the cells beyond it, counted as every voxel of those
     // leaves.
-    if (scene.transport == Transport::Global) {
+    if (frame_policy::usesGlobalLayer(scene)) {
         uint64_t cells = e.clayLeavesGrown * 512;
         LayerBound lb;
         lb.push = scene.push;

@@ -28,7 +28,7 @@
 #include "sculpt/MemoryEstimate.h"
 #include "core/ParallelFor.h"
 #include "shapes/Rasterize.h"
-#include "sculpt/SculptTuning.h"
+#include "sculpt/FramePolicy.h"
 
 #include <openvdb/openvdb.h>
 
@@ -44,14 +44,6 @@
 #include <unordered_set>
 
 namespace vdbclay {
-
-using sculpt_internal::growBox;
-using sculpt_internal::kMaxSweepSubsteps;
-using sculpt_internal::kReachPerContact;
-using sculpt_internal::kTryChunk;
-using sculpt_internal::kTrySaturated;
-using sculpt_internal::kTrySteps;
-using sculpt_internal::kTryWork;
 
 namespace {
 
@@ -186,6 +178,17 @@ struct Sculptor::Impl {
 
     bool stopRequested() const { return stopPoll && stopPoll(); }
 
+    /// Closes the open frame. After the scene's last frame the global layer's arrays are freed: no
+    /// later call needs them, and what follows a run (writing its output) has that memory back
+    /// (estimateSceneMemory counts the layer and the output apart, not added).
+    void finishFrame()
+    {
+        open = false;
+        openSteps = 0;
+        ++frame;
+        if (frame >= scene.frames) transportWorkspace.release();
+    }
+
     /// The voxels placeTools(@a tools) would edit: the tools' bounds (2D: only z = 0).
     Box regionOf(const std::vector<ShapePtr>& tools) const
     {
@@ -243,28 +246,22 @@ struct Sculptor::Impl {
         return r;
     }
 
-    /// The global transport's first try (docs/TRANSPORT.md, round 4b): the automaton alone, in chunks
-    /// of kTryChunk steps, after a surface push only, unless the clay near the overload is saturated
-    /// on average (kTrySaturated: saturated clay has room only at its surface, the automaton's random
-    /// walk would not settle it), while the blocks it visits stay within kTryWork per 2x2x2 block of
-    /// that clay (about what the global layer costs a frame on it) and the frame within kTrySteps
-    /// steps. The clay near the overload: the clay leaves meeting @a near (the push's region grown
-    /// by the layer's reach: its plastic zone; round 5), the whole body when @a near is empty (no tool
-    /// touched clay): a frame costs the tool's zone, not the model, and a saturated lump beside a
-    /// loose one is judged by itself. @a finished: the frame ended here (settled, tolerance, no
-    /// room, the scene's step budget); otherwise the global layer runs on what is left. No stop
-    /// request is honoured here (the try is bounded, as the layer is): a frame saved open is always
-    /// past its global layer, so a resumed frame never repeats or skips it, with no new checkpoint
-    /// field.
+    /// The global transport's first try: the automaton alone, in chunks, on the clay near the
+    /// overload, under the frame policy's rules (FramePolicy.h: after a surface push only, not on
+    /// saturated clay, within a work and a step cap). The clay near the overload: the clay leaves
+    /// meeting @a near (frame_policy::tryNear: the push's region grown by the layer's reach), the
+    /// whole body when @a near is empty (no tool touched clay): a frame costs the tool's zone, not the
+    /// model, and a saturated lump beside a loose one is judged by itself. @a finished: the frame
+    /// ended here (settled, tolerance, no room, the scene's step budget); otherwise the global layer
+    /// runs on what is left. No stop request is honoured here (the try is bounded, as the layer is):
+    /// a frame saved open is always past its global layer, so a resumed frame never repeats or skips
+    /// it, with no new checkpoint field.
     StepReport settleBounded(bool& finished, const Box& near)
     {
         StepReport total;
         finished = false;
         if (automaton->residualOverload() == 0) return total; // the layer would do nothing either
-        // The compress push leaves overload only where the clay ahead of the tool had no room (on
-        // compressible clay it leaves none: the 48^3 press at 0.8 Tc), and global + compress is the
-        // setting for clay at Tc: its results stay those of the layer alone.
-        if (scene.push != PushMode::Surface) return total;
+        if (!frame_policy::tryAfterPush(scene)) return total;
         uint64_t voxels = 0;
         int64_t clay = 0;
         if (near.empty()) {
@@ -280,13 +277,12 @@ struct Sculptor::Impl {
                 clay += sum;
             }
         }
-        const double tc = double(scene.rule.threshold);
-        if (double(clay) >= kTrySaturated * tc * double(voxels)) return total;
-        const double work = kTryWork * double(voxels) / (scene.dimensions == 2 ? 4.0 : 8.0);
-        // The cap counts the blocks the automaton visits. With the candidates pruned (round 8) that
-        // count would depend on how the automaton's bookkeeping started (a resumed run begins from
-        // merged lists): the try visits every block near a change, as before, so that a resumed run
-        // gives up where the unbroken one does and the results stay round 7's.
+        if (frame_policy::trySaturated(scene, clay, voxels)) return total;
+        const double work = frame_policy::tryWork(scene, voxels);
+        // The cap counts the blocks the automaton visits. With the candidates pruned that count
+        // would depend on how the automaton's bookkeeping started (a resumed run begins from merged
+        // lists): the try visits every block near a change, so that a resumed run gives up where the
+        // unbroken one does.
         struct FullVisits {
             Automaton& a;
             const bool was;
@@ -298,8 +294,7 @@ struct Sculptor::Impl {
         } fullVisits(*automaton);
         for (;;) {
             const StepReport r =
-                settleFrameUpTo(std::min<uint64_t>(scene.settle.maxSteps, openSteps + kTryChunk),
-                                /*honourStop=*/false);
+                settleFrameUpTo(frame_policy::tryChunkEnd(scene, openSteps), /*honourStop=*/false);
             total += r;
             total.reason = r.reason;
             total.residualOverload = r.residualOverload;
@@ -308,7 +303,7 @@ struct Sculptor::Impl {
                 finished = true;
                 return total;
             }
-            if (openSteps >= kTrySteps || double(total.blocksVisited) > work) return total;
+            if (frame_policy::tryGivesUp(openSteps, total.blocksVisited, work)) return total;
         }
     }
 
@@ -348,7 +343,7 @@ struct Sculptor::Impl {
         const Coord lo(box.min[0] >> 3, box.min[1] >> 3, box.min[2] >> 3);
         const Coord hi(box.max[0] >> 3, box.max[1] >> 3, box.max[2] >> 3);
         const int64_t boxSlots = clay_internal::slotCount(box);
-        bool all = scene.transport == Transport::Global || reach > 64;
+        bool all = frame_policy::toolCellsOverWholeBounds(scene) || reach > 64;
         std::vector<const clay_internal::MassLeafT*> leaves;
         if (!all) {
             leaves =
@@ -423,35 +418,15 @@ struct Sculptor::Impl {
     }
 
     /// Places the tools at frame @a f and pushes clay out of them. With Scene::sweep, the move from
-    /// frame f - 1 is split into sub-steps of at most a quarter voxel (the largest displacement of
-    /// a corner of any tool's bounds), each placed and pushed in turn, so the push acts on the
+    /// frame f - 1 is split into frame_policy::sweepSubsteps() sub-steps (at most a quarter voxel of
+    /// a corner of any tool's bounds each), each placed and pushed in turn, so the push acts on the
     /// volume the tools sweep and clay never passes through a thin or fast tool.
     PushReport pushTools(uint64_t f)
     {
         PushOptions po;
         po.mode = scene.push;
         const std::vector<ShapePtr> tools = toolsAt(f);
-        int substeps = 1;
-        if (scene.sweep && f > 0) {
-            double most = 0;
-            for (const ToolSpec& t : scene.tools) {
-                const Pose a = t.poseAt(f - 1), b = t.poseAt(f);
-                const Box bb = t.shape.shape->bounds();
-                if (bb.empty()) continue;
-                for (int corner = 0; corner < 8; ++corner) {
-                    const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]),
-                                  double(corner & 2 ? bb.max[1] : bb.min[1]),
-                                  double(corner & 4 ? bb.max[2] : bb.min[2])}};
-                    const Vec3 pa = a.apply(p), pb = b.apply(p);
-                    const double d =
-                        std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
-                                  (pa[2] - pb[2]) * (pa[2] - pb[2]));
-                    most = std::max(most, d);
-                }
-            }
-            substeps = int(std::min(std::ceil(most * 4), double(kMaxSweepSubsteps)));
-            substeps = std::max(substeps, 1);
-        }
+        const int substeps = frame_policy::sweepSubsteps(scene, f);
         PushReport total;
         for (int k = 1; k <= substeps; ++k) {
             std::vector<ShapePtr> sub;
@@ -704,42 +679,18 @@ FrameReport Sculptor::runFrame()
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
-        // Round 7: a frame whose tools touch no clay runs the layer (with no reach: over every over
-        // cell) only as the scene's first frame, for clay that starts over Tc; later, what a frame
-        // that ended unsettled (step budget, tolerance, no room) left is the automaton's, as with
-        // local (before, the layer then ran over every over cell, however far: the memory estimate
-        // counts the whole body only for clay that starts over Tc). By the scene's frame number, so
-        // a run resumed from a checkpoint does what the unbroken run did.
-        const bool layer = rep.push.contactSize > 0 || rep.frame == 1;
-        if (im.scene.transport == Transport::Global && layer) {
-            GlobalTransportOptions go;
-            go.threads = im.automaton->options().threads;
-            // The plastic zone: a few contact sizes around the over cells; the whole body when no
-            // tool touched clay this frame.
-            go.reach = rep.push.contactSize > 0
-                           ? int64_t(std::ceil(kReachPerContact * rep.push.contactSize)) + 2
-                           : 0;
-            // The overload the push made lies in its region: look for it there only (a frame
-            // costs the tool's region, not the model's size).
-            if (rep.push.contactSize > 0) go.seedRegion = rep.push.region;
-            // The automaton's try first (compressible clay settles in a few cheap steps, as with
-            // local); the layer only on what it leaves in the push's region. Round 7: the overload
-            // the try carried out of that region (up to 4096 steps, a voxel a step) is left to the
-            // cleanup below, not looked for as far as the try's steps reach (round 6): the try ran
-            // only because the clay within the reach of the push is unsaturated (kTrySaturated), where
-            // the automaton settles overload cheaply, and a layer seeded that far would cost, and the
-            // memory estimate have to count, a region of thousands of voxels around the tool
-            // (MemoryEstimate.cc: with the seeds in the push's region the bound holds under any
-            // step budget).
+        // The global layer (frame_policy::layerRuns), after the automaton's try: compressible clay
+        // settles in a few cheap steps, as with the local transport; the layer runs only on what the
+        // try leaves in the push's region (frame_policy::layerOptions).
+        if (frame_policy::layerRuns(im.scene, rep.frame, rep.push)) {
+            const GlobalTransportOptions go =
+                frame_policy::layerOptions(rep.push, im.automaton->options().threads);
             im.open = true;
             im.openSteps = 0;
-            rep.settle =
-                im.settleBounded(rep.finished, go.reach > 0 ? growBox(go.seedRegion, go.reach, 3) : Box());
+            rep.settle = im.settleBounded(rep.finished, frame_policy::tryNear(go));
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
-                im.open = false;
-                im.openSteps = 0;
-                ++im.frame;
+                im.finishFrame();
                 return rep;
             }
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
@@ -752,9 +703,7 @@ FrameReport Sculptor::runFrame()
     rep.settle += rest; // after the try, if any
     rep.settle.reason = rest.reason;
     if (rep.finished) {
-        im.open = false;
-        im.openSteps = 0;
-        ++im.frame;
+        im.finishFrame();
     } else {
         im.stopped = true;
     }

@@ -54,7 +54,7 @@
 
 #include "transport/Chunks.h"
 #include "transport/Multigrid.h"
-#include "sculpt/SculptTuning.h"
+#include "transport/CellIndex.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -94,8 +94,6 @@ using namespace transport_internal;
 constexpr int kDir[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
 
 enum Kind : uint8_t { kUnknown = 0, kDirichlet = 1, kFrozen = 2 };
-
-using sculpt_internal::kDenseIndexMax; // the dense cell index's largest box (the estimate counts it)
 
 /// The active set's rounds solve to the tolerance once a round changes at most 1/kTightChange of the rows.
 constexpr size_t kTightChange = 1000;
