@@ -78,7 +78,8 @@ int sweepSubsteps(const Scene& scene, uint64_t frame)
         const Box bb = t.shape.shape->bounds();
         if (bb.empty()) continue;
         for (int corner = 0; corner < 8; ++corner) {
-            const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]), double(corner & 2 ? bb.max[1] : bb.min[1]),
+            const Vec3 p{{double(corner & 1 ? bb.max[0] : bb.min[0]),
+                          double(corner & 2 ? bb.max[1] : bb.min[1]),
                           double(corner & 4 ? bb.max[2] : bb.min[2])}};
             const Vec3 pa = a.apply(p), pb = b.apply(p);
             const double d = std::sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +

@@ -156,7 +156,7 @@ struct Sculptor::Impl {
     // Where the tools' cells are marked (file comment): slots and leaves by origin >> 3.
     std::vector<ShapePtr> placed; ///< the tools as placed now
     // Sets, not MaskTrees: a few hundred slots a frame, where a tree cleared every frame allocated
-    // and zeroed its upper nodes again (~1 ms a frame on the 48^3 press; round 9).
+    // and zeroed its upper nodes again (~1 ms a frame on the 48^3 press).
     std::unordered_set<openvdb::Coord, CoordHash>
         coveredSlots; ///< slots of toolRegion whose tool cells are marked
     std::unordered_set<openvdb::Coord, CoordHash>
