@@ -138,7 +138,8 @@ struct ClayCover {
             neighbours ? std::max(bandWithin, anchorWithin + kAnchorSpread) : holdsWithin;
         std::vector<Box> grown(members.size());
         for (size_t i = 0; i < members.size(); ++i)
-            grown[i] = clip2D(neighbourhood(frame_policy::growBox(members[i].box, margin, dims), neighbours, dims), dims);
+            grown[i] = clip2D(
+                neighbourhood(frame_policy::growBox(members[i].box, margin, dims), neighbours, dims), dims);
         auto distanceAt = [&](const Member& mb, double x, double y, double z) {
             if (budget > 0) --budget;
             return mb.shape->distance(Vec3{{x, y, z}});
