@@ -665,7 +665,8 @@ int runScene(const RunArgs& a)
     // The budget is kept while the run goes on: the estimate may fall short (clay from a file that
     // spreads far), so every 64 polls the grid is measured, and a run that outgrows the budget
     // stops where a checkpoint resumes exactly, as on SIGINT.
-    const uint64_t fixedBytes = startEstimate.obstacleBytes + startEstimate.toolBytes;
+    const uint64_t fixedBytes =
+        startEstimate.processBytes + startEstimate.obstacleBytes + startEstimate.toolBytes;
     uint64_t polls = 0, grewTo = 0;
     // The grid's size changes only with its nodes: it is measured again (a walk of every node)
     // only when its leaf or internal node count changed since the last poll (a walk of the

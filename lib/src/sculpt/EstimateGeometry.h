@@ -84,14 +84,17 @@ ToolSweep sweep(const ToolSpec& tool, uint64_t frames, int dims, bool countInsid
 /// surface's band 4 voxels (output/Surface.cc: a half width of 3, swept one voxel further).
 Box neighbourhood(Box b, bool neighbours, int dims);
 
-/// Distance evaluations one estimate may spend counting clay leaves (ClayCover).
+/// Distance evaluations one estimate may spend counting clay leaves (ClayCover), and the members one
+/// count may try against nodes and leaves (many shapes, or boxes, near each leaf): ~0.1 s each.
 constexpr uint64_t kCoverBudget = uint64_t(1) << 23;
+constexpr uint64_t kCoverTests = uint64_t(1) << 26;
 
 /// Where clay may lie during a run, leaf by leaf: within `margin` voxels of a clay shape's voxels
 /// (an analytic shape, whose distance is exact: a leaf whose centre is at least
 /// kLeafHalfDiagonal + margin from it holds no such voxel; other shapes: their bounds), or of a box
 /// (clay from a file, a tool's sweep). Counting leaves costs a distance per leaf near a shape's
-/// surface (whole 128^3 nodes are decided from their centre), within a budget of evaluations.
+/// surface (whole 128^3 nodes are decided from their centre), within a budget of evaluations and of
+/// tests; past either the count gives up and the caller counts boxes.
 struct ClayCover {
     struct Member {
         const Shape* shape = nullptr; ///< an analytic shape, or null: the box alone
@@ -161,6 +164,7 @@ struct ClayCover {
         const int64_t hi[3] = {int64_t(region.max[0]) >> 7, int64_t(region.max[1]) >> 7,
                                int64_t(region.max[2]) >> 7};
         std::vector<size_t> near;
+        uint64_t tests = 0; // members tried against nodes and leaves: at most kCoverTests
         for (int64_t nx = lo[0]; nx <= hi[0]; ++nx)
             for (int64_t ny = lo[1]; ny <= hi[1]; ++ny)
                 for (int64_t nz = lo[2]; nz <= hi[2]; ++nz) {
@@ -172,6 +176,7 @@ struct ClayCover {
                     // The members that may hold a leaf of this node, and one that holds all of them.
                     near.clear();
                     bool whole = false;
+                    if ((tests += members.size()) > kCoverTests) return false;
                     for (size_t i = 0; i < members.size() && !whole; ++i) {
                         const Box in = intersect(part, grown[i]);
                         if (in.empty()) continue;
@@ -195,6 +200,7 @@ struct ClayCover {
                                 const Box leaf{{{int32_t(x), int32_t(y), int32_t(z)}},
                                                {{int32_t(x + 7), int32_t(y + 7), int32_t(z + 7)}}};
                                 bool holds = whole;
+                                if (!whole && (tests += near.size()) > kCoverTests) return false;
                                 for (size_t k = 0; k < near.size() && !holds; ++k) {
                                     const Member& mb = members[near[k]];
                                     if (!touches(leaf, grown[near[k]])) continue;
