@@ -27,6 +27,7 @@
 #include "AllocationCounter.h"     // the byte-counting operator new and delete
 #include "sculpt/FramePolicy.h"    // frame_policy::tryStepsBeforeLayer
 #include "sculpt/MemoryEstimate.h" // memory_internal: voxelsWithinFaceSteps, the bytes per part
+#include "transport/CellIndex.h"   // transport_internal::kDenseIndexMax
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -110,10 +111,12 @@ Scene withObstacleBesideTheStroke(Scene s)
     return s;
 }
 
-/// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body).
+/// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body), with
+/// a dense index as large as it gets (a tool's push seeds it).
 uint64_t wholeBody(const MemoryEstimate& e)
 {
-    return e.clayLeavesGrown * 512 * memory_internal::kTransportBytesPerCell;
+    return e.clayLeavesGrown * 512 * memory_internal::kTransportBytesPerCell +
+           4 * uint64_t(transport_internal::kDenseIndexMax);
 }
 
 } // namespace

@@ -94,6 +94,35 @@ Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
     return b;
 }
 
+uint64_t voxelsInsideShape(const Shape& shape, const Box& b, uint64_t& budget)
+{
+    const uint64_t all = voxelsIn(b);
+    if (b.empty() || nodesIn(b, 3) > budget) return all;
+    uint64_t in = 0;
+    const Box start = b;
+    for (int64_t x = int64_t(b.min[0]) & ~int64_t(7); x <= b.max[0]; x += 8)
+        for (int64_t y = int64_t(b.min[1]) & ~int64_t(7); y <= b.max[1]; y += 8)
+            for (int64_t z = int64_t(b.min[2]) & ~int64_t(7); z <= b.max[2]; z += 8) {
+                const Box leaf = intersect(start, Box{{{int32_t(x), int32_t(y), int32_t(z)}},
+                                                      {{int32_t(x + 7), int32_t(y + 7), int32_t(z + 7)}}});
+                if (budget == 0) return all;
+                --budget;
+                const double d = shape.distance(Vec3{{double(x) + 3.5, double(y) + 3.5, double(z) + 3.5}});
+                if (d >= 6.07) continue; // no voxel centre of the leaf inside (3.5 sqrt 3 = 6.06)
+                if (d <= -6.07) {
+                    in += voxelsIn(leaf);
+                    continue;
+                }
+                if (budget < voxelsIn(leaf)) return all;
+                budget -= voxelsIn(leaf);
+                for (int64_t vx = leaf.min[0]; vx <= leaf.max[0]; ++vx)
+                    for (int64_t vy = leaf.min[1]; vy <= leaf.max[1]; ++vy)
+                        for (int64_t vz = leaf.min[2]; vz <= leaf.max[2]; ++vz)
+                            in += shape.distance(Vec3{{double(vx), double(vy), double(vz)}}) < 0 ? 1 : 0;
+            }
+    return in;
+}
+
 bool touches(const Box& a, const Box& b)
 {
     return !intersect(a, b).empty();

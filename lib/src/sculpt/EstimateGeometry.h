@@ -40,6 +40,12 @@ Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget);
 /// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
 constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
 
+/// The voxels of @a b (an analytic shape's tightened bounds, 2D: clipped to z = 0) whose centre lies
+/// inside @a shape, counted a leaf at a time (a leaf whose centre lies a half-diagonal inside or
+/// outside is decided at once, the others voxel by voxel) while @a budget lasts; voxelsIn(@a b) when
+/// it does not.
+uint64_t voxelsInsideShape(const Shape& shape, const Box& b, uint64_t& budget);
+
 /// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
 /// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
 /// 100000 one-voxel boxes in a few leaves), else bounded by their sum and by their bounding box.

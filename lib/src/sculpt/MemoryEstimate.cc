@@ -376,6 +376,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.processBytes = kProcessBytes;
     uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
     uint64_t coverBudget = kCoverBudget;                           // clay leaves and the layer's cells
+    uint64_t voxelBudget = kTightenBudget;                         // clay voxels, for its mass
     struct Area {
         Box box;
         bool clay;                    ///< holds clay (else: a tool's sweep)
@@ -437,7 +438,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                                                   c.shape.kind == "cylinder" || c.shape.kind == "capsule"))
                 a.shape = c.shape.shape.get();
             areas.push_back(a);
-            const double m = double(c.mass) * double(voxelsIn(b));
+            // Its mass: the voxels of an analytic shape counted (while the budget lasts), else its box's.
+            const double m =
+                double(c.mass) * double(a.shape ? voxelsInsideShape(*a.shape, b, voxelBudget) : voxelsIn(b));
             if (massBound != UINT64_MAX)
                 massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
@@ -725,7 +728,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             lb.buried |= !out;
         }
         const LayerReach reach = layerReach(lb);
-        uint64_t bytes = cells * kTransportBytesPerCell;
+        // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood
+        // densely when that holds at most kDenseIndexMax cells.
+        uint64_t bytes =
+            cells * kTransportBytesPerCell + (toolBoxes.empty() ? 0 : 4 * uint64_t(kDenseIndexMax));
         uint64_t counted = cells; // the domain's cells counted
         if (reach.bounded && !toolBoxes.empty()) {
             Box extent; // where the clay can be

@@ -57,12 +57,11 @@ constexpr uint64_t kOutputScratchPerLeaf = 12 + 2 * 64 + 8 + 32 + 8 + 184 + 8 + 
 /// coordinates (twice, 24 bytes), mass, distance and current mass (24), kinds and flags (10), six
 /// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, diagonal,
 /// right-hand side and inverse (40), six work vectors (48), the routing's lists and sort (~60) and
-/// MIC(0)'s rows (24): ~336 bytes, held at the capacity the largest frame grew them to (up to twice
-/// for vectors grown an element at a time); the multigrid preconditioner of large solves (row lists,
-/// diagonal, work vectors, coordinates, aggregates over every level: ~88 bytes); and its index (4
-/// bytes). The 512-wide compress stroke's first frame holds ~510 bytes per unknown beside its dense
-/// index.
-constexpr uint64_t kTransportBytesPerCell = 3 * 336 / 2 + 88 + 4;
+/// MIC(0)'s rows (24): ~336 bytes at their size, held at the capacity the largest frame grew them to;
+/// the multigrid preconditioner of large solves (~88 bytes over every level); and its index (4 bytes).
+/// Measured beside the dense index: ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown
+/// (the 512-wide compress stroke's first frame).
+constexpr uint64_t kTransportBytesPerCell = 512;
 
 /// Rows (x, y) voxelsWithinFaceSteps counts before it gives up: ~10 ms.
 constexpr int64_t kFaceStepRowsMax = int64_t(1) << 23;
