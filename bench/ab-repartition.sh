@@ -14,10 +14,10 @@
 #   (a virtual machine's CPUs need not be equal: bench_handoff measures each; compare one thread on
 #   each CPU with THREADS=1 CPU=0 and THREADS=1 CPU=1). Last, each build's ratio to the first,
 #   round by round (the same state of the machine), as median and range.
-# example: bench/ab-repartition.sh bench/scenes/press48-0.8tc.json 10 \
+# example: bench/ab-repartition.sh data/scenes/bench/press48-0.8tc.json 10 \
 #            old=build/apps/vdbclay:/tmp/old-lib new=build/apps/vdbclay
-#          THREADS=2 bench/ab-repartition.sh bench/scenes/press128-0.8tc.json 8 \
-#            'tbb=VDBCLAY_PASS_CREW=0 build/apps/vdbclay' crew=build/apps/vdbclay
+#          bench/ab-repartition.sh data/scenes/bench/press128-0.8tc.json 8 \
+#            'one=THREADS=1 build/apps/vdbclay' 'two=THREADS=2 build/apps/vdbclay'
 set -euo pipefail
 if [[ $# -lt 3 ]]; then
     sed -n '2,18p' "$0" >&2

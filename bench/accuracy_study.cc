@@ -9,16 +9,16 @@
 //            height H and radius R0 sqrt(H0 / H). Per rule and resolution R0: volume (mass / Tc and
 //            occupied voxels) against pi R0^2 H0, the radius of the occupied cross-section at
 //            mid-height, IoU and surface distance against the analytic cylinder (Metrics.h).
-//   fig6     The paper's figure 6: data/scenes/cylinder2d-<rule>.json run frame by frame, steps and
-//            time to stabilise per frame and rule; then rule 2 (sorted) on the same scene in a dense
+//   fig6     The paper's figure 6: data/scenes/paper/cylinder2d-<rule>.json run frame by frame, steps
+//            and time to stabilise per frame and rule; then rule 2 (sorted) on the same scene in a dense
 //            2D re-implementation, as we implement it (checked bit-identical to the library) and in
 //            the variants the paper's text allows, to find which one does not converge.
 //   sweep    Speed against error on the squeeze: per rule, one knob at a time around a base case:
 //            settle tolerance, step budget per frame, plate travel per frame (same total travel),
 //            resolution, Tc against the initial mass.
-//   scenes   For every data/scenes/*.json: what the sparse grid stores (active voxels, leaves,
-//            bytes) and the blocks examined per step, against the dense box a naive implementation
-//            allocates and sweeps.
+//   scenes   For every scene in data/scenes/paper and data/scenes/studies: what the sparse grid
+//            stores (active voxels, leaves, bytes) and the blocks examined per step, against the dense
+//            box a naive implementation allocates and sweeps.
 //
 // Every run is single-threaded (results are identical on any thread count; one thread makes the
 // times less noisy on a shared machine). Output: DIR/{squeeze,fig6,fig6-rule2,sweep,scenes}.csv and
@@ -341,7 +341,7 @@ void studySweep(const Options& opt)
 /// The scene file of figure 3 to 6 for @a rule.
 std::string cylinder2dScene(const Options& opt, Rule rule)
 {
-    return opt.scenes + "/cylinder2d-" + ruleName(rule) + ".json";
+    return opt.scenes + "/paper/cylinder2d-" + ruleName(rule) + ".json";
 }
 
 void studyFig6Library(const Options& opt, Csv& csv, std::map<Rule, uint64_t>& hashes)
@@ -785,15 +785,17 @@ SceneStats measureScene(const std::string& path)
 
 void studyScenes(const Options& opt)
 {
-    std::fprintf(stderr, "\n== model only what a scene needs: every scene in %s ==\n", opt.scenes.c_str());
+    std::fprintf(stderr, "\n== model only what a scene needs: every scene in %s/{paper,studies} ==\n",
+                 opt.scenes.c_str());
     Csv csv(opt.out + "/scenes.csv",
             "scene,dims,frames,steps,seconds,active_voxels,clay_voxels,leaves,grid_bytes,leaf_bytes,obstacle_"
             "bytes,peak_active,"
             "peak_leaves,peak_bytes,blocks_visited_per_step,blocks_updated_per_step,hull_voxels,hull_bytes,"
             "hull_blocks_per_step,scene_box_voxels,scene_box_bytes,scene_box_blocks_per_step");
     std::vector<std::string> files;
-    for (const auto& e : std::filesystem::directory_iterator(opt.scenes))
-        if (e.path().extension() == ".json") files.push_back(e.path().string());
+    for (const char* folder : {"paper", "studies"})
+        for (const auto& e : std::filesystem::directory_iterator(opt.scenes + "/" + folder))
+            if (e.path().extension() == ".json") files.push_back(e.path().string());
     std::sort(files.begin(), files.end());
     for (const std::string& f : files) {
         const SceneStats s = measureScene(f);
@@ -828,7 +830,7 @@ int usage(const char* argv0)
                  "usage: %s [--quick] [--out DIR] [--scenes DIR] [--parts squeeze,fig6,sweep,scenes]\n"
                  "  --quick   small sizes and few knob values (a smoke test, seconds)\n"
                  "  --out     where the CSVs go (default docs/accuracy; created if missing)\n"
-                 "  --scenes  the scene directory (default data/scenes)\n",
+                 "  --scenes  the scene directory, holding paper/ and studies/ (default data/scenes)\n",
                  argv0);
     return 2;
 }

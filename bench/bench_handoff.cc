@@ -1,13 +1,12 @@
 // bench_handoff: what it costs this machine to hand work between threads, the floor under a pass on
-// several threads (docs/PERFORMANCE.md, round 12).
+// several threads (docs/PERFORMANCE.md).
 //
 // Three measures, no vdbclay code:
 // - each CPU's own speed, one at a time (the others idle), on two loops: passes over a 16 KiB buffer
 //   (loads, adds and stores, all in L1, as the automaton's kernel mostly is) and spin()'s add
 //   chain through one volatile variable (a store-to-load forwarding chain). On a virtual machine the CPUs
 //   need not be equal: a vCPU whose physical core serves another guest's thread too runs memory-bound code
-//   slower, and then no split of a pass can reach the CPUs' count as its speed-up (docs/PERFORMANCE.md, round
-//   14);
+//   slower, and then no split of a pass can reach the CPUs' count as its speed-up;
 // - the round trip of one cache line between two threads pinned to CPUs 0 and k (one thread stores
 //   a flag, the other answers; half of it is what each line a thread reads after another wrote it
 //   costs at least), for every k the process may run on;
@@ -19,7 +18,7 @@
 //   ~10 us as the pass's lanes do; each thread's work per pass against the same loop alone on its
 //   CPU. Nothing is shared but the barrier, so a slowdown here is the machine's (shared cores,
 //   caches, bandwidth or clock), and what a pass loses beyond it on T threads is the data its
-//   threads share (docs/PERFORMANCE.md, round 17).
+//   threads share.
 // usage: bench_handoff [T (default 2)] [work per task in us (default 20)]
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -7,13 +7,14 @@
 //            the "fill every room, then share equally" branch).
 //   NoOver   every cell at or under Tc: the early exit, which is what most candidate blocks hit.
 // Each is timed through the public, out-of-line vdbclay::repartitionBlock and through the inline
-// rules_internal::repartition that the automaton's kernel uses (lib/src/RulesImpl.h). The step in
-// the key changes every iteration so the remainder hash is not hoisted out of the loop.
+// rules_internal::repartition that the automaton's kernel uses (lib/src/automaton/RulesImpl.h). The
+// step in the key changes every iteration so the remainder hash is not hoisted out of the loop.
 //
-// Pass: the automaton's kernel (lib/src/Kernel.h, processRange) on a 32^3 cube of random clay, every
-// block of the phase a candidate, on its SIMD path (with the over-cell filter chosen at run time, the
-// SSE2 filter, or none: PassInput::filter; mode 4: the pass's baseline build where the CPU would run its
-// AVX2 build, PassInput::avx2 off) and on its portable path (PassInput::portable),
+// Pass: the automaton's kernel (lib/src/automaton/Kernel.h, processRange) on a 32^3 cube of random
+// clay, every block of the phase a candidate, on its SIMD path (with the over-cell filter chosen at
+// run time, the SSE2 filter, or none: kernel_testing::Paths::filter; mode 4: the pass's baseline
+// build where the CPU would run its AVX2 build, Paths::avx2 off) and on its portable path
+// (Paths::portable),
 // one pass per iteration on a fresh copy of the grid (the copy is not timed). items_per_second
 // counts updated blocks: 1e9 / items_per_second is the kernel's ns per updated block.
 //   surplus  cells 900-1600 (Tc 1000): most blocks have more excess than room (E > A), as in a
@@ -22,6 +23,8 @@
 //   sparse   cells 950-1000 with one in 60 at 1001-1400: most candidate blocks hold no over cell
 //            (a settling press examines ~4 such blocks per updated one: the over-cell filter's case).
 #include "automaton/Kernel.h"
+#include "automaton/KernelTesting.h"
+#include "automaton/OverFilter.h"
 #include "automaton/RulesImpl.h"
 #include "vdbclay/Rules.h"
 
@@ -139,9 +142,10 @@ void BM_Pass(benchmark::State& state)
     in.phase = phase;
     in.step = uint64_t(phase);
     in.seed = 1;
-    in.portable = portable;
-    in.avx2 = mode != 4;
-    in.filter = mode == 1 ? OverFilter::Sse2 : mode == 2 ? OverFilter::None : OverFilter::Auto;
+    kernel_testing::Paths paths;
+    paths.portable = portable;
+    paths.avx2 = mode != 4;
+    paths.filter = mode == 1 ? OverFilter::Sse2 : mode == 2 ? OverFilter::None : OverFilter::Auto;
     uint64_t updated = 0;
     for (auto _ : state) {
         state.PauseTiming();
@@ -150,18 +154,20 @@ void BM_Pass(benchmark::State& state)
         in.step += 2; // a new remainder hash each pass, same parity as the phase
         PassTotals tot;
         state.ResumeTiming();
-        processRange(in, work.data(), 0, work.size(), tot);
+        kernel_testing::processRange(in, paths, work.data(), 0, work.size(), tot);
         updated += tot.updated;
         benchmark::DoNotOptimize(tot.overloadDelta);
     }
     state.SetItemsProcessed(int64_t(updated));
-    const OverFilter f = (mode == 0 || mode == 4) ? bestOverFilter() : in.filter;
+    const OverFilter f = (mode == 0 || mode == 4) ? bestOverFilter() : paths.filter;
     const char* filter = portable                ? ""
                          : f == OverFilter::Avx2 ? "+avx2"
                          : f == OverFilter::Sse2 ? "+sse2"
                                                  : "+nofilter";
     const char* kinds[] = {"surplus", "spread", "sparse"};
-    const char* build = portable ? "" : (in.avx2 && avx2Pass()) ? "[avx2 build]" : "[baseline build]";
+    const char* build = portable                                     ? ""
+                        : (paths.avx2 && kernel_testing::avx2Pass()) ? "[avx2 build]"
+                                                                     : "[baseline build]";
     state.SetLabel(std::string(portable ? "portable" : "simd") + build + filter + "/" + kinds[kind] +
                    "/phase " + std::to_string(phase));
 }

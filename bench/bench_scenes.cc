@@ -1,4 +1,5 @@
-// bench_scenes: vdbclay on whole scenes, against two baselines written here for comparison only.
+// bench_scenes: vdbclay on whole scenes, against two baselines written here for comparison only. The
+// scenes are templates in data/scenes/bench (press.json.in, stroke.json.in: the size filled in).
 //
 //   press   A cube N^3 of clay at 950 (Tc 1000, prorata, seed 1) on a floor, pressed N/8 voxels by a
 //           plate wider than the cube over N/8 frames with no settling between frames (settle
@@ -54,6 +55,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <fstream>
+#include <iterator>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -82,6 +85,7 @@ struct Options {
     bool layers = false;     ///< also the layer schedules of DENSE (forkjoin, pipe, tblock)
     uint64_t pressSteps = 0; ///< 0: settle to rest; K: run K steps only (every implementation)
     std::string csv;
+    std::string scenes = "data/scenes/bench"; ///< where press.json.in and stroke.json.in are
 };
 
 std::vector<int> parseList(const std::string& s)
@@ -147,25 +151,50 @@ struct State {
     AutomatonOptions options;
 };
 
-std::string pressJson(int n)
+/// The scene template @a name in opt.scenes (data/scenes/bench by default) with every {{key}} replaced by
+/// its value, each number printed with 10 significant digits. @throw Error if the file cannot be read
+/// or a {{...}} is left.
+Scene sceneFromTemplate(const Options& opt, const std::string& name,
+                        const std::vector<std::pair<std::string, double>>& values)
 {
-    const int f = std::max(1, n / 8);
-    std::ostringstream js;
-    js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
-  "clay": [{"shape": "box", "min": [0, 0, 0], "max": [)"
-       << n - 1 << "," << n - 1 << "," << n - 1 << R"(], "mass": 950}],
-  "tools": [{"shape": "box", "min": [)"
-       << -n / 2 << "," << n << "," << -n / 2 << "], \"max\": [" << n + n / 2 - 1 << "," << n + 3 << ","
-       << n + n / 2 - 1 << R"(], "path": [{"translate": [0, -1, 0], "frames": )" << f << R"(}]}],
-  "obstacles": [{"shape": "box", "min": [)"
-       << -2 * n << ", -3, " << -2 * n << "], \"max\": [" << 3 * n << ", -1, " << 3 * n << R"(]}],
-  "settle": {"max_steps": 0}})";
-    return js.str();
+    const std::string path = opt.scenes + "/" + name;
+    std::ifstream in(path, std::ios::binary);
+    if (!in)
+        throw Error(path +
+                    ": cannot read the scene template (run from the repository root or pass --scenes)");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string label;
+    for (const auto& [key, value] : values) {
+        std::ostringstream v;
+        v.precision(10);
+        v << value;
+        const std::string placeholder = "{{" + key + "}}";
+        for (size_t at = text.find(placeholder); at != std::string::npos; at = text.find(placeholder, at))
+            text.replace(at, placeholder.size(), v.str());
+        label += (label.empty() ? " (" : ", ") + key + " " + v.str();
+    }
+    if (const size_t left = text.find("{{"); left != std::string::npos)
+        throw Error(path + ": no value for " + text.substr(left, text.find("}}", left) + 2 - left));
+    return parseScene(text, path + label + ")", opt.scenes);
 }
 
-State makePress(int n)
+/// The press scene for a cube of @a n (data/scenes/bench/press.json.in).
+Scene pressScene(const Options& opt, int n)
 {
-    const Scene scene = parseScene(pressJson(n), "<press " + std::to_string(n) + ">", ".");
+    return sceneFromTemplate(opt, "press.json.in",
+                             {{"n", n},
+                              {"last", n - 1},
+                              {"frames", std::max(1, n / 8)},
+                              {"plate_min", -n / 2},
+                              {"plate_max", n + n / 2 - 1},
+                              {"plate_top", n + 3},
+                              {"floor_min", -2 * n},
+                              {"floor_max", 3 * n}});
+}
+
+State makePress(const Options& opt, int n)
+{
+    const Scene scene = pressScene(opt, n);
     Sculptor sculptor(scene, 0);
     sculptor.run();
     State st;
@@ -638,7 +667,7 @@ Result runNaive(const State& st, uint64_t refSteps, double limit, uint64_t maxSt
 void press(const Options& opt, int n, std::vector<Row>& rows)
 {
     const auto tSetup = Clock::now();
-    const State st = makePress(n);
+    const State st = makePress(opt, n);
     std::fprintf(stderr, "\npress N=%d%s: set-up %.2f s, %llu clay voxels, overload %lld, step %llu\n", n,
                  opt.pressSteps ? (" (first " + std::to_string(opt.pressSteps) + " steps)").c_str()
                                 : " (settle to rest)",
@@ -742,32 +771,22 @@ void press(const Options& opt, int n, std::vector<Row>& rows)
 }
 
 // ---- the stroke scene ----------------------------------------------------------------------------
-std::string strokeJson(int dia)
+/// The stroke scene for a clay sphere of diameter @a dia (data/scenes/bench/stroke.json.in).
+Scene strokeScene(const Options& opt, int dia)
 {
     const double r = dia / 2.0, c = dia / 2.0;
     const double deg =
         2.0 / (r + 4.0) * 180.0 / 3.14159265358979323846; // 2 voxels of arc per frame at the tool's centre
-    std::ostringstream js;
-    js.precision(10);
-    js << R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
-  "clay": [{"shape": "sphere", "center": [)"
-       << c << "," << c << "," << c << "], \"radius\": " << r << R"(, "mass": 950}],
-  "tools": [{"shape": "sphere", "center": [)"
-       << c << "," << c + r + 7 << "," << c << R"(], "radius": 6,
-             "pivot": [)"
-       << c << "," << c + 3 << "," << c << R"(],
-             "path": [{"translate": [0, -3, 0], "frames": 1}, {"rotate": [0, 0, )"
-       << deg << R"(], "frames": 9}]}],
-  "settle": {"max_steps": 100000}})";
-    return js.str();
+    return sceneFromTemplate(opt, "stroke.json.in",
+                             {{"c", c}, {"tool_y", c + r + 7}, {"pivot_y", c + 3}, {"deg", deg}});
 }
 
 /// The stroke, @a repeats times from scratch (a new Sculptor each time): frame times are pooled over
 /// the repeats (median and p95 of 10 x repeats frames: single 10-frame runs of ~2 ms frames move by
 /// 0.5-1 ms), counts and stages are the first run's, and every run must end with the same hash.
-std::vector<Row> strokeChild(int dia, int threads, int repeats)
+std::vector<Row> strokeChild(const Options& opt, int dia, int threads, int repeats)
 {
-    const Scene scene = parseScene(strokeJson(dia), "<stroke " + std::to_string(dia) + ">", ".");
+    const Scene scene = strokeScene(opt, dia);
     std::vector<double> ms, firstMs;
     uint64_t steps = 0, updated = 0, visited = 0;
     StageSeconds stages;
@@ -923,7 +942,7 @@ void stroke(const Options& opt, std::vector<Row>& rows)
         std::vector<Row> mine;
         for (int t : opt.threads) {
             bool ok = false;
-            std::vector<Row> got = inChild([&] { return strokeChild(dia, t, opt.repeats); }, ok);
+            std::vector<Row> got = inChild([&] { return strokeChild(opt, dia, t, opt.repeats); }, ok);
             if (!ok || got.empty()) {
                 std::fprintf(stderr, "  D=%d threads=%d: failed (see above)\n", dia, t);
                 continue;
@@ -968,6 +987,8 @@ int usage(const char* argv0)
                  "          [--baseline-limit 60] [--vdb-limit 60] [--no-baselines] [--csv FILE]\n"
                  "          [--press-steps K]  (press: K steps only instead of settling to rest)\n"
                  "          [--layers]  (press: also DENSE in layers: forkjoin, the paper's pipe, tblock)\n"
+                 "          [--scenes DIR]  (the scene templates press.json.in, stroke.json.in; default\n"
+                 "                          data/scenes/bench, from the repository root)\n"
                  "  a list may be 'none'\n",
                  argv0);
     return 2;
@@ -1005,6 +1026,8 @@ int main(int argc, char** argv)
                 opt.layers = true;
             else if (a == "--csv")
                 opt.csv = val();
+            else if (a == "--scenes")
+                opt.scenes = val();
             else if (a == "-h" || a == "--help")
                 return usage(argv[0]);
             else

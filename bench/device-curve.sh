@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 13's thread-scaling curve in one command, for a machine with more cores than this project's
+# The thread-scaling curve in one command, for a machine with more cores than this project's
 # CI and development VMs (the lent device: 16 cores, bare, no network). It unpacks the bundle that
 # scripts/device-bundle.sh made (a Release build with its own libraries and loader), then writes to
 # OUTDIR:
@@ -7,7 +7,7 @@
 #                     other CPU, a fork/join of THREADS_MAX tasks (the floor under a pass), and
 #                     THREADS_MAX threads at once on private data (what the machine itself costs a
 #                     CPU while the others work: the rest of a pass's loss is shared data)
-#   curve.txt, .csv   bench/thread-curve.sh on issue 13's scenes (press48 and press128 at 0.8 Tc,
+#   curve.txt, .csv   bench/thread-curve.sh on its default scenes (press48 and press128 at 0.8 Tc,
 #                     settled every frame: small active sets, 130-670 blocks a step)
 #   press.txt, .csv   bench_scenes' press, first PRESS_STEPS steps (large active sets: ~130,000
 #                     updates a step at N = 128), vdbclay alone, every thread count

@@ -8,14 +8,13 @@
 #   os      the kernel's and the hypervisor's ([k]: page faults, interrupts)
 #   other   the rest (push, output, loader, setup)
 # One sample is 0.5 ms of one thread's time. Comparing one thread with two shows which part the
-# second thread makes more expensive (docs/PERFORMANCE.md, round 18: the sink and the gather, not
-# the kernel). Needs perf (linux-perf); with no hardware counters (a VM) perf samples the CPU clock.
+# second thread makes more expensive (docs/PERFORMANCE.md). Needs perf (linux-perf); with no hardware counters (a VM) perf samples the CPU clock.
 #
 # usage: bench/profile-parts.sh SCENE THREADS [ROUNDS (default 1)] [VAR=VALUE ...]
 #   BIN (default build-bench/apps/vdbclay, else build/apps/vdbclay) is the vdbclay to run; CPU
 #   (default 0-(THREADS-1)) the CPUs to pin to. VAR=VALUE words set the run's environment.
-# example: bench/profile-parts.sh bench/scenes/press128-0.8tc.json 2 2
-#          CPU=1 bench/profile-parts.sh bench/scenes/press128-0.8tc.json 1 2
+# example: bench/profile-parts.sh data/scenes/bench/press128-0.8tc.json 2 2
+#          CPU=1 bench/profile-parts.sh data/scenes/bench/press128-0.8tc.json 1 2
 set -euo pipefail
 if [[ $# -lt 2 ]]; then
     sed -n '2,18p' "$0" >&2

@@ -14,7 +14,7 @@
 #   -r  rounds (default 3)
 #   -b  the vdbclay to run (default build/apps/vdbclay); a wrapper script is fine
 #   -c  also write every run as CSV to this file
-#   SCENE  default: bench/scenes/press48-0.8tc.json bench/scenes/press128-0.8tc.json (issue 13's)
+#   SCENE  default: data/scenes/bench/press48-0.8tc.json data/scenes/bench/press128-0.8tc.json
 set -euo pipefail
 cpus=$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 threads=
@@ -35,7 +35,7 @@ while getopts "t:r:b:c:h" opt; do
 done
 shift $((OPTIND - 1))
 scenes=("$@")
-[[ ${#scenes[@]} -gt 0 ]] || scenes=(bench/scenes/press48-0.8tc.json bench/scenes/press128-0.8tc.json)
+[[ ${#scenes[@]} -gt 0 ]] || scenes=(data/scenes/bench/press48-0.8tc.json data/scenes/bench/press128-0.8tc.json)
 if [[ -z $threads ]]; then
     threads=1
     for ((t = 2; t < cpus; t *= 2)); do threads+=",$t"; done

@@ -1,4 +1,4 @@
-// transport_study: local vs global transport x surface vs compress push (issue 12; docs/TRANSPORT.md).
+// transport_study: local vs global transport x surface vs compress push (docs/TRANSPORT.md).
 //
 //   transport_study squeeze R0        cylinder R0, H0 = 2 R0 between slip plates, pressed to H = R0
 //   transport_study poke              sphere r 6 pressed 8 voxels into a 96 x 40 x 96 slab at Tc

@@ -1,6 +1,6 @@
 """Runs a vdbclay scene from Blender's Python and loads the result, upright, as a volume and a mesh.
 
-    blender --python python/blender_import.py -- --scene data/scenes/cube-big-plate.json --out /tmp/clay
+    blender --python python/blender_import.py -- --scene data/scenes/paper/cube-big-plate.json --out /tmp/clay
     blender -b --python python/blender_import.py -- --scene SCENE.json --out DIR      # headless
 
 Debian's Blender runs on the system Python, so the `vdbclay` module built for /usr/bin/python3

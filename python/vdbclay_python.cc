@@ -6,14 +6,19 @@
 // unless asked for a box. Long calls (steps, settling, frames) release the GIL; progress callbacks
 // run between frames with the GIL held, and Ctrl-C (KeyboardInterrupt) is honoured between frames.
 // Errors from the library arrive as vdbclay.Error (a RuntimeError) with the library's message.
+// Sculptor.run returns the run's report: the dict of the CLI's --stats file, parsed from the same
+// JSON text (vdbclay/RunReport.h), so the two never differ in a key.
 #include <vdbclay/Automaton.h>
 #include <vdbclay/IO.h>
+#include <vdbclay/MemoryEstimate.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Push.h>
 #include <vdbclay/Render.h>
+#include <vdbclay/RunReport.h>
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
+#include <vdbclay/SurfaceMesh.h>
 
 #include <openvdb/openvdb.h>
 
@@ -22,6 +27,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
+#include <chrono>
 #include <climits>
 #include <memory>
 #include <optional>
@@ -183,10 +190,73 @@ struct PyAutomaton {
     Clay clay;
 };
 
-/// A Sculptor and the scene it runs.
+/// A Sculptor, with what its run report tells beside the run's totals.
 struct PySculptor {
     std::unique_ptr<Sculptor> sculptor;
+    int threads = 0;
+    double setupSeconds = 0; ///< the constructor's
 };
+
+/// A memory budget as Python gives it: None (0: the scene's, else the default), a number of bytes,
+/// or a size as scenes write it ("8G", "512M", "none": parseByteSize).
+uint64_t budgetArg(const py::object& budget)
+{
+    if (budget.is_none()) return 0;
+    if (py::isinstance<py::str>(budget)) return parseByteSize(budget.cast<std::string>());
+    if (!py::isinstance<py::int_>(budget) || budget.cast<py::int_>() <= py::int_(0))
+        throw Error("memory_budget: expected a positive number of bytes, a size such as \"8G\", or \"none\"");
+    return budget.cast<uint64_t>();
+}
+
+/// Once the memory budget stopped a run: the error a Python caller gets.
+void throwIfOutgrewBudget(const Sculptor& s)
+{
+    const uint64_t needs = s.outgrewBudget();
+    if (needs == 0) return;
+    throw Error("the clay outgrew the memory budget of " + formatBytes(s.memoryBudget()) +
+                " (it needs about " + formatBytes(needs) +
+                " now); write() saves the run where it stopped, and a Sculptor with a larger memory_budget "
+                "continues it exactly from that file");
+}
+
+/// The run report (runReportJson) as a dict: the keys and values of the CLI's --stats file.
+py::object reportDict(const RunReport& r)
+{
+    return py::module_::import("json").attr("loads")(runReportJson(r, -1));
+}
+
+/// Sculptor.run: Sculptor::run with the GIL released; after each frame, with the GIL held, Ctrl-C
+/// is checked and progress called. progress returning False asks the run to stop (a stop request:
+/// at the next point a checkpoint resumes exactly, the frame's end almost always).
+py::object runSculptor(PySculptor& p, uint64_t frames, const std::function<py::object(py::dict)>& progress)
+{
+    Sculptor& s = *p.sculptor;
+    std::atomic<bool> stop{false};
+    s.setStopRequest([&stop] { return stop.load(std::memory_order_relaxed); });
+    struct ClearStop {
+        Sculptor& s;
+        ~ClearStop() { s.setStopRequest({}); }
+    } clearStop{s};
+    const uint64_t total = s.totalFrames();
+    RunSummary summary;
+    {
+        py::gil_scoped_release nogil;
+        summary = s.run(frames, [&](const FrameReport& r) {
+            py::gil_scoped_acquire gil;
+            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            if (!progress) return;
+            py::dict d = frameDict(r);
+            d["total_frames"] = total;
+            const py::object go = progress(d);
+            if (!go.is_none() && !go.cast<bool>()) stop.store(true, std::memory_order_relaxed);
+        });
+    }
+    throwIfOutgrewBudget(s);
+    RunReport report = makeRunReport(s, summary, p.threads);
+    report.setupSeconds = p.setupSeconds;
+    report.heap = "system (a Python process keeps its own allocator)";
+    return reportDict(report);
+}
 
 Clay sculptorClay(const Sculptor& s)
 {
@@ -208,6 +278,7 @@ PYBIND11_MODULE(_vdbclay, m)
     py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
     m.attr("Error").attr("__doc__") = "Every error vdbclay reports: bad input, refused states, I/O failures.";
     m.attr("__version__") = VDBCLAY_VERSION;
+    m.attr("NO_MEMORY_BUDGET") = kNoMemoryBudget;
 
     // ---- shapes ----------------------------------------------------------------------------------
     py::class_<PyShape>(m, "Shape",
@@ -288,12 +359,15 @@ PYBIND11_MODULE(_vdbclay, m)
         py::arg("a"), py::arg("b"), py::arg("radius"), "All points within radius of the segment a-b.");
     m.def(
         "mesh",
-        [](const std::string& path, double vs, const std::string& up) {
-            return PyShape{loadMesh(path, vs, parseUpAxis(up))};
+        [](const std::string& path, double vs, const std::string& up, const py::object& budget) {
+            return PyShape{loadMesh(path, vs, parseUpAxis(up), Placement(), budgetArg(budget))};
         },
         py::arg("path"), py::arg("voxel_size") = 1.0, py::arg("up") = "y",
+        py::arg("memory_budget") = py::none(),
         "A triangle mesh (OBJ, STL or PLY) in world units with up axis 'y' or 'z', at voxel_size world "
-        "units per voxel.");
+        "units per voxel. The level set it becomes must fit memory_budget (bytes or a size such as "
+        "\"8G\"; None: the default, 3/4 of memory; \"none\": no check), as `vdbclay import "
+        "--memory-budget`.");
     m.def(
         "level_set",
         [](const std::string& path, double vs, const std::string& grid, const std::string& up) {
@@ -410,9 +484,22 @@ PYBIND11_MODULE(_vdbclay, m)
     m.def(
         "make_clay",
         [](const PyShape& s, int32_t mass, int dimensions, int32_t threshold, double voxelSize,
-           const std::string& up) {
+           const std::string& up, const py::object& budget) {
             Clay c;
             c.meta.up = parseUpAxis(up);
+            { // the clay must fit the memory budget, as `vdbclay import` checks it
+                Scene sc;
+                sc.source = "make_clay";
+                sc.dimensions = dimensions;
+                ClaySpec spec;
+                spec.shape.kind = "shape";
+                spec.shape.field = "shape";
+                spec.shape.shape = s.shape;
+                spec.mass = mass;
+                sc.clay.push_back(spec);
+                sc.memoryBudget = budgetArg(budget);
+                checkMemoryBudget(sc);
+            }
             c.mass = makeClay(*s.shape, mass, dimensions);
             c.meta.rule.threshold = threshold;
             validate(c.meta.rule);
@@ -421,8 +508,10 @@ PYBIND11_MODULE(_vdbclay, m)
             return c;
         },
         py::arg("shape"), py::arg("mass"), py::arg("dimensions") = 3, py::arg("threshold") = 1000,
-        py::arg("voxel_size") = 1.0, py::arg("up") = "y",
-        "Clay of `mass` per voxel in every voxel whose centre is inside shape.");
+        py::arg("voxel_size") = 1.0, py::arg("up") = "y", py::arg("memory_budget") = py::none(),
+        "Clay of `mass` per voxel in every voxel whose centre is inside shape. Refused (vdbclay.Error) "
+        "when it is estimated to need more than memory_budget (bytes or a size such as \"8G\"; None: "
+        "the default, 3/4 of memory; \"none\": no check), as `vdbclay import --memory-budget`.");
     m.def(
         "read",
         [](const std::string& path, const std::string& grid) {
@@ -543,20 +632,32 @@ PYBIND11_MODULE(_vdbclay, m)
     // ---- scenes ----------------------------------------------------------------------------------
     py::class_<Scene>(m, "Scene", "A scene (docs/SCENES.md): clay, tools with paths, obstacles, settling.")
         .def_static(
-            "load", [](const std::string& path) { return loadScene(path); }, py::arg("path"),
-            "Reads a scene .json file.")
+            "load",
+            [](const std::string& path, const py::object& budget) {
+                return loadScene(path, budgetArg(budget));
+            },
+            py::arg("path"), py::arg("memory_budget") = py::none(),
+            "Reads a scene .json file. memory_budget (bytes, or a size such as \"8G\" or \"none\"), when "
+            "given, replaces the scene's \"memory_budget\" (as `vdbclay run --memory-budget`): meshes are "
+            "checked against it as they are read, and a Sculptor keeps it.")
         .def_static(
             "from_json",
-            [](const std::string& text, const std::string& source, const std::string& baseDir) {
-                return parseScene(text, source, baseDir);
-            },
+            [](const std::string& text, const std::string& source, const std::string& baseDir,
+               const py::object& budget) { return parseScene(text, source, baseDir, budgetArg(budget)); },
             py::arg("text"), py::arg("source") = "<python>", py::arg("base_dir") = ".",
-            "Parses scene JSON text; relative file names resolve against base_dir.")
+            py::arg("memory_budget") = py::none(),
+            "Parses scene JSON text; relative file names resolve against base_dir. memory_budget as in "
+            "Scene.load.")
         .def_static("default", &defaultScene, "The built-in default scene (a cube pressed by a plate).")
         .def_readonly("source", &Scene::source)
         .def_readwrite("seed", &Scene::seed)
         .def_readwrite("frames", &Scene::frames, "Frames to run.")
         .def_readwrite("start", &Scene::start, "A clay .vdb to continue from (empty: none).")
+        .def_property(
+            "memory_budget", [](const Scene& s) { return s.memoryBudget; },
+            [](Scene& s, const py::object& budget) { s.memoryBudget = budgetArg(budget); },
+            "Bytes a run may use (\"memory_budget\" in the scene): 0 the default (3/4 of memory), "
+            "NO_MEMORY_BUDGET none. Set from bytes, a size such as \"8G\" or \"none\", or None (0).")
         .def_readonly("dimensions", &Scene::dimensions)
         .def_readonly("voxel_size", &Scene::voxelSize)
         .def_property_readonly("up", [](const Scene& s) { return std::string(upAxisName(s.up)); })
@@ -576,12 +677,21 @@ PYBIND11_MODULE(_vdbclay, m)
         });
 
     py::class_<PySculptor>(m, "Sculptor", "Runs a scene frame by frame: move the tools, push, settle.")
-        .def(py::init([](const Scene& s, int threads) {
+        .def(py::init([](const Scene& s, int threads, const py::object& budget) {
                  auto p = std::make_unique<PySculptor>();
-                 p->sculptor = std::make_unique<Sculptor>(s, threads);
+                 p->threads = threads;
+                 Scene scene = s;
+                 if (const uint64_t b = budgetArg(budget)) scene.memoryBudget = b;
+                 const auto t0 = std::chrono::steady_clock::now();
+                 p->sculptor = std::make_unique<Sculptor>(scene, threads);
+                 p->setupSeconds =
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
                  return p;
              }),
-             py::arg("scene"), py::arg("threads") = 0)
+             py::arg("scene"), py::arg("threads") = 0, py::arg("memory_budget") = py::none(),
+             "Builds the scene's clay, obstacles and tools. memory_budget (bytes, or a size such as \"8G\" "
+             "or \"none\"; None: the scene's) replaces the scene's, as `vdbclay run --memory-budget`: a "
+             "scene estimated to need more is refused, and a run whose clay outgrows it stops (Error).")
         .def(
             "run_frame",
             [](PySculptor& p) {
@@ -590,33 +700,22 @@ PYBIND11_MODULE(_vdbclay, m)
                     py::gil_scoped_release nogil;
                     r = p.sculptor->runFrame();
                 }
+                throwIfOutgrewBudget(*p.sculptor);
                 return frameDict(r);
             },
-            "Runs the next frame; returns a report dict (frame, push, settle).")
-        .def(
-            "run",
-            [](PySculptor& p, uint64_t frames, const std::function<py::object(py::dict)>& progress) {
-                uint64_t n = 0;
-                while (!p.sculptor->done() && (frames == 0 || n < frames)) {
-                    FrameReport r;
-                    {
-                        py::gil_scoped_release nogil;
-                        r = p.sculptor->runFrame();
-                    }
-                    ++n;
-                    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-                    if (progress) {
-                        py::dict d = frameDict(r);
-                        d["total_frames"] = p.sculptor->totalFrames();
-                        const py::object go = progress(d);
-                        if (!go.is_none() && !go.cast<bool>()) break;
-                    }
-                }
-                return n;
-            },
-            py::arg("frames") = 0, py::arg("progress") = nullptr,
-            "Runs up to `frames` frames (0: all left). progress(report) is called after each frame with "
-            "the frame's report and total_frames; returning False stops. Returns the frames run.")
+            "Runs the next frame; returns a report dict (frame, push, settle, finished). Raises "
+            "vdbclay.Error when the clay outgrows the memory budget (the frame stays open: write() "
+            "saves it).")
+        .def("run", &runSculptor, py::arg("frames") = 0, py::arg("progress") = nullptr,
+             "Runs up to `frames` frames (0: all left) and returns the run's report: a dict with the keys "
+             "and values of `vdbclay run --stats` (frames run, steps, seconds, setup_seconds, masses, "
+             "stage_seconds, the final clay's metrics, content_hash, ...; output_seconds 0). "
+             "progress(report) is called after each frame with the frame's report dict and "
+             "total_frames; returning False asks the run to stop, which it does at the next point a "
+             "checkpoint resumes exactly: almost always that frame's end (else the report counts the "
+             "open frame, and `stopped` and `frame_open` say so). Ctrl-C raises KeyboardInterrupt after "
+             "a frame. Raises vdbclay.Error when the clay outgrows the memory budget (write() saves the "
+             "run where it stopped).")
         .def_property_readonly(
             "clay", [](const PySculptor& p) { return sculptorClay(*p.sculptor); },
             "The clay now (shares the grid), with metadata to continue from a file.")
@@ -628,6 +727,15 @@ PYBIND11_MODULE(_vdbclay, m)
             },
             py::arg("path"), "Writes the clay as a .vdb that a scene's \"start\" continues exactly.")
         .def_property_readonly("done", [](const PySculptor& p) { return p.sculptor->done(); })
+        .def_property_readonly(
+            "stopped", [](const PySculptor& p) { return p.sculptor->stopped(); },
+            "The last run() or run_frame() stopped early (progress returned False, or the memory budget).")
+        .def_property_readonly(
+            "frame_open", [](const PySculptor& p) { return p.sculptor->frameOpen(); },
+            "A frame was cut short and is not finished; the next run() or run_frame() finishes it.")
+        .def_property_readonly(
+            "memory_budget", [](const PySculptor& p) { return p.sculptor->memoryBudget(); },
+            "The bytes the run keeps to (the default resolved; NO_MEMORY_BUDGET: none).")
         .def_property_readonly("frame", [](const PySculptor& p) { return p.sculptor->frame(); })
         .def_property_readonly("total_frames", [](const PySculptor& p) { return p.sculptor->totalFrames(); })
         .def_property_readonly("total_mass",

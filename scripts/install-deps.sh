@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Installs what vdbclay needs to build and test, from Debian packages.
-# Idempotent: quiet and quick when everything is already there.
+# Installs what vdbclay needs, from Debian packages: `install-deps.sh cli` only what the library and
+# the CLI need to build (scripts/run.sh); with no argument, everything the tests, the Python module
+# and the sanitizer builds need too. Idempotent: quiet and quick when everything is already there.
 #   libboost-iostreams-dev: Debian's FindOpenVDB.cmake requires its CMake config.
 #   nlohmann-json3-dev:     header-only JSON for scene files (saves a hand-written parser).
 #   libpng-dev:             PNG output for `vdbclay render`.
@@ -15,14 +16,22 @@
 set -euo pipefail
 
 PKGS=(
-  cmake g++ ninja-build pkg-config
+  cmake g++ ninja-build pkg-config ccache
   libopenvdb-dev libtbb-dev libboost-dev libboost-iostreams-dev libblosc-dev
-  libgtest-dev googletest
-  nlohmann-json3-dev libpng-dev libcli11-dev libopenvdb-tools
-  curl ca-certificates xz-utils
-  clang libclang-rt-dev ccache
-  pybind11-dev python3-dev python3-numpy python3-openvdb
+  nlohmann-json3-dev libpng-dev libcli11-dev
 )
+case "${1:-all}" in
+  cli) ;;
+  all)
+    PKGS+=(
+      libgtest-dev googletest libopenvdb-tools
+      curl ca-certificates xz-utils
+      clang libclang-rt-dev
+      pybind11-dev python3-dev python3-numpy python3-openvdb
+    )
+    ;;
+  *) echo "install-deps: unknown set '$1' (expected cli or nothing)" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${PKGS[@]}"; do

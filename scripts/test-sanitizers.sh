@@ -21,4 +21,4 @@ cd "$BUILD_DIR"
 # The long runs (10^5 and 10^6 steps) stay in the normal stage: under ASan they cost minutes and
 # fill its quarantine, and they test conservation and flat memory, which the normal build checks.
 ctest --output-on-failure --parallel "${JOBS:-2}" --timeout 1800 \
-  -E '^package_|^Accuracy.HardLongRunKeepsMassExactAndMemoryFlat$|^AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles$'
+  -E '^package_|^SettleTest.LongRunKeepsMassExactAndAllocatesNothing$|^SculptorTest.LongRunKeepsMassExactAndMemoryFlat$|^AutomatonTest.MassIsExactOverHundredThousandStepsWithObstacles$'

@@ -57,8 +57,8 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${generator[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
         -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_PYTHON=OFF >/dev/null
 fi
-cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_pass_crew test_tool_placement \
-  test_transport test_output_stages vdbclay_cli
+cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_pass_crew test_sculptor \
+  test_transport test_surface test_metrics test_rasterize vdbclay_cli
 
 # The instrumented TBB must be the one loaded: check, rather than trust the search path.
 export LD_LIBRARY_PATH=$TBB_PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -87,11 +87,14 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 # The pass's crew (lib/src/automaton/PassCrew.h) alone: its ticket, done count and sleep under contention.
 "$BUILD_DIR/tests/test_pass_crew" --gtest_brief=1
 # The push and the tools' placement on 1, 2, 3 and 8 threads; the global layer's solver likewise.
-"$BUILD_DIR/tests/test_tool_placement" --gtest_brief=1
+"$BUILD_DIR/tests/test_sculptor" --gtest_brief=1 \
+  --gtest_filter='SculptorTest.ToolCells*:SculptorTest.AHugeTool*:SculptorTest.APushedLump*:SculptorTest.OverlappingClay*'
 "$BUILD_DIR/tests/test_transport" --gtest_brief=1 --gtest_filter='*Thread*'
-# The output's stages (the fog grown by flat masks, the band's sweeps, the leaf-parallel sums) on
-# 1, 2, 3 and 8 threads.
-"$BUILD_DIR/tests/test_output_stages" --gtest_brief=1
+# The output's stages (the fog grown by flat masks, the band's sweeps, the leaf-parallel sums, the
+# shapes rasterised by leaves) on 1, 2, 3 and 8 threads.
+"$BUILD_DIR/tests/test_surface" --gtest_brief=1
+"$BUILD_DIR/tests/test_metrics" --gtest_brief=1 --gtest_filter='MetricsTest.MeasureClayOverLeaves*'
+"$BUILD_DIR/tests/test_rasterize" --gtest_brief=1
 # A whole scene through the CLI (scene, push, settle, the parallel output) on 2 and 3 threads.
 # Not --mesh: OpenVDB's volumeToMesh locks a tbb::concurrent_hash_map whose spin_rw_mutex is compiled
 # into libopenvdb.so, which is not instrumented, so TSan cannot see the lock and reports a race in
@@ -99,7 +102,7 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 tsan_work=$BUILD_DIR/tsan-scene
 rm -rf "$tsan_work"; mkdir -p "$tsan_work"
 for t in 2 3; do
-  "$BUILD_DIR/apps/vdbclay" run data/scenes/cube-small-plate.json --frames 3 --threads $t --quiet \
+  "$BUILD_DIR/apps/vdbclay" run data/scenes/paper/cube-small-plate.json --frames 3 --threads $t --quiet \
     -o "$tsan_work/t$t.vdb" > /dev/null
 done
 echo "test-tsan: no data race reported"

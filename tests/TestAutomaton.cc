@@ -3,8 +3,8 @@
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Rules.h>
 
+#include "automaton/AutomatonInternal.h"
 #include "automaton/Candidates.h"
-#include "automaton/PassSplit.h"
 
 #include <openvdb/openvdb.h>
 
@@ -330,14 +330,11 @@ TEST_F(AutomatonTest, SameHashOnOneTwoThreeAndEightThreads)
     }
 }
 
-TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
+TEST_F(AutomatonTest, ThePassGivesTheSameStepsOnAnyThreadCount)
 {
-    // The pass splits (PassSplit.h): the default weighted one (chunks of about equal candidate blocks,
-    // serial below a threshold; on the pass's crew, or on TBB tasks) and round 4's auto partitioner. Every
-    // item exactly once: the same hash, and the same blocks examined and updated (a lost or doubled item
-    // changes the counts), as one thread (which takes no split).
-    using automaton_internal::PassSplit;
-    const PassSplit saved = automaton_internal::passSplit();
+    // The pass on several threads (PassEngine.h): chunks cut by the measured speed, run on the crew,
+    // chunk 0 predraining. Every item exactly once: the same hash, and the same blocks examined,
+    // over Tc and updated (a lost or doubled item changes the counts), as one thread (no chunks).
     for (Rule rule : {Rule::Prorata, Rule::Arata}) {
         for (int dims : {2, 3}) {
             auto runOnce = [&](int threads) {
@@ -352,60 +349,13 @@ TEST_F(AutomatonTest, WeightedPassSplitGivesTheSameStepsOnAnyThreadCount)
                 return std::vector<uint64_t>{contentHash(*mass), r.blocksVisited, r.blocksUpdated,
                                              r.blocksOverTc};
             };
-            automaton_internal::passSplit() = PassSplit();
             const std::vector<uint64_t> expected = runOnce(1);
             EXPECT_GT(expected[2], 1000u);
-            PassSplit autoSplit;
-            autoSplit.weighted = false;
-            automaton_internal::passSplit() = autoSplit;
             for (int threads : {2, 3, 8})
                 EXPECT_EQ(runOnce(threads), expected)
-                    << ruleName(rule) << " " << dims << "D, auto split, " << threads << " threads";
-            for (int k : {1, 2, 3}) {
-                for (uint64_t minBlocks : {uint64_t(0), uint64_t(300)}) {
-                    PassSplit p;
-                    p.weighted = true;
-                    p.perThread = k;
-                    p.minBlocks = minBlocks;
-                    automaton_internal::passSplit() = p;
-                    for (int threads : {1, 2, 3, 8})
-                        EXPECT_EQ(runOnce(threads), expected)
-                            << ruleName(rule) << " " << dims << "D, K " << k << ", MIN " << minBlocks << ", "
-                            << threads << " threads";
-                }
-            }
-            // The chunks on TBB tasks instead of the pass's crew (PassSplit::crew, PassCrew.h).
-            for (int k : {1, 3}) {
-                PassSplit p;
-                p.perThread = k;
-                p.crew = false;
-                automaton_internal::passSplit() = p;
-                for (int threads : {2, 3, 8})
-                    EXPECT_EQ(runOnce(threads), expected)
-                        << ruleName(rule) << " " << dims << "D, TBB tasks, K " << k << ", " << threads
-                        << " threads";
-            }
-            // Chunk 0 with a smaller share (FIRST), and without the predrain (Candidates::predrain);
-            // FIRST alone sets the shares with the balance off, and the first pass of each phase with
-            // it on (PassBalance.h; later passes cut where the chunks' measured speed says).
-            for (int first : {100, 40}) {
-                for (bool predrain : {false, true}) {
-                    for (bool balance : {false, true}) {
-                        PassSplit p;
-                        p.firstShare = first;
-                        p.predrain = predrain;
-                        p.balance = balance;
-                        automaton_internal::passSplit() = p;
-                        for (int threads : {2, 3, 8})
-                            EXPECT_EQ(runOnce(threads), expected)
-                                << ruleName(rule) << " " << dims << "D, FIRST " << first << ", predrain "
-                                << predrain << ", balance " << balance << ", " << threads << " threads";
-                    }
-                }
-            }
+                    << ruleName(rule) << " " << dims << "D, " << threads << " threads";
         }
     }
-    automaton_internal::passSplit() = saved;
 }
 
 TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
@@ -416,11 +366,6 @@ TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
     // Python's multiprocessing forks a process that holds automata. The child has the automaton's
     // pass crew but not its helper threads (PassCrew.h, "fork()"): it must make its own, settle to
     // the same clay as the parent, and destroy the automaton without waiting for the parent's helpers.
-    using automaton_internal::PassSplit;
-    const PassSplit saved = automaton_internal::passSplit();
-    PassSplit every; // every pass split, so the crew exists before the fork
-    every.minBlocks = 0;
-    automaton_internal::passSplit() = every;
     Rng rng(23);
     auto mass = newMass();
     auto obs = openvdb::MaskGrid::create(false);
@@ -449,7 +394,6 @@ TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
     close(fds[0]);
     int status = 0;
     ASSERT_EQ(waitpid(child, &status, 0), child);
-    automaton_internal::passSplit() = saved;
     ASSERT_TRUE(WIFEXITED(status)) << "the child died of signal "
                                    << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
     EXPECT_EQ(WEXITSTATUS(status), 0);
@@ -464,14 +408,11 @@ TEST_F(AutomatonTest, AForkedChildGoesOnWithThreadsOfItsOwnAndTheSameResult)
 
 TEST_F(AutomatonTest, PassIdleCountsTheThreadSecondsThePassesLeftUnused)
 {
-    // StageSeconds::passBusy (the thread-seconds the passes' shares ran) and passIdle (threads x the
+    // StageSeconds::passBusy (the thread-seconds the passes' chunks ran) and passIdle (threads x the
     // passes' time, minus passBusy). They are times, so only their bounds are exact: busy more than 0
     // once a pass ran; idle 0 on one thread (no pass is shared); both within the threads' capacity
-    // over the repartition (the passes lie inside it) for every split; and, where every pass is too
-    // small to share (MIN above any pass), idle at least (threads - 1) x the passes' time, so more
-    // than 0.
-    using automaton_internal::PassSplit;
-    const PassSplit saved = automaton_internal::passSplit();
+    // over the repartition (the passes lie inside it); and on several threads idle more than 0 (every
+    // lane waits at least while the caller cuts the work list, before the chunks start).
     auto runOnce = [&](int threads, StepReport& first, StepReport& second) {
         Rng rng(11);
         auto mass = newMass();
@@ -481,49 +422,29 @@ TEST_F(AutomatonTest, PassIdleCountsTheThreadSecondsThePassesLeftUnused)
         first = a.run(40);
         second = a.run(40);
     };
-    PassSplit crew, tasks, autoSplit, serial;
-    tasks.crew = false;
-    autoSplit.weighted = false;
-    serial.minBlocks = UINT64_MAX;
-    struct Case {
-        const char* name;
-        PassSplit split;
-        bool serial; // every pass runs on the calling thread
-    };
-    const Case splits[] = {{"crew", crew, false},
-                           {"TBB tasks", tasks, false},
-                           {"auto", autoSplit, false},
-                           {"serial", serial, true}};
-    for (const auto& [name, split, everyPassSerial] : splits) {
-        automaton_internal::passSplit() = split;
-        for (int threads : {1, 2, 3}) {
-            StepReport first, second;
-            runOnce(threads, first, second);
-            ASSERT_GT(first.blocksUpdated, 1000u);
-            StepReport sum = first;
-            sum += second;
-            EXPECT_EQ(sum.seconds.passIdle, first.seconds.passIdle + second.seconds.passIdle) << name;
-            EXPECT_EQ(sum.seconds.passBusy, first.seconds.passBusy + second.seconds.passBusy) << name;
-            const double idle = sum.seconds.passIdle, busy = sum.seconds.passBusy;
-            const double capacity = threads * sum.seconds.repartition;
-            EXPECT_GT(busy, 0.0) << name << ", " << threads << " threads";
-            EXPECT_LE(idle + busy, capacity * (1 + 1e-9)) << name << ", " << threads << " threads";
-            if (threads == 1) {
-                EXPECT_EQ(idle, 0.0) << name;
-                continue;
-            }
-            EXPECT_GE(idle, 0.0) << name << ", " << threads << " threads";
-            if (everyPassSerial) {
-                EXPECT_GT(idle, 0.0) << threads << " threads";
-            }
+    for (int threads : {1, 2, 3}) {
+        StepReport first, second;
+        runOnce(threads, first, second);
+        ASSERT_GT(first.blocksUpdated, 1000u);
+        StepReport sum = first;
+        sum += second;
+        EXPECT_EQ(sum.seconds.passIdle, first.seconds.passIdle + second.seconds.passIdle);
+        EXPECT_EQ(sum.seconds.passBusy, first.seconds.passBusy + second.seconds.passBusy);
+        const double idle = sum.seconds.passIdle, busy = sum.seconds.passBusy;
+        const double capacity = threads * sum.seconds.repartition;
+        EXPECT_GT(busy, 0.0) << threads << " threads";
+        EXPECT_LE(idle + busy, capacity * (1 + 1e-9)) << threads << " threads";
+        if (threads == 1) {
+            EXPECT_EQ(idle, 0.0);
+        } else {
+            EXPECT_GT(idle, 0.0) << threads << " threads";
         }
     }
-    automaton_internal::passSplit() = saved;
 }
 
 TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
 {
-    // Candidates::predrain, as the weighted pass calls it: the items below a cut recorded (random
+    // Candidates::predrain, as the pass engine calls it: the items below a cut recorded (random
     // lanes), then the next step's slot drained below the reach of the items after the cut, then
     // those recorded. Against a twin without predrain: the same work lists, step after step, with
     // edits, quiet steps, detach/attach and missed sinks (predrain undone) among them. A predrain
@@ -625,9 +546,9 @@ TEST_F(AutomatonTest, PredrainLeavesEveryGatherUnchanged)
 
 TEST_F(AutomatonTest, PrunedCandidatesChangeOnlyTheBlocksVisited)
 {
-    // Round 8: the pass wakes a block of the other phase only through cells that were or went over
-    // Tc, and its own blocks two steps on only while they hold an over and a not-over cell
-    // (sinkActive). Against the full bookkeeping (setPruneCandidates(false)), step by step: the same
+    // The pass wakes a block of the other phase only through cells that were or went over Tc, and
+    // its own blocks two steps on only while they hold an over and a not-over cell (sinkActive).
+    // Against the full bookkeeping (automaton_internal::setPruneCandidates off), step by step: the same
     // grid, the same blocks updated and the same overload, with fewer blocks visited. A third
     // automaton switches pruning on and off every few steps and is edited midway (the two
     // bookkeepings must mix). Every rule, 2D and 3D, obstacles, 1 and 3 threads.
@@ -659,8 +580,8 @@ TEST_F(AutomatonTest, PrunedCandidatesChangeOnlyTheBlocksVisited)
                 Automaton& pruned = *autos[0];
                 Automaton& full = *autos[1];
                 Automaton& mixed = *autos[2];
-                EXPECT_TRUE(pruned.pruneCandidates());
-                full.setPruneCandidates(false);
+                EXPECT_TRUE(automaton_internal::pruneCandidates(pruned));
+                automaton_internal::setPruneCandidates(full, false);
                 uint64_t visitedPruned = 0, visitedFull = 0, updated = 0;
                 const std::string what = std::string(ruleName(rule)) + " " + std::to_string(dims) + "D " +
                                          std::to_string(threads) + " threads";
@@ -677,7 +598,7 @@ TEST_F(AutomatonTest, PrunedCandidatesChangeOnlyTheBlocksVisited)
                                                          acc.getValue(Coord(x, y, zz)) + 300);
                             });
                     }
-                    mixed.setPruneCandidates((t / 7) % 2 == 0);
+                    automaton_internal::setPruneCandidates(mixed, (t / 7) % 2 == 0);
                     const StepReport a = pruned.step(), b = full.step(), c = mixed.step();
                     ASSERT_EQ(a.blocksUpdated, b.blocksUpdated) << what << " step " << t;
                     ASSERT_EQ(c.blocksUpdated, b.blocksUpdated) << what << " step " << t;

@@ -195,7 +195,7 @@ void dilateCornersRun(int phase, bool is3D, const uint64_t act[8], uint64_t out[
 
 TEST(BlockMasks, DilateCornersSendsEachCellToTheOneBlockOfTheOtherPhaseHoldingIt)
 {
-    // Round 8's sink follows single cells: corner k (bit 0 = +x, 1 = +y, 2 = +z) of block b of
+    // The pruned sink follows single cells: corner k (bit 0 = +x, 1 = +y, 2 = +z) of block b of
     // phase P is the cell at local 2 b - P + d along each axis; the block of phase Q = 1 - P holding
     // it is the one whose two cells 2 c - Q and 2 c - Q + 1 (c = 0..3, in the anchor's leaf or in the
     // neighbour the dilation spills to: +8 on the even phase, -8 on the odd) include it.

@@ -1,7 +1,6 @@
 // Golden values: the block hash, the rules on random blocks and whole runs of the automaton, each
-// pinned to the numbers today's code gives. They were computed once with the automaton before its
-// kernel was rewritten (issue 13) and must never change: a faster kernel, a new leaf table or a new
-// gather must reproduce every one of them bit for bit. A change here means results changed.
+// pinned to exact numbers that must never change: any kernel, leaf table or gather must reproduce
+// every one of them bit for bit. A change here means results changed.
 //
 // The scenes are built here, from this file's own generator, so no helper elsewhere can move them.
 #include <vdbclay/Automaton.h>

@@ -1,9 +1,11 @@
 // Clay files, meshes, clay from shapes and pictures: round trips, atomic writes, refused input.
+#include <vdbclay/AtomicWrite.h>
 #include <vdbclay/Automaton.h>
 #include <vdbclay/IO.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Render.h>
 #include <vdbclay/Shapes.h>
+#include <vdbclay/SurfaceMesh.h>
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -459,7 +461,7 @@ TEST_F(IOTest, NegativeMassIsRefused)
 
 TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
 {
-    // Round 7: writeClayFile records the largest cell (vdbclay_max_mass, int64) on "mass" (and
+    // writeClayFile records the largest cell (vdbclay_max_mass, int64) on "mass" (and
     // "density"), for the memory estimate, which reads it without the voxels.
     const auto clay = sampleClay(); // its largest cell: the overloaded core, 3 Tc + 1 at x = 1
     const std::string path = file("clay.vdb");
@@ -514,7 +516,7 @@ TEST_F(IOTest, AClayFileRecordsItsLargestCellAndAFileThatExceedsItIsRefused)
     const std::string typed = errorOf([&] { readClayFile(forged); });
     EXPECT_TRUE(contains(typed, forged) && contains(typed, "vdbclay_max_mass") && contains(typed, "int64"))
         << typed;
-    // A file with no record reads as before.
+    // A file with no record of its largest cell reads.
     g->removeMeta("vdbclay_max_mass");
     openvdb::io::File(forged).write({g});
     EXPECT_EQ(errorOf([&] { readClayFile(forged); }), "");
@@ -918,7 +920,7 @@ TEST_F(IOTest, OutputGridsFollowTheClayNotTheSpanBetweenLumps)
     EXPECT_FLOAT_EQ(density->tree().getValue(Coord(-500000000, 7, 7)), 0.4f);
 }
 
-// ---- issue 11: one definition of the clay in a file; coordinates; outputs that are not files ---
+// ---- One definition of the clay in a file; coordinates; outputs that are not files --------------
 
 namespace {
 
@@ -935,8 +937,8 @@ void writePlainVdb(const std::string& path, openvdb::Int32Grid::Ptr grid)
 
 TEST_F(IOTest, ClayInAFileIsEveryNonZeroValueForEveryCommand)
 {
-    // An inactive 8^3 tile at 700 beside active voxels, and one inactive voxel holding mass: "info"
-    // counted them, "run" dropped them. Now they are clay everywhere: read as active voxels.
+    // An inactive 8^3 tile at 700 beside active voxels, and one inactive voxel holding mass: clay
+    // for every command alike, read as active voxels.
     auto g = openvdb::Int32Grid::create(0);
     g->tree().addTile(1, Coord(64, 0, 0), 700, false);
     g->tree().setValueOn(Coord(0, 0, 0), 900);
@@ -959,7 +961,7 @@ TEST_F(IOTest, NonZeroBackgroundIsRefusedAndNotCountedAsClay)
     writePlainVdb(file("bg.vdb"), g);
     const std::string m = errorOf([&] { readClayFile(file("bg.vdb")); });
     EXPECT_TRUE(contains(m, "grid \"mass\" has background value 5, expected 0")) << m;
-    // info said 343597841920 for such a file: now it says why there is no total.
+    // describeVdb gives no total for such a file, and says why.
     const std::string d = describeVdb(file("bg.vdb"));
     EXPECT_TRUE(contains(d, "total mass: none (the background is 5")) << d;
 }
@@ -993,7 +995,7 @@ TEST_F(IOTest, OutputsThatAreNotRegularFilesAreWrittenThroughNeverReplaced)
     struct stat st;
     ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
     EXPECT_TRUE(S_ISFIFO(st.st_mode));
-    // A full device: the failure is reported (it used to be replaced by a regular file).
+    // A full device: the failure is reported, and the device is not replaced by a regular file.
     if (::access("/dev/full", W_OK) == 0) {
         const std::string m = errorOf([&] { writeClayFile("/dev/full", *sampleClay(), ClayMeta{}); });
         EXPECT_TRUE(contains(m, "cannot write /dev/full: write failed: No space left on device")) << m;

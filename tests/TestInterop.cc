@@ -5,6 +5,7 @@
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
+#include <vdbclay/SurfaceMesh.h>
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -108,8 +109,8 @@ double objVolumeOf(const std::string& path)
 
 } // namespace
 
-// Issue 14 item 1: the mesh of a .vdb with voxel size 0.1 is in the same world units as the .vdb,
-// and mesh clay read back at that voxel size lands on the same voxels.
+// The mesh of a .vdb with voxel size 0.1 is in the same world units as the .vdb, and mesh clay read
+// back at that voxel size lands on the same voxels.
 TEST_F(InteropTest, MeshOutputIsInWorldUnitsAndRoundTripsAsMeshClay)
 {
     const double vs = 0.1;
@@ -165,8 +166,8 @@ TEST_F(InteropTest, PlyOutputIsInWorldUnitsToo)
     EXPECT_NEAR(maxX, 3.5 * 2.0, 1e-6);
 }
 
-// Issue 14 item 2: Tc and the other vdbclay_* metadata are on the density FloatGrid as well, for
-// readers that cannot load Int32 grids; round(density * Tc) gives the mass back.
+// Tc and the other vdbclay_* metadata are on the density FloatGrid as well, for readers that cannot
+// load Int32 grids; round(density * Tc) gives the mass back.
 TEST_F(InteropTest, DensityGridCarriesTheClayMetadata)
 {
     const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(4, 4, 4), 250, 0.5);
@@ -194,8 +195,7 @@ TEST_F(InteropTest, DensityGridCarriesTheClayMetadata)
     EXPECT_EQ(total, totalMass(*clay));
 }
 
-// Issue 14 item 3: a start file made with another Tc is refused, naming the file, both values and
-// the way on.
+// A start file made with another Tc is refused, naming the file, both values and the way on.
 TEST_F(InteropTest, AStartFileWithAnotherTcIsRefusedWithTheWayOn)
 {
     const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(7, 7, 7), 250, 1.0);
@@ -216,9 +216,9 @@ TEST_F(InteropTest, AStartFileWithAnotherTcIsRefusedWithTheWayOn)
     EXPECT_EQ(totalMass(*s.mass()), totalMass(*clay));
 }
 
-// Issue 14 item 6: "up": "z" rotates the file's transform so index y (vdbclay's up) is world z;
-// the mesh follows the transform, and reading it (or the file's own surface level set) back with
-// up z lands on the same voxels.
+// "up": "z" rotates the file's transform so index y (vdbclay's up) is world z; the mesh follows the
+// transform, and reading it (or the file's own surface level set) back with up z lands on the same
+// voxels.
 TEST_F(InteropTest, UpZIsWrittenIntoTheTransformAndRoundTrips)
 {
     const double vs = 0.5;
@@ -285,8 +285,8 @@ const char* kUnitCubeObj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1
                            "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
 } // namespace
 
-// Issue 14 item 7: every shape can be placed: translate, rotate, uniform or per-axis scale, meshes
-// included; voxel counts are exact where the voxel-centre rule makes them so.
+// Every shape can be placed: translate, rotate, uniform or per-axis scale, meshes included; voxel
+// counts are exact where the voxel-centre rule makes them so.
 TEST_F(InteropTest, TransformPlacesEveryShapeIncludingMeshes)
 {
     {
@@ -362,8 +362,8 @@ std::string boxesObj(const std::vector<std::pair<Vec3, Vec3>>& boxes)
 }
 } // namespace
 
-// Issue 14 item 4: a closed but non-manifold mesh (two boxes sharing an edge: 4 faces on it) is
-// accepted and fills both boxes; a mesh with a hole is refused with the way on.
+// A closed but non-manifold mesh (two boxes sharing an edge: 4 faces on it) is accepted and fills both
+// boxes; a mesh with a hole is refused with the way on.
 TEST_F(InteropTest, ClosedNonManifoldMeshesAreAcceptedOpenOnesExplained)
 {
     {
@@ -397,7 +397,7 @@ TEST_F(InteropTest, ClosedNonManifoldMeshesAreAcceptedOpenOnesExplained)
     EXPECT_TRUE(contains(e, "tri.obj") && contains(e, "open") && contains(e, "encloses no volume")) << e;
 }
 
-// ---- Issue 14 item 5: clay from a mesh or level set keeps its volume ------------------------------
+// ---- Clay from a mesh or level set keeps its volume -----------------------------------------------
 
 namespace {
 /// A UV sphere of @a rings x @a segments, outward, centred at @a c (world units), as OBJ text.
@@ -443,9 +443,9 @@ void writeText(const std::string& path, const std::string& text)
 }
 } // namespace
 
-// Blender's 16-unit cube, faces on voxel centres: the voxel-centre rule made it 17^3 voxels (+20 %);
-// coverage gives a face voxel half its mass, an edge voxel a quarter, a corner an eighth: 16^3 x m0
-// exactly (15^3 + 6 x 15^2 / 2 + 12 x 15 / 4 + 8 / 8 = 4096).
+// Blender's 16-unit cube, faces on voxel centres: by the voxel-centre rule it would be 17^3 voxels
+// (+20 %); coverage gives a face voxel half its mass, an edge voxel a quarter, a corner an eighth:
+// 16^3 x m0 exactly (15^3 + 6 x 15^2 / 2 + 12 x 15 / 4 + 8 / 8 = 4096).
 TEST_F(InteropTest, MeshClayOfA16UnitCubeWithFacesOnVoxelCentresHoldsExactly16Cubed)
 {
     writeText(file("cube16.obj"), boxesObj({{{{-8, -8, -8}}, {{8, 8, 8}}}}));
@@ -516,7 +516,7 @@ TEST_F(InteropTest, MeshClayHoldsTheMeshVolume)
 }
 
 namespace {
-/// The previous round's estimate, for comparison: 4^3 sign samples of a shape's distance().
+/// A sampled estimate, for comparison: 4^3 sign samples of a shape's distance().
 double supersampledVolume(const Shape& s)
 {
     const Box b = s.bounds();
@@ -533,8 +533,8 @@ double supersampledVolume(const Shape& s)
 }
 } // namespace
 
-// Why the previous attempt lost volume: a trilinear level set rounds convex edges and corners inward,
-// so sign samples of it miss part of every edge voxel. Exact coverage does not sample the level set.
+// Why sampling a mesh's level set loses volume: a trilinear level set rounds convex edges and corners
+// inward, so sign samples of it miss part of every edge voxel. Exact coverage does not sample it.
 TEST_F(InteropTest, ExactMeshCoverageAgainstSamplesOfTheLevelSet)
 {
     writeText(file("cube16.obj"), boxesObj({{{{-8, -8, -8}}, {{8, 8, 8}}}}));
@@ -547,7 +547,7 @@ TEST_F(InteropTest, ExactMeshCoverageAgainstSamplesOfTheLevelSet)
                 "%.4f (%+.2f %%)\n",
                 exact, sampled, 100 * (sampled - 4096) / 4096);
     EXPECT_NEAR(exact, 4096, 0.01);
-    EXPECT_LT(sampled, 4096 * 0.995); // more than the 0.5 % the issue allows
+    EXPECT_LT(sampled, 4096 * 0.995); // more than the 0.5 % that level set clay may lose
 }
 
 // Level sets (and meshes that are open) fill by clamp(1/2 - d, 0, 1) at voxel centres: within 0.5 %
@@ -634,7 +634,7 @@ void cubeMesh(double h, double degZ, double degX, const openvdb::Vec3d& t,
     quads = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
 }
 
-/// The volume the previous rule gave: the sum of clamp(1/2 - d, 0, 1) at voxel centres.
+/// The volume of the plain ramp, for comparison: the sum of clamp(1/2 - d, 0, 1) at voxel centres.
 double rampVolume(const Shape& s)
 {
     const Box b = s.bounds();
@@ -793,7 +793,7 @@ TEST_F(InteropTest, MeshRoundTripKeepsPlaceAndVolume)
     }
 }
 
-// ---- Issue 14 item 8: import gaps: PLY meshes, fog volumes -----------------------------------------
+// ---- Import: PLY meshes, fog volumes --------------------------------------------------------------
 
 // PLY: what `vdbclay mesh` writes, and ordinary ASCII / binary little-endian files with other
 // properties and elements; others are refused naming the file and what is wrong.
@@ -906,7 +906,7 @@ TEST_F(InteropTest, FogVolumesImportAsClay)
     EXPECT_TRUE(contains(e, "\"mass\"") && contains(e, "expected a FloatGrid fog volume")) << e;
 }
 
-// Issue 14 item 9: `render` and `mesh` take any .vdb: the clay grid "mass", else the first fog
+// `render` and `mesh` take any .vdb: the clay grid "mass", else the first fog
 // volume, else the first level set (readAsClay), in the file's world units; a note names the grid.
 TEST_F(InteropTest, RenderAndMeshReadFogVolumesAndLevelSets)
 {

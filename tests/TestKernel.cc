@@ -1,11 +1,14 @@
-// The automaton's kernel (lib/src/Kernel.cc) on its own: the SIMD path (its AVX2 build where the CPU
-// has it, and its baseline SSE2 build, PassInput::avx2 off) and the portable path (PassInput::portable)
-// must give bit-identical grids, active masks, changed masks and totals on the same input. The inputs are
-// random grids built to reach every branch of the pass: over cells next to empty ones (0 -> positive, active
-// bits), E > A and E <= A blocks, obstacle voxels and an obstacle tile, odd blocks straddling into missing
-// leaves (deferred), 2D and 3D, every rule, small and large Tc (Tc > 2^27 turns the SIMD branch off, so both
-// paths must agree there trivially too).
+// The automaton's kernel (lib/src/automaton/Kernel.cc) on its own: the SIMD path (its AVX2 build
+// where the CPU has it, and its baseline SSE2 build) and the portable path must give bit-identical
+// grids, active masks, changed masks and totals on the same input (kernel_testing::Paths forces each).
+// The inputs are random grids built to reach every branch of the pass: over cells next to empty ones
+// (0 -> positive, active bits), E > A and E <= A blocks, obstacle voxels and an obstacle tile, odd
+// blocks straddling into missing leaves (deferred), 2D and 3D, every rule, small and large Tc
+// (Tc > 2^27 turns the SIMD branch off, so both paths must agree there trivially too).
 #include "automaton/Kernel.h"
+#include "automaton/KernelTesting.h"
+#include "automaton/LeafTable.h"
+#include "automaton/OverFilter.h"
 
 #include <vdbclay/Automaton.h>
 #include <vdbclay/Metrics.h>
@@ -120,15 +123,16 @@ Result runPass(const Scene& s, Rule rule, int32_t tc, bool is3D, int phase, uint
     in.phase = phase;
     in.step = step;
     in.seed = 7;
-    in.portable = portable;
-    in.filter = filter;
-    in.avx2 = avx2;
     in.table = useTable ? &table : nullptr;
+    kernel_testing::Paths paths;
+    paths.portable = portable;
+    paths.filter = filter;
+    paths.avx2 = avx2;
     // Two ranges, as two tasks would get them, joined in order.
     const size_t half = work.size() / 2;
     PassTotals second;
-    processRange(in, work.data(), 0, half, r.tot);
-    processRange(in, work.data(), half, work.size(), second);
+    kernel_testing::processRange(in, paths, work.data(), 0, half, r.tot);
+    kernel_testing::processRange(in, paths, work.data(), half, work.size(), second);
     r.tot.join(second);
     for (const WorkItem& w : work)
         r.changed.push_back(w.changed);
@@ -192,12 +196,12 @@ TEST_F(KernelTest, SimdAndPortablePathsGiveIdenticalPasses)
                     expectSame(simd, portable, what);
                     expectSame(sse2, portable, what + " (baseline build)");
                 }
-    std::printf("the pass's build on this machine: %s\n", avx2Pass() ? "AVX2" : "baseline");
+    std::printf("the pass's build on this machine: %s\n", kernel_testing::avx2Pass() ? "AVX2" : "baseline");
 }
 
-/// The flat leaf table (PassInput::table) only replaces the accessor probes: the same passes with and
-/// without it, on the SIMD and the portable path, must agree bit for bit. The work list holds anchors
-/// the table indexes (every leaf, and the upper neighbours reaching into one) and anchors it does not
+/// The flat leaf table (LeafTable.h, PassInput::table) only replaces the accessor probes: the same passes
+/// with and without it, on the SIMD and the portable path, must agree bit for bit. The work list holds
+/// anchors the table indexes (every leaf, and the upper neighbours reaching into one) and anchors it does not
 /// (an anchor all of whose leaves are missing), which fall back to the accessors.
 TEST_F(KernelTest, LeafTableGivesIdenticalPasses)
 {
@@ -225,7 +229,7 @@ TEST_F(KernelTest, LeafTableGivesIdenticalPasses)
                     }
 }
 
-/// The over-cell filter (Kernel.cc, overBlocks) against brute force on coordinates: the anchor's 8
+/// The over-cell filter (OverFilter.h, overBlocks) against brute force on coordinates: the anchor's 8
 /// leaves as plain arrays, each block's 8 cells found from its minimum corner (blockOrigin), not
 /// through the filter's column tables. First one over cell at each corner of each block of both
 /// phases (so every corner position, and on the odd phase every cell that lies across a leaf border
@@ -431,9 +435,10 @@ void passOneBlockEveryBuild(const Scene& s, const RuleParams& p, bool is3D, uint
         in.phase = 0;
         in.step = step;
         in.seed = seed;
-        in.portable = build == 1;
-        in.avx2 = build != 2;
-        processRange(in, work.data(), 0, 1, r[build].tot);
+        kernel_testing::Paths paths;
+        paths.portable = build == 1;
+        paths.avx2 = build != 2;
+        kernel_testing::processRange(in, paths, work.data(), 0, 1, r[build].tot);
         r[build].changed.push_back(work[0].changed);
     }
 }
@@ -473,7 +478,7 @@ TEST_F(KernelTest, SingleBlocksGiveIdenticalTotals)
     EXPECT_GT(updated, 2000); // most random blocks hold an over cell and an under one
 }
 
-/// The branches in registers (Kernel.cc: surplusBranch, roomBranch) against the scalar rule on single
+/// The branches in registers (BlockSimd.h: surplusBranch, roomBranch) against the scalar rule on single
 /// blocks built from edge values: cells at 0, 1, Tc - 1, Tc (no room), Tc + 1, 2 Tc and INT32_MAX / 8 (the
 /// largest a pass without overflow checks sees), so that blocks with every cell over, none under, no room
 /// at all (A = 0), E = A and E = A + 1, ties everywhere and empty cells that become active all occur;

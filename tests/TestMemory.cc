@@ -27,7 +27,7 @@
 #include "AllocationCounter.h"     // the byte-counting operator new and delete
 #include "sculpt/FramePolicy.h"    // frame_policy::tryStepsBeforeLayer
 #include "sculpt/MemoryEstimate.h" // memory_internal: voxelsWithinFaceSteps, the bytes per part
-#include "transport/CellIndex.h"   // transport_internal::kDenseIndexMax
+#include "transport/SolverTuning.h" // transport_internal::kDenseIndexMax
 #include "TestRng.h"
 
 using namespace vdbclay;

@@ -53,7 +53,7 @@ TEST(PassBalance, SharesFollowTheMeasuredSpeed)
     EXPECT_EQ(cutsOf(b, 0, 2, 3000), (std::vector<uint64_t>{0, 1000, 3000}));
     // Phases are separate: phase 1 has no estimates yet.
     EXPECT_EQ(cutsOf(b, 1, 2, 1000), (std::vector<uint64_t>{0, 460, 1000}));
-    // Equal speeds: even shares (FIRST no longer applies).
+    // Equal speeds: even shares (firstShare applies only without estimates).
     measure(b, 1, {128, 32}, {1.0, 0.25});
     EXPECT_EQ(cutsOf(b, 1, 2, 1000), (std::vector<uint64_t>{0, 500, 1000}));
     // Three chunks at 1, 2 and 4 units per block: shares 4/7, 2/7, 1/7.
@@ -88,7 +88,7 @@ TEST(PassBalance, SmallChunksAndZeroTimesLeaveTheirEstimate)
     EXPECT_EQ(b.secondsPerBlock(0, 1), 1.0 / 128 + (1.0 / 128) / 8);
     measure(b, 0, {64, 64}, {0.0, 0.5});
     EXPECT_EQ(b.secondsPerBlock(0, 0), 1.0 / 128);
-    // A chunk never measured leaves the phase on FIRST's shares.
+    // A chunk never measured leaves the phase on the firstShare cuts.
     PassBalance partial;
     measure(partial, 0, {64, 8}, {0.5, 0.5});
     EXPECT_EQ(partial.secondsPerBlock(0, 1), 0.0);
@@ -100,7 +100,7 @@ TEST(PassBalance, AnotherChunkCountOrResetStartsOver)
     PassBalance b;
     measure(b, 0, {64, 64}, {0.5, 0.25});
     measure(b, 1, {64, 64}, {0.5, 0.25});
-    // Asked for three chunks, the phase has estimates for two: FIRST's shares.
+    // Asked for three chunks, the phase has estimates for two: the firstShare cuts.
     EXPECT_EQ(cutsOf(b, 0, 3, 3000), (std::vector<uint64_t>{0, 920, 1960, 3000}));
     // Measured with three chunks: phase 0 starts over from this pass; phase 1 keeps its two.
     measure(b, 0, {64, 64, 64}, {0.25, 0.25, 0.25});

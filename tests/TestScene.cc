@@ -436,7 +436,7 @@ TEST_F(SceneTest, StoppingWaitsForAStepThatResumesExactlyAndSavesTheOpenFrame)
 
 // The Sculptor settles through Automaton::settle(SettleOptions): a stopped frame says Stopped, and
 // a frame stopped and resumed in the middle keeps settle's no-room schedule in frame steps. The
-// 2D piston of TestHardCases (clay pressed into a closed tube with no room) stops its first frame
+// 2D piston of TestSculptor (clay pressed into a closed tube with no room) stops its first frame
 // with NoRoom after exactly 8192 steps; stopped at step 5000 and resumed from the checkpoint, the
 // resumed part runs the other 3192 steps and stops with NoRoom at the same step, same clay.
 TEST_F(SceneTest, AStoppedFrameSaysStoppedAndKeepsTheNoRoomScheduleWhenResumed)

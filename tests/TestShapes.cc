@@ -10,7 +10,7 @@
 
 #include <gtest/gtest.h>
 
-#include "shapes/InsideBox.h" // shape_internal::insideVoxelBox
+#include "shapes/InsideBox.h" // shapes_internal::insideVoxelBox
 
 #include <climits>
 #include <cmath>
@@ -317,7 +317,7 @@ TEST_F(ShapesTest, TransformedDistanceIsBitIdenticalToTheInnerDistanceAtApplyInv
 
 TEST_F(ShapesTest, InsideVoxelBoxIsExactlyTheVoxelsWhoseCentreIsInside)
 {
-    // Round 9: an unrotated box, moved by any translation and pivot, is marked and rasterised as a
+    // An unrotated box, moved by any translation and pivot, is marked and rasterised as a
     // box (InsideBox.h) instead of a distance per voxel; it must be the same voxels, bit for bit.
     // Boxes with corners on quarter voxels and at random, translations on half voxels (centres on
     // the faces: not inside) and at random.
@@ -340,7 +340,7 @@ TEST_F(ShapesTest, InsideVoxelBoxIsExactlyTheVoxelsWhoseCentreIsInside)
         const ShapePtr b = makeBox(lo, hi);
         for (const ShapePtr& s : {b, makeTransformed(b, pose)}) {
             Box got;
-            ASSERT_TRUE(shape_internal::insideVoxelBox(*s, got)) << s->describe();
+            ASSERT_TRUE(shapes_internal::insideVoxelBox(*s, got)) << s->describe();
             Box want;
             const Box bb = s->bounds();
             for (int x = bb.min[0] - 1; x <= bb.max[0] + 1; ++x)
@@ -374,11 +374,11 @@ TEST_F(ShapesTest, InsideVoxelBoxIsExactlyTheVoxelsWhoseCentreIsInside)
     Pose turned;
     turned.rotationDeg = {{0, 30, 0}};
     EXPECT_FALSE(
-        shape_internal::insideVoxelBox(*makeTransformed(makeBox({{0, 0, 0}}, {{4, 4, 4}}), turned), unused));
-    EXPECT_FALSE(shape_internal::insideVoxelBox(*makeSphere({{0, 0, 0}}, 5), unused));
+        shapes_internal::insideVoxelBox(*makeTransformed(makeBox({{0, 0, 0}}, {{4, 4, 4}}), turned), unused));
+    EXPECT_FALSE(shapes_internal::insideVoxelBox(*makeSphere({{0, 0, 0}}, 5), unused));
     Pose shifted;
     shifted.translation = {{1, 2, 3}};
-    EXPECT_FALSE(shape_internal::insideVoxelBox(
+    EXPECT_FALSE(shapes_internal::insideVoxelBox(
         *makeTransformed(makeTransformed(makeBox({{0, 0, 0}}, {{4, 4, 4}}), shifted), shifted), unused));
 }
 
@@ -499,7 +499,7 @@ TEST_F(ShapesTest, MeshErrors)
     std::string open = kCubeObj;
     open.erase(open.find("f 5/1 6/1 7/1 8/1\n"), std::strlen("f 5/1 6/1 7/1 8/1\n"));
     const std::string po = file("open.obj", open);
-    // Open meshes are filled by the generalized winding number (issue 14) and say so.
+    // Open meshes are filled by the generalized winding number and say so.
     EXPECT_TRUE(loadMesh(po)->describe().find("open: 4 open edges") != std::string::npos);
     // Malformed lines name the line.
     const std::string pm = file("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 x\nf 1 2 3\n");

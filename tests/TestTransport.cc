@@ -1,4 +1,4 @@
-// The compressing push, the global transport and the swept push (issue 12).
+// The compressing push, the global transport and the swept push.
 #include <vdbclay/Automaton.h>
 #include <vdbclay/IO.h>
 #include <vdbclay/Metrics.h>
@@ -7,6 +7,8 @@
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
 #include <vdbclay/Transport.h>
+
+#include "transport/SolverTuning.h" // the solver's tuning, varied here
 
 #include <openvdb/openvdb.h>
 
@@ -18,6 +20,7 @@
 #include <unistd.h>
 
 using namespace vdbclay;
+using transport_internal::SolverTuning;
 
 namespace {
 
@@ -290,21 +293,25 @@ TEST_F(TransportTest, CompressPushIsDeterministicAndExactAndFallsBackToTheSurfac
 
 // ---- the global transport ------------------------------------------------------------------------
 
-TEST_F(TransportTest, BadGlobalTransportOptionsAreRefusedNamingTheOptionAndChangeNothing)
+TEST_F(TransportTest, BadGlobalTransportOptionsAndTuningAreRefusedNamingTheFieldAndChangeNothing)
 {
     MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
     g->tree().setValue(openvdb::Coord(1, 1, 1), 1500);
     Automaton a(g, opts());
     const uint64_t h = contentHash(*g);
-    GlobalTransportOptions bad[4];
-    bad[0].reach = -1;
+    GlobalTransportOptions badReach;
+    badReach.reach = -1;
+    SolverTuning bad[4];
     bad[1].maxRounds = 0;
     bad[2].tolerance = 0;
     bad[3].roundTolerance = 1.5;
     const char* names[4] = {"reach", "maxRounds", "tolerance", "roundTolerance"};
     for (int i = 0; i < 4; ++i) {
         try {
-            transportGlobally(a, bad[i]);
+            if (i == 0)
+                transportGlobally(a, badReach);
+            else
+                transport_internal::transportGlobally(a, {}, bad[i]);
             ADD_FAILURE() << names[i];
         } catch (const Error& e) {
             EXPECT_NE(std::string(e.what()).find(names[i]), std::string::npos) << e.what();
@@ -342,8 +349,8 @@ TEST_F(TransportTest, GlobalLayerMovesTheOverloadToRoomExactly)
 
 TEST_F(TransportTest, TheDenseCellIndexAndTheTreeBeyondItGiveOneResult)
 {
-    // Round 5's cell index is a dense array over the seeds' bounds grown by the reach + 2, a tree
-    // beyond it. Clay at 0.99 Tc with 20 Tc extra in one cell: the cell is the whole flood (no full
+    // The cell index is a dense array over the seeds' bounds grown by the reach + 2, a tree beyond
+    // it. Clay at 0.99 Tc with 20 Tc extra in one cell: the cell is the whole flood (no full
     // cell beside it) with reach 1 as with reach 0 (no dense index at all), and the active set joins
     // cells with room (10 each) shell by shell, far past the dense box: both give one result, on any
     // thread count, exact.
@@ -369,7 +376,7 @@ TEST_F(TransportTest, TheDenseCellIndexAndTheTreeBeyondItGiveOneResult)
 
 TEST_F(TransportTest, SetMassesIsAnEditOfItsRegionThatReadsOnlyTheCells)
 {
-    // Round 6: the routing writes its changed cells through Automaton::setMasses (no rescan of their
+    // The routing writes its changed cells through Automaton::setMasses (no rescan of their
     // bounds). Against edit() over the same region: one cell over Tc, one emptied, a whole leaf
     // emptied (pruned), a new leaf beyond the clay; the same grid, leaves, totals, and the same
     // steps after (the same blocks woken). Bad lists are refused and change nothing.
@@ -469,8 +476,8 @@ TEST_F(TransportTest, GlobalLayerIsIdenticalOnAnyThreadCount2DAnd3D)
 TEST_F(TransportTest, MultigridSolvesAreExactIdenticalOnAnyThreadCountAndNeedFewerIterations)
 {
     // The same overloaded block solved with the multigrid preconditioner (multigridMin 0) and with
-    // MIC(0) (multigrid off): both exact, every solved cell at Tc; the multigrid result is the same
-    // on 1, 2, 3 and 8 threads, 2D and 3D, and needs fewer CG iterations than MIC(0) at this size.
+    // MIC(0) (multigridMin beyond every solve): both exact, every solved cell at Tc; the multigrid result is
+    // the same on 1, 2, 3 and 8 threads, 2D and 3D, and needs fewer CG iterations than MIC(0) at this size.
     for (int dims : {2, 3}) {
         uint64_t first = 0, micIterations = 0, mgIterations = 0;
         for (int threads : {1, 2, 3, 8, 0}) {
@@ -483,8 +490,9 @@ TEST_F(TransportTest, MultigridSolvesAreExactIdenticalOnAnyThreadCountAndNeedFew
             Automaton a(g, opts(dims, threads == 0 ? 1 : threads));
             GlobalTransportOptions go;
             go.threads = threads == 0 ? 1 : threads;
-            go.multigridMin = threads == 0 ? UINT64_MAX : 0; // threads 0 here: MIC(0), one thread
-            const GlobalTransportReport r = transportGlobally(a, go);
+            SolverTuning tuning;
+            tuning.multigridMin = threads == 0 ? UINT64_MAX : 0; // threads 0 here: MIC(0), one thread
+            const GlobalTransportReport r = transport_internal::transportGlobally(a, go, tuning);
             EXPECT_EQ(r.multigridSolves, threads == 0 ? 0u : r.solves);
             EXPECT_EQ(totalMass(*g), m0);
             EXPECT_EQ(a.totalMass(), m0);
@@ -523,8 +531,9 @@ GlobalTransportReport transportByMultigrid(Automaton& a, int threads)
 {
     GlobalTransportOptions go;
     go.threads = threads;
-    go.multigridMin = 0;
-    return transportGlobally(a, go);
+    SolverTuning tuning;
+    tuning.multigridMin = 0;
+    return transport_internal::transportGlobally(a, go, tuning);
 }
 } // namespace
 
@@ -557,13 +566,13 @@ TEST_F(TransportTest, ActiveSetRoundsReuseTheMultigridHierarchyExactlyOnAnyThrea
     }
 }
 
-TEST_F(TransportTest, TheMultigridsFixedWidthFinestRowsGiveRoundFivesResults)
+TEST_F(TransportTest, TheMultigridActiveSetGivesItsPinnedHashAndIterations)
 {
-    // Round 5b: the V-cycle's finest-level residual and CG's A p read 6 neighbour rows per row (a
-    // missing face points at a -0 / +0 sentinel) instead of the CSR rows: the same additions in the
-    // same order. The active-set scene above (first solve builds the hierarchy, later rounds rebind
-    // it; 2D and 3D, 1 and 3 threads) gives round 5's results: content hash and CG iterations as
-    // computed by round 5's library (main 8573fb6).
+    // The active-set scene above (the first solve builds the hierarchy, later rounds rebind it; 2D
+    // and 3D, 1 and 3 threads): its content hash and CG iterations, pinned. The V-cycle's finest-level
+    // residual and CG's A p read 6 neighbour rows per row (a missing face points at a -0 / +0
+    // sentinel): the same additions in the same order as a loop over the present faces (CSR rows),
+    // which computes these values too.
     const uint64_t pinnedHash[2] = {0xc9607a28cfb7c329ull, 0xac3ff2ff670d6ecfull};
     const uint64_t pinnedIterations[2] = {24, 12};
     for (int dims : {2, 3})
@@ -592,12 +601,13 @@ TEST_F(TransportTest, AWorkspaceKeptAcrossCallsChangesNoResult)
     for (const Case& c : cases) {
         GlobalTransportOptions go;
         go.threads = c.threads;
-        go.multigridMin = c.multigridMin;
+        SolverTuning tuning;
+        tuning.multigridMin = c.multigridMin;
         MassGridPtr fresh = make(c), reused = make(c);
         const int64_t m0 = totalMass(*fresh);
         Automaton a(fresh, opts(c.dims, c.threads)), b(reused, opts(c.dims, c.threads));
-        const GlobalTransportReport ra = transportGlobally(a, go);
-        const GlobalTransportReport rb = transportGlobally(b, go, &ws);
+        const GlobalTransportReport ra = transport_internal::transportGlobally(a, go, tuning);
+        const GlobalTransportReport rb = transport_internal::transportGlobally(b, go, tuning, &ws);
         EXPECT_GT(ra.massMoved, 0) << c.dims << "D " << c.top;
         EXPECT_EQ(contentHash(*reused), contentHash(*fresh)) << c.dims << "D " << c.top;
         EXPECT_EQ(rb.solves, ra.solves);
@@ -733,7 +743,7 @@ TEST_F(TransportTest, GlobalPressKeepsMassOverEveryFrameWithEveryRuleIn2DAnd3D)
 
 TEST_F(TransportTest, GlobalPressIsIdenticalOnOneTwoThreeAndEightThreads)
 {
-    // Surface: the later frames run the automaton's try before the layer (round 4b).
+    // Surface: the later frames run the automaton's try before the layer.
     for (const char* push : {"compress", "surface"})
         for (int dims : {2, 3}) {
             const std::string s = pressScene("prorata", push, "global", dims);
@@ -786,7 +796,7 @@ TEST_F(TransportTest, ASqueezedTallCylinderKeepsStraightSides)
     for (int64_t n : layer)
         counts += " " + std::to_string(n);
     // Cells per layer within 10 % of each other (radius within 5 %; one ring of cells is ~5 %), floor
-    // to plate. Measured: 157 ... 169; a push cut at the search region (round 3): 109 ... 293, a cone.
+    // to plate. Measured: 157 ... 169; a push cut at the search region would give 109 ... 293, a cone.
     EXPECT_LE(hi * 100, lo * 110) << "cells per layer, floor to plate:" << counts;
     EXPECT_GE(lo, 150) << counts;
 }
@@ -823,11 +833,11 @@ TEST_F(TransportTest, TheTryIsJudgedByTheClayNearTheToolNotByTheWholeBody)
 {
     // A sphere of clay at Tc (32 wide) stroked by a small sphere, beside a large loose lump (0.5 Tc)
     // the tool never touches: the body's mean density is ~0.55, under the try's 0.96, but the
-    // stroked clay is saturated. Judged near the tool (the push's region grown by the layer's reach;
-    // round 5), every frame goes straight to the layer, as the stroke at Tc on its own does; round
-    // 4b's whole-body gate ran the automaton's try first (250-380 steps a frame here, up to its cap
-    // of 4096 on larger clay) and cost a scan of the whole body every frame. A sphere pressed into
-    // the loose lump is still settled by the try alone.
+    // stroked clay is saturated. Judged near the tool (the push's region grown by the layer's
+    // reach), every frame goes straight to the layer, as the stroke at Tc on its own does; judged by
+    // the whole body, the automaton's try would run first (250-380 steps a frame here, up to its cap
+    // of 4096 on larger clay) after a scan of the whole body every frame. A sphere pressed into the
+    // loose lump is still settled by the try alone.
     const auto scene = [](const std::string& tool) {
         return R"({"threshold": 1000, "rule": "prorata", "push": "surface", "transport": "global",
             "clay": [{"shape": "sphere", "center": [16,16,16], "radius": 16, "mass": 1000},
@@ -976,8 +986,8 @@ TEST_F(TransportTest, TheReachCountsFromTheContactNotFromEveryCellOfACompressCha
     // A 21^3 block at Tc; a compress chain from the top face straight down: (10, 20 ... 17, 10), 25
     // extra each. Reach 4. From the contact (the chain's top cell, the only one with a face on room)
     // the unknowns are the cells within 4 face steps of it: a half octahedron, 85 cells. From every
-    // over cell (round 4): the union of the four chain cells' octahedra, 208 cells. Both exact: every
-    // cell of the block ends at Tc, the 100 extra above it.
+    // over cell (reachFromContact false): the union of the four chain cells' octahedra, 208 cells. Both
+    // exact: every cell of the block ends at Tc, the 100 extra above it.
     for (const bool fromContact : {true, false}) {
         MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
         for (int y = 17; y <= 20; ++y)
@@ -985,8 +995,9 @@ TEST_F(TransportTest, TheReachCountsFromTheContactNotFromEveryCellOfACompressCha
         Automaton a(g, opts());
         GlobalTransportOptions go;
         go.reach = 4;
-        go.reachFromContact = fromContact;
-        const GlobalTransportReport r = transportGlobally(a, go);
+        SolverTuning tuning;
+        tuning.reachFromContact = fromContact;
+        const GlobalTransportReport r = transport_internal::transportGlobally(a, go, tuning);
         EXPECT_EQ(r.overloadBefore, 100);
         EXPECT_EQ(r.overloadAfter, 0) << fromContact;
         EXPECT_EQ(r.reach, 4);
@@ -1039,16 +1050,16 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
 
 TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotToTheLayer)
 {
-    // Round 7: after the automaton's try, the global layer looks for its seeds in the push's region
-    // only, not as far as the try's steps can have carried the overload (up to 4096 steps: the memory
-    // estimate had to count the whole body). A 2D channel of clay at Tc
-    // 2400 long between two walls, a plunger entering it 1 voxel a frame, room (loose clay) only at its
-    // far end, and loose clay behind the upper wall near the plunger, so the clay near the tool is
-    // unsaturated on average and the try runs. In the full channel the automaton carries the overload
-    // as a front, one voxel a step: the try gives up at its work cap (~1,500 steps) with all of it far
-    // beyond the reach (contact 6: reach 8). Round 6 then seeded the layer there: every frame solved
-    // the channel up to the front (11,136 unknowns in the first frame, its reach doubled until it met the
-    // room); now the layer finds no seed and the cleanup automaton carries the front on to the room.
+    // After the automaton's try, the global layer looks for its seeds in the push's region only, not
+    // as far as the try's steps can have carried the overload (up to 4096 steps: the memory estimate
+    // would have to count the whole body). A 2D channel of clay at Tc 2400 long between two walls, a
+    // plunger entering it 1 voxel a frame, room (loose clay) only at its far end, and loose clay
+    // behind the upper wall near the plunger, so the clay near the tool is unsaturated on average and
+    // the try runs. In the full channel the automaton carries the overload as a front, one voxel a
+    // step: the try gives up at its work cap (~1,500 steps) with all of it far beyond the reach
+    // (contact 6: reach 8). The layer finds no seed (seeded there, every frame would solve the
+    // channel up to the front: 11,136 unknowns in the first frame, its reach doubled until it met the
+    // room), and the cleanup automaton carries the front on to the room.
     const std::string json =
         R"({"dimensions": 2, "threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": "surface",
         "clay": [{"shape": "box", "min": [0,0], "max": [2399,5], "mass": 1000},
@@ -1086,9 +1097,9 @@ TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotTo
 
 TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheOverloadToTheAutomaton)
 {
-    // Round 7: a frame whose tools touch no clay runs the layer (over every over cell, no reach) only as
-    // the scene's first frame (clay that starts over Tc); before, also after a frame that ended
-    // unsettled, over every over cell however far, which the memory estimate did not count. A plate
+    // A frame whose tools touch no clay runs the layer (over every over cell, no reach) only as the
+    // scene's first frame (clay that starts over Tc), not after a frame that ended unsettled (over
+    // every over cell however far, which the memory estimate does not count). A plate
     // presses a cube at Tc once, then lifts away; beside it, clay walled in a closed chamber with more
     // than Tc per cell: every frame ends with that overload left (no room). The first frame's layer
     // seeds it (it lies in the push's region); the later frames touch no clay and run no layer.
@@ -1144,7 +1155,7 @@ TEST_F(TransportTest, AFrameWhoseToolsTouchNoClayAfterAnUnsettledFrameLeavesTheO
 
 TEST_F(TransportTest, TheLayersWorkFollowsTheToolNotTheBody)
 {
-    // Round 9: the stroke of transport_study (a sphere r 6 dipped 9 voxels, slid 2 a frame) into the
+    // The stroke of transport_study (a sphere r 6 dipped 9 voxels, slid 2 a frame) into the
     // flat top of a slab at Tc, 96 wide and 256 wide, the tool at the same place. The layer's domain
     // is the clay within the reach of the contact: every frame solves the same unknowns with the same
     // solves and iterations and routes the same clay, and the small slab's clay is the large one's

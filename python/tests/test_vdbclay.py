@@ -1,6 +1,8 @@
 """Tests of the Python module vdbclay, run by ctest with PYTHONPATH at the built module."""
+import json
 import os
 import signal
+import subprocess
 import tempfile
 import unittest
 
@@ -86,7 +88,7 @@ class AutomatonTests(unittest.TestCase):
     def test_a_forked_child_goes_on_with_the_automaton_and_gets_the_same_clay(self):
         # multiprocessing's "fork" start method: the child holds the parent's automaton, whose pass
         # threads stayed in the parent. It must settle (on threads of its own) to the same clay and
-        # exit; it used to hang or abort when the automaton was destroyed there.
+        # exit, without hanging or aborting when the automaton is destroyed there.
         clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (31, 31, 31)), mass=1000)
         auto = vdbclay.Automaton(clay, rule="prorata", threads=2)
         auto.add_mass(np.full((4, 4, 4), 3000, dtype=np.int32), origin=(14, 32, 14))
@@ -172,13 +174,16 @@ class FilesAndScenes(unittest.TestCase):
         initial = unbroken.total_mass
         self.assertGreater(initial, 0)
         seen = []
-        n = unbroken.run(progress=lambda r: seen.append((r["frame"], r["total_frames"])))
-        self.assertEqual(n, 4)
+        report = unbroken.run(progress=lambda r: seen.append((r["frame"], r["total_frames"])))
+        self.assertEqual(report["frames"], 4)
+        self.assertEqual(report["mass_initial"], initial)
+        self.assertEqual(report["mass_drift"], 0)
+        self.assertEqual(report["content_hash"], f"{unbroken.clay.content_hash():016x}")
         self.assertEqual(seen, [(1, 4), (2, 4), (3, 4), (4, 4)])
         self.assertEqual(unbroken.total_mass, initial)
 
         first = vdbclay.Sculptor(scene, threads=1)
-        self.assertEqual(first.run(frames=2), 2)
+        self.assertEqual(first.run(frames=2)["frames"], 2)
         path = os.path.join(d, "half.vdb")
         first.write(path)
         scene.start = path
@@ -192,8 +197,77 @@ class FilesAndScenes(unittest.TestCase):
     def test_progress_returning_false_stops(self):
         scene = vdbclay.Scene.default()
         s = vdbclay.Sculptor(scene)
-        self.assertEqual(s.run(progress=lambda r: False), 1)
+        self.assertEqual(s.run(progress=lambda r: False)["frames"], 1)
         self.assertEqual(s.frame, 1)
+        self.assertTrue(s.stopped)
+        self.assertFalse(s.frame_open)
+
+    def test_an_error_in_progress_reaches_the_caller_and_the_run_goes_on_after(self):
+        s = vdbclay.Sculptor(vdbclay.Scene.default())
+
+        def fail(report):
+            raise ValueError("from progress")
+
+        with self.assertRaises(ValueError):
+            s.run(progress=fail)
+        self.assertEqual(s.frame, 1)
+        self.assertEqual(s.run()["frames"], s.total_frames - 1)
+        self.assertTrue(s.done)
+
+    @unittest.skipUnless(os.environ.get("VDBCLAY_CLI"), "needs the vdbclay command (VDBCLAY_CLI)")
+    def test_run_report_is_the_cli_stats(self):
+        d = tmpdir()
+        stats = os.path.join(d, "stats.json")
+        subprocess.run([os.environ["VDBCLAY_CLI"], "run", "--frames", "2", "--threads", "2", "--quiet",
+                        "--stats", stats], check=True, stdout=subprocess.DEVNULL)
+        with open(stats) as f:
+            cli = json.load(f)
+        report = vdbclay.Sculptor(vdbclay.Scene.default(), threads=2).run(frames=2)
+        self.assertEqual(sorted(report), sorted(cli))
+        timed = {"seconds", "push_seconds", "setup_seconds", "output_seconds", "transport_seconds",
+                 "stage_seconds", "pass_busy_seconds", "pass_idle_seconds", "heap"}
+        for key in cli:
+            if key not in timed:
+                self.assertEqual(report[key], cli[key], key)
+        self.assertEqual(sorted(report["stage_seconds"]), sorted(cli["stage_seconds"]))
+        self.assertEqual(report["output_seconds"], 0)
+        self.assertGreater(report["setup_seconds"], 0)
+
+    def test_memory_budget_refuses_a_scene_and_stops_a_run_that_outgrows_it(self):
+        d = tmpdir()
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.Sculptor(vdbclay.Scene.default(), memory_budget="1M")
+        self.assertIn("more than the memory budget of 1.00 MiB", str(e.exception))
+        scene = vdbclay.Scene.default()
+        scene.memory_budget = "none"
+        self.assertEqual(scene.memory_budget, vdbclay.NO_MEMORY_BUDGET)
+        self.assertEqual(vdbclay.Sculptor(scene).memory_budget, vdbclay.NO_MEMORY_BUDGET)
+        scene.memory_budget = None
+        self.assertEqual(scene.memory_budget, 0)
+        self.assertGreater(vdbclay.Sculptor(scene).memory_budget, 0)  # the default, resolved
+        with self.assertRaises(vdbclay.Error):
+            scene.memory_budget = "lots"
+        with self.assertRaises(vdbclay.Error) as e:  # as `vdbclay import` checks it
+            vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 3000), mass=800, memory_budget="1G")
+        self.assertIn("more than the memory budget of 1.00 GiB", str(e.exception))
+
+        # Clay at 2^31 - 1 per voxel spreads far beyond what the estimate sees in its file: the
+        # run stops once its grids outgrow the budget, and write() saves where it stopped.
+        dense = vdbclay.make_clay(vdbclay.box((0, 0, 0), (2, 2, 0)), mass=2**31 - 1, dimensions=2)
+        dense.write(os.path.join(d, "dense.vdb"))
+        text = ('{"dimensions": 2, "settle": {"max_steps": 160}, '
+                '"clay": [{"shape": "vdb", "file": "dense.vdb"}]}')
+        scene = vdbclay.Scene.from_json(text, base_dir=d, memory_budget="8M")
+        self.assertEqual(scene.memory_budget, 8 << 20)
+        s = vdbclay.Sculptor(scene, threads=2)
+        with self.assertRaises(vdbclay.Error) as e:
+            s.run()
+        self.assertIn("the clay outgrew the memory budget of 8.00 MiB", str(e.exception))
+        self.assertTrue(s.stopped)
+        self.assertTrue(s.frame_open)
+        checkpoint = os.path.join(d, "dense-checkpoint.vdb")
+        s.write(checkpoint)
+        self.assertEqual(vdbclay.read(checkpoint).total_mass(), dense.total_mass())
 
     def test_bad_scene_is_an_error_naming_the_field(self):
         with self.assertRaises(vdbclay.Error) as e:

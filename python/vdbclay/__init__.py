@@ -2,7 +2,8 @@
 
 Clay is an exact integer mass per voxel; a cellular automaton moves the excess of cells over Tc to
 cells under it. Coordinates are voxel indices (y up); numpy arrays are dense boxes indexed
-[x, y, z]. See docs/INTEROP.md and help(vdbclay.Automaton), help(vdbclay.Sculptor), ...
+[x, y, z]. Sculptor.run returns the run's report: the dict of `vdbclay run --stats` (the same keys,
+from the same JSON text). See docs/INTEROP.md and help(vdbclay.Automaton), help(vdbclay.Sculptor), ...
 """
 import ctypes
 import ctypes.util

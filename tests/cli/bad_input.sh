@@ -41,7 +41,7 @@ VDBCLAY_HEAP=huge expect_refused heap-choice 'VDBCLAY_HEAP must be "batch" or "s
 # an unwritable output: the error names it and nothing is left behind
 expect_refused unwritable "/nonexistent-dir/out.vdb" run -o /nonexistent-dir/out.vdb --frames 1 --quiet
 
-# Unbounded and odd inputs (issue 11, items 2 and 10): refused with the reason, before reading far.
+# Unbounded and odd inputs: refused with the reason, before reading far.
 mkdir adir
 expect_refused scene-dev-zero "/dev/zero: more than 16.0 MiB" run /dev/zero -o result.vdb
 expect_refused scene-directory "adir: is a directory, expected a scene file" run adir -o result.vdb
@@ -57,7 +57,7 @@ fi
 # A scene read from a pipe (process substitution) is a scene like any other.
 "$bin" run <(printf '{"frames": 1}') --quiet > /dev/null 2> err.txt || { echo "FAIL scene from a pipe: $(cat err.txt)"; fails=$((fails+1)); }
 
-# Options: every number range-checked with the option named and a short message (items 9, 10).
+# Options: every number range-checked with the option named and a short message.
 expect_refused frames-zero "--frames: Value 0 not in range 1 to 100000000" run --frames 0 -o result.vdb
 expect_refused frames-negative "--frames" run --frames -3 -o result.vdb
 expect_refused threads-negative "--threads: Value -1 not in range 0 to 256" run --threads -1 -o result.vdb
@@ -73,11 +73,11 @@ expect_refused unknown-subcommand "unknown subcommand \"bogus\" (expected one of
 expect_refused run-rule-bogus "--rule: unknown rule \"bogus\"" run --rule bogus -o result.vdb
 expect_refused demo-rule-bogus "--rule: unknown rule \"bogus\"" demo --rule bogus
 expect_refused demo-too-big "demo --size 4096: needs about .* more than the memory budget" demo --size 4096
-# Empty strings are refused, not taken as "none" (item 14).
+# Empty strings are refused, not taken as "none".
 expect_refused empty-output "--output: expected a file name, got an empty string" run -o "" --frames 1
 expect_refused empty-rule "--rule: expected a rule name, got an empty string" run --rule "" -o result.vdb
 expect_refused empty-scene "scene: expected a file name, got an empty string" run ""
-# No message spans lines or carries terminal escapes from input (item 10).
+# No message spans lines or carries terminal escapes from input.
 cat > escape.json <<'JSON'
 {"thr\neshold\u001b[31m": 5}
 JSON
@@ -85,7 +85,7 @@ expect_refused escaped-key 'thr\\neshold\\x1b\[31m: unknown field' run escape.js
 expect_refused escaped-name 'nothere\\n.json' run "$(printf 'nothere\n.json')" -o result.vdb
 expect_refused escaped-subcommand 'unknown subcommand "a\\x1b\[2Jb"' "$(printf 'a\033[2Jb')"
 
-# Scene fields (items 10, 12, 14, 16): types, duplicates, ranges, 2D planes, start with clay.
+# Scene fields: types, duplicates, ranges, 2D planes, start with clay.
 scene() { printf '%s' "$2" > "$1.json"; }
 scene desc-object '{"description": {"a": [1]}}'
 expect_refused description-type "desc-object.json: description: expected a string, got object" run desc-object.json -o result.vdb

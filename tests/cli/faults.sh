@@ -69,7 +69,7 @@ refused budget-bad "--memory-budget: \"lots\" is not a size" "$bin" run small.js
 "$bin" run small.json --memory-budget 64M --quiet > /dev/null 2> err.txt || fail "--memory-budget 64M: $(cat err.txt)"
 no_temp_files budget
 
-# 5. Meshes are checked before they are voxelized (issue 11, item 3): a 12-triangle cube of side 5000
+# 5. Meshes are checked before they are voxelized: a 12-triangle cube of side 5000
 #    (its level set alone needs tens of GiB) and one spanning 0..8e9 are refused at once, as clay,
 #    as a tool and in import. Each names a budget: the default one depends on the machine.
 cube() { # SIDE FILE: a closed cube of 12 triangles
@@ -114,7 +114,7 @@ printf '{"memory_budget": "1G", "clay": [{"shape": "mesh", "file": "c40.obj", "m
 refused mesh-scaled-too-big "clay\[0\]: c40.obj: turning the mesh into a level set needs about" "$bin" run mesh-scaled.json -o big.vdb
 [ -e big.vdb ] && fail "placed mesh checks: an output was written"
 
-# 6. The budget is kept while the run goes on (item 5): clay read from a file at 2^31 - 1 per voxel
+# 6. The budget is kept while the run goes on: clay read from a file at 2^31 - 1 per voxel
 #    spreads far beyond what the estimate can see in the file, and the run stops with a checkpoint
 #    once its grids outgrow the budget, instead of growing until the machine runs out.
 cube 3 small-cube.obj

@@ -24,7 +24,7 @@ ver=$("$bin" --version) || fail "--version: exit $?"
 recorded=$("$bin" info direct.vdb | sed -n 's/.*vdbclay_version (string) = //p' | head -1)
 [ "$ver" = "vdbclay $recorded" ] || fail "--version printed '$ver', the file records '$recorded'"
 [ "$(grep 'content hash' info.txt)" = "$("$bin" info direct.vdb | grep 'content hash')" ] || fail "fifo output: other clay"
-# A full device: the write fails and says so (it used to replace the path and report success).
+# A full device: the write fails and says so (the path is not replaced, nothing reports success).
 if [ -w /dev/full ]; then
   refused full-device-vdb "cannot write /dev/full: write failed: No space left on device" run1 -o /dev/full
   refused full-device-stats "cannot write /dev/full: write failed: No space left on device" run1 --stats /dev/full
@@ -46,7 +46,7 @@ mkdir real && cp direct.vdb real/target.vdb && ln -s real/target.vdb link.vdb
 cmp -s real/target.vdb direct.vdb && fail "symlink output: the target was not rewritten"
 no_temp_files devices
 
-# 7. Writing over an input, or two outputs to one file, is refused before any work.
+# 2. Writing over an input, or two outputs to one file, is refused before any work.
 printf '{"frames": 1}' > s.json
 cp s.json s.json.copy
 refused over-scene "-o s.json: that is the scene file s.json; refusing to write over an input" "$bin" run s.json -o s.json
@@ -72,7 +72,7 @@ run1 -o cont.vdb > /dev/null
 printf '{"start": "cont.vdb", "frames": 2}' > cont.json
 "$bin" run cont.json --quiet -o cont.vdb > /dev/null 2> err.txt || fail "continue in place: $(cat err.txt)"
 
-# 8. Every output is checked before the work: nothing is written when the last one is bad.
+# 3. Every output is checked before the work: nothing is written when the last one is bad.
 refused mesh-format-first "--mesh out.stl: unknown mesh format \".stl\"" run1 -o first.vdb --mesh out.stl
 [ -e first.vdb ] && fail "mesh-format-first: first.vdb was written before the mesh was refused"
 mkdir adir
@@ -82,14 +82,14 @@ refused png-missing-dir-first "cannot write nodir/x.png" run1 -o first.vdb --png
 [ -e first.vdb ] && fail "png-missing-dir-first: first.vdb was written"
 refused mesh-subcommand-format "-o out.stl: unknown mesh format" "$bin" mesh direct.vdb -o out.stl
 
-# 15. A file size limit with SIGXFSZ at its default action: reported, nothing left behind.
+# 4. A file size limit with SIGXFSZ at its default action: reported, nothing left behind.
 cp direct.vdb before.vdb
 refused sigxfsz "cannot write before.vdb: write failed: File too large" bash -c 'ulimit -f 16; exec "$0" run --frames 1 --quiet -o before.vdb' "$bin"
 cmp -s before.vdb direct.vdb || fail "sigxfsz: before.vdb changed"
 no_temp_files sigxfsz
 
-# 6. SIGTERM while an output is written ends the process at once (it used to be swallowed and the
-#    write went on). The output is a FIFO: once the reader has some bytes, the write is under way,
+# 5. SIGTERM while an output is written ends the process at once (it is not swallowed while the
+#    write goes on). The output is a FIFO: once the reader has some bytes, the write is under way,
 #    and it cannot finish while the reader waits.
 mkfifo slow.vdb
 "$bin" run --frames 1 --quiet -o slow.vdb > /dev/null 2> sig-err.txt &
@@ -103,7 +103,7 @@ exec 3<&-
 grep -q "interrupted while writing an output" sig-err.txt || fail "signal during write: no message: $(cat sig-err.txt)"
 echo "PASS signal during write: rc $rc, $(tr '\n' ' ' < sig-err.txt)"
 
-# 13. The continue hint of an interrupted run names -o (and the other outputs), so that running it
+# 6. The continue hint of an interrupted run names -o (and the other outputs), so that running it
 #     as printed writes them. The run's stdout is a pipe of 4 KiB that is read up to the first
 #     frame's line and then left full: the signal arrives while the run is still in its frames.
 printf '{"clay": [{"shape": "box", "min": [0,0,0], "max": [7,7,7], "mass": 900}], "frames": 400,

@@ -9,7 +9,7 @@ bin=$(cd "$(dirname "$1")" && pwd)/$(basename "$1"); src=$2; build=$3; work=$4
 rm -rf "$work"; mkdir -p "$work"
 work=$(cd "$work" && pwd)
 cd "$src"
-scene=data/scenes/cube-small-plate.json
+scene=data/scenes/paper/cube-small-plate.json
 fail() { echo "FAIL: $*"; exit 1; }
 
 # 1. The curve on 1 and 2 threads, two rounds: a row per thread count, every hash equal.

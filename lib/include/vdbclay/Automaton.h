@@ -1,11 +1,11 @@
 /// @file Automaton.h
 /// @brief The virtual-clay cellular automaton on a sparse OpenVDB grid.
 ///
-/// An Automaton owns a reference to a MassGrid (openvdb::Int32Grid, background 0) and, optionally,
-/// an ObstacleGrid (openvdb::MaskGrid; active voxels are obstacles). Each step() applies the rule to
-/// every Margolus block of the current phase that can change: even steps use blocks whose minimum
-/// corner has even coordinates, odd steps blocks shifted by one voxel along every axis. 3D blocks
-/// are 2x2x2; in 2D the clay lives in the z = 0 layer and blocks are 2x2 in xy.
+/// An Automaton owns a reference to a MassGrid (openvdb::Int32Grid, background value 0) and,
+/// optionally, an ObstacleGrid (openvdb::MaskGrid; active voxels are obstacles). Each step()
+/// applies the rule to every Margolus block of the current phase that can change: even steps use
+/// blocks whose minimum corner has even coordinates, odd steps blocks shifted by one voxel along
+/// every axis. 3D blocks are 2x2x2; in 2D the clay lives in the z = 0 layer and blocks are 2x2 in xy.
 ///
 /// Guarantees:
 /// - Mass is conserved exactly (integers throughout; sums in 64 bits).
@@ -91,6 +91,9 @@ enum class StopReason {
 const char* stopReasonName(StopReason reason);
 
 class Automaton;
+namespace automaton_internal {
+struct AutomatonAccess; // the library's own hooks (lib/src/automaton/AutomatonInternal.h)
+}
 
 /// How settle() runs; settle(maxSteps, tolerance) is settle(SettleOptions{maxSteps, tolerance}).
 struct SettleOptions {
@@ -212,15 +215,6 @@ public:
     /// remainder hash follow the counter, so the continuation is identical to an unbroken run.
     /// Every block is reconsidered on the next two steps.
     void setStepCount(uint64_t steps);
-    /// Which blocks a step examines (blocksVisited; the results are the same either way). On (the
-    /// default), a block is examined again only where the cells that changed near it can let it
-    /// change: its own over cells, or cells that went over Tc or came down from over it. Off, every
-    /// block that overlaps a block changed in the last two steps is examined, as before round 8, so
-    /// that blocksVisited counts the same blocks however the automaton was built or resumed (a
-    /// Sculptor's try caps its work by that count).
-    void setPruneCandidates(bool on);
-    bool pruneCandidates() const;
-
     const AutomatonOptions& options() const;
     uint64_t stepCount() const; ///< steps run since construction; step parity gives the phase
     int64_t totalMass() const;  ///< tracked exactly; equals sum of the grid at every step
@@ -233,6 +227,7 @@ public:
     const ObstacleGridPtr& obstacles() const;
 
 private:
+    friend struct automaton_internal::AutomatonAccess;
     struct Impl;
     std::unique_ptr<Impl> mImpl;
 };

@@ -4,7 +4,7 @@
 /// Including <openvdb/openvdb.h> costs several seconds of compile time in every translation unit
 /// that sees it. vdbclay's public headers name grids only through these declarations, so a tool
 /// that links vdbclay pays for OpenVDB only in the files that build or read grids. The aliases are
-/// checked against OpenVDB's own (static_assert in lib/src/Automaton.cc).
+/// checked against OpenVDB's own (static_assert in lib/src/automaton/Automaton.cc).
 #pragma once
 
 #include <openvdb/version.h>

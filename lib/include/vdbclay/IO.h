@@ -1,5 +1,9 @@
 /// @file IO.h
-/// @brief Clay files (.vdb): writing atomically, reading with checks, describing; meshes; import.
+/// @brief Clay files (.vdb): writing atomically, reading with checks; clay from other .vdb files
+///        (fog volumes, level sets); a description of any .vdb.
+///
+/// Surface meshes are written by SurfaceMesh.h, pictures by Render.h, clay from a shape made by
+/// makeClay() (Shapes.h).
 #pragma once
 
 #include "vdbclay/Fwd.h"
@@ -10,6 +14,8 @@
 #include <string>
 
 namespace vdbclay {
+
+// ---- Clay files ----------------------------------------------------------------------------------
 
 /// What a clay file records beside the voxels (as grid metadata, names prefixed "vdbclay_").
 struct ClayMeta {
@@ -47,6 +53,13 @@ struct ClayFile {
 ///        of that name, or the grid is not an Int32Grid, or holds negative mass.
 ClayFile readClayFile(const std::string& path, const std::string& gridName = "mass");
 
+/// Gives @a mass the transform a clay file records: @a voxelSize world units per voxel, rotated for
+/// @a up (Shapes.h: UpAxis). writeSurfaceMesh() places its vertices through it.
+/// @throw Error if voxelSize is not positive and finite.
+void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up);
+
+// ---- Clay from other .vdb files ------------------------------------------------------------------
+
 /// The fog volume `vdbclay import` reads from @a path: @a gridName when it names a FloatGrid fog
 /// volume; with @a gridName empty, the first fog volume if the file holds no FloatGrid level set
 /// (level sets come first). Empty: import reads a level set instead.
@@ -75,40 +88,11 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
 /// @throw Error naming the file if it holds none of these, or as readClayFile.
 ClayFile readAsClay(const std::string& path, std::string& note);
 
+// ---- Any .vdb ------------------------------------------------------------------------------------
+
 /// A human-readable description of any .vdb: each grid's name, type, class, active voxel count,
 /// index bounding box, voxel size, metadata, and for Int32 grids the total mass.
 /// @throw Error as readClayFile.
 std::string describeVdb(const std::string& path);
-
-/// Writes the clay surface (openvdb::tools::volumeToMesh of the density at isovalue 0.5, i.e. where
-/// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension, in world units: the
-/// vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform),
-/// so the mesh lies on the .vdb and loadMesh() with the same voxel size and up axis puts it back on
-/// the same voxels. With @a keepClayVolume, every vertex then moves along its normal by one distance
-/// (at most half a voxel) so that the mesh encloses the clay's volume (the sum of min(mass / Tc, 1)
-/// over the cells): marching cubes cuts convex edges and rounds convex surfaces inward, and mesh
-/// clay made from the mesh then keeps the clay's volume. Atomic like writeClayFile.
-/// @throw Error on an unknown extension or a write failure.
-void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue = 0.5,
-                      bool keepClayVolume = false);
-
-/// Gives @a mass the transform a clay file records: @a voxelSize world units per voxel, rotated for
-/// @a up (Shapes.h: UpAxis).
-void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up);
-
-/// Writes @a text to @a path as writeClayFile writes a .vdb: atomically for a regular file, through
-/// it for a device or FIFO (never replacing it). @throw Error "cannot write PATH: REASON".
-void writeTextFile(const std::string& path, const std::string& text);
-
-/// For a signal handler that ends the process during a write: removes the temporary file of the
-/// write in progress, if any. Async-signal-safe (one unlink(2) of a name kept in a fixed buffer).
-void removePendingTempFile() noexcept;
-
-/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0), for
-/// the analytic shapes. Shapes that keepsVolume() (meshes, level sets) give every voxel
-/// round(massPerVoxel x the fraction of it they cover) instead (forEachVoxelCovered), so that the
-/// clay's mass is their volume x massPerVoxel; boundary voxels are under-full clay.
-/// @throw Error if massPerVoxel <= 0 or the shape is empty.
-MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);
 
 } // namespace vdbclay

@@ -12,8 +12,8 @@
 ///   below measures the inside of the object, as the paper's figures 3.2 and 4.2 show it.
 /// - A *surface voxel* of an occupied set is an occupied voxel with at least one face neighbour
 ///   that is not occupied.
-/// All of them are computed serially in coordinate-independent sums: the same grid gives the same
-/// numbers whatever its tree layout.
+/// Their sums are exact integers (or taken in the grid's coordinate order): the same grid gives the
+/// same numbers whatever its tree layout, and measureClay the same on any thread count.
 #pragma once
 
 #include "vdbclay/Fwd.h"

@@ -32,8 +32,8 @@ struct PushReport {
 enum class PushMode {
     /// The paper's push: into the nearest free voxel just past the tool's surface, along its normal.
     Surface,
-    /// A compressing push: spread evenly over the contiguous clay (m >= 0.3 Tc: kCompressFullNum /
-    /// kCompressFullDen) ahead of the tool along its normal. A tool with clay beside it (a small tool
+    /// A compressing push: spread evenly over the contiguous clay (m >= 0.3 Tc; thinner clay is a film,
+    /// pushed to the surface) ahead of the tool along its normal. A tool with clay beside it (a small tool
     /// in a large block) goes at most its contact size deep, each entered voxel's clay down its own
     /// column (a local rim); a tool that covers the clay it entered (a plate wider than the clay)
     /// compresses every column under it all the way, its clay shared evenly over all of them
@@ -45,14 +45,9 @@ const char* pushModeName(PushMode mode);
 /// "surface" or "compress". @throw Error naming @a name otherwise.
 PushMode parsePushMode(const std::string& name);
 
-/// A voxel counts as clay the compress push spreads over when m * 10 >= 3 * Tc. Measured against
-/// 0.9 Tc (docs/TRANSPORT.md): at 0.9 the partly filled rim under a plate is surface-pushed into
-/// the layer below every frame and piles up there (squeezed cylinder: top / mid radius 1.107 against
-/// 1.058 at 0.3, IoU 0.924 against 0.940); clay below 0.3 Tc is a thin film, pushed to the surface.
-constexpr int kCompressFullNum = 3, kCompressFullDen = 10;
-
 struct PushOptions {
     PushMode mode = PushMode::Surface;
+    /// How far (voxels, Chebyshev) a target may lie from its source, in [0, 1024].
     int maxSearch = 16;
     /// Tc, for the compress push's full test (read from the automaton when 0).
     int32_t threshold = 0;

@@ -85,8 +85,16 @@ public:
     /// (almost always), else after the next such step or at the next frame boundary. Pass an empty
     /// function to remove it. @a poll must be cheap (it runs between steps).
     void setStopRequest(std::function<bool()> poll);
-    /// True when the last run() or runFrame() returned early on the stop request.
+    /// True when the last run() or runFrame() returned early on the stop request or the memory budget.
     bool stopped() const;
+    /// The memory budget a run keeps as its clay grows: Scene::memoryBudget, defaultMemoryBudget()
+    /// when that is 0, kNoMemoryBudget for none. Unless none, every 64th stop poll (the points
+    /// setStopRequest names) measures the clay (clayMemoryInUse, plus the estimate's obstacles and
+    /// tools), and run() and runFrame() stop as on a stop request once that exceeds the budget.
+    uint64_t memoryBudget() const;
+    /// When the memory budget stopped the last run() or runFrame(): what the run needed then
+    /// (bytes); 0 otherwise (it ran on, or the stop request stopped it).
+    uint64_t outgrewBudget() const;
     /// Metadata for writing the current state with writeClayFile() as a file a scene's "start"
     /// continues from exactly (same clay, same step count, same content hash as an unbroken run):
     /// the scene's rule, seed, dimensions and voxel size, the step count, the frames finished, and

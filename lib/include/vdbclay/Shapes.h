@@ -1,5 +1,6 @@
 /// @file Shapes.h
-/// @brief Signed distance fields for tools, obstacles and clay: analytic shapes, level sets, meshes.
+/// @brief Signed distance fields for tools, obstacles and clay: analytic shapes, level sets, meshes;
+///        clay made from a shape (makeClay).
 ///
 /// All coordinates are in the clay grid's index space: voxel (i, j, k) has its centre at (i, j, k)
 /// and a voxel is inside a shape when the shape's distance at its centre is < 0. Distances are in
@@ -7,6 +8,7 @@
 /// distance is known to be >= 0, and callers never evaluate a shape outside it.
 #pragma once
 
+#include "vdbclay/Fwd.h"
 #include "vdbclay/Types.h"
 
 #include <array>
@@ -48,13 +50,15 @@ public:
     /// A short description for messages, e.g. "sphere (center [1,2,3], radius 4)".
     virtual std::string describe() const = 0;
     /// True for shapes that stand for a volume given in world units (meshes, level sets): makeClay
-    /// gives their boundary voxels mass in proportion to the part of each voxel they cover
-    /// (forEachVoxelCovered), so that the clay keeps their volume. False (the analytic shapes, in
-    /// voxel indices): a voxel is in or out by its centre (forEachVoxelInside).
+    /// gives their boundary voxels mass in proportion to the part of each voxel they cover, so that
+    /// the clay keeps their volume. False (the analytic shapes, in voxel indices): a voxel is in or
+    /// out by its centre.
     virtual bool keepsVolume() const { return false; }
-    /// For shapes that know their covered fractions better than forEachVoxelCovered's estimate from
-    /// distance() (closed meshes: exactly): calls @a covered(x, y, z, fraction) as
-    /// forEachVoxelCovered does and returns true; returns false (calling nothing) otherwise.
+    /// For shapes that know the part of each voxel they cover better than makeClay's estimate from
+    /// distance() (closed meshes: exactly): calls @a covered(x, y, z, fraction) for every voxel (only
+    /// the z = 0 layer when @a dimensions == 2) of which the shape covers a fraction in (0, 1], each
+    /// voxel once, in x, then y, then z order, and returns true; returns false (calling nothing)
+    /// otherwise.
     virtual bool coverage(int dimensions,
                           const std::function<void(int32_t, int32_t, int32_t, double)>& covered) const
     {
@@ -64,46 +68,6 @@ public:
     }
 };
 using ShapePtr = std::shared_ptr<const Shape>;
-
-/// The one rasterisation of vdbclay: calls @a inside(x, y, z) for every voxel whose centre lies
-/// inside @a shape (distance < 0), in x, then y, then z order, within shape.bounds() (only the
-/// z = 0 layer when @a dimensions == 2). Voxels for which @a skip(x, y, z) is true are passed over
-/// without evaluating the shape (e.g. voxels already marked). Clay, obstacles, tools and the
-/// accuracy metrics all go through it.
-template <typename Inside, typename Skip>
-void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside, Skip&& skip)
-{
-    Box b = shape.bounds();
-    if (dimensions == 2) {
-        b.min[2] = b.min[2] > 0 ? b.min[2] : 0;
-        b.max[2] = b.max[2] < 0 ? b.max[2] : 0;
-    }
-    if (b.empty()) return;
-    for (int32_t x = b.min[0]; x <= b.max[0]; ++x)
-        for (int32_t y = b.min[1]; y <= b.max[1]; ++y)
-            for (int32_t z = b.min[2]; z <= b.max[2]; ++z) {
-                if (skip(x, y, z)) continue;
-                if (shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0) inside(x, y, z);
-            }
-}
-template <typename Inside> void forEachVoxelInside(const Shape& shape, int dimensions, Inside&& inside)
-{
-    forEachVoxelInside(shape, dimensions, inside, [](int32_t, int32_t, int32_t) { return false; });
-}
-
-/// The coverage variant of forEachVoxelInside, for shapes that keepsVolume(): calls
-/// @a covered(x, y, z, fraction) for every voxel (only the z = 0 layer when @a dimensions == 2) of
-/// which the shape covers a fraction in (0, 1], each voxel once, in x, then y, then z order.
-/// The fraction is the shape's own coverage() when it has one (closed meshes: the exact volume of
-/// the mesh inside the voxel, by column integrals), else estimated from distance() at voxel centres:
-/// exact where the distance field shows planes near the voxel (a face, a convex edge or corner as
-/// the max of planes, a concave edge as their min), else clamp(0.5 - distance(centre), 0, 1), the
-/// part of the voxel below a plane at that distance averaged over the plane's orientations,
-/// corrected for curvature on curved surfaces (a ball of radius 4 voxels within 0.1 %). 2D: the
-/// plain ramp.
-/// docs/INTEROP.md, "Coverage".
-void forEachVoxelCovered(const Shape& shape, int dimensions,
-                         const std::function<void(int32_t, int32_t, int32_t, double)>& covered);
 
 /// @throw Error (naming the parameter) on NaN/infinite values, radius/height <= 0, min > max,
 /// an axis other than 0, 1, 2.
@@ -163,5 +127,23 @@ ShapePtr loadLevelSet(const std::string& path, double voxelSize = 1.0, const std
 /// out of range, or over the budget (with the estimate).
 ShapePtr loadMesh(const std::string& path, double voxelSize = 1.0, UpAxis up = UpAxis::Y,
                   const Placement& placement = Placement(), uint64_t memoryBudget = 0);
+
+// ---- Clay from a shape ---------------------------------------------------------------------------
+
+/// Clay of @a massPerVoxel in every voxel whose centre lies inside @a shape (2D: only z = 0), for
+/// the analytic shapes. Shapes that keepsVolume() (meshes, level sets) give every voxel
+/// round(massPerVoxel x the fraction of it they cover) instead, so that the clay's mass is their
+/// volume x massPerVoxel; boundary voxels are under-full clay. The fraction is the shape's own
+/// coverage() when it has one (closed meshes: the exact volume of the mesh inside the voxel, by
+/// column integrals), else estimated from distance() at voxel centres: exact where the distance
+/// field shows planes near the voxel (a face, a convex edge or corner as the max of planes, a
+/// concave edge as their min), else clamp(0.5 - distance(centre), 0, 1), the part of the voxel
+/// below a plane at that distance averaged over the plane's orientations, corrected for curvature
+/// on curved surfaces (a ball of radius 4 voxels within 0.1 %); 2D: the plain ramp.
+/// docs/INTEROP.md, "Coverage". The grid is named "mass", one world unit per voxel (setClayTransform
+/// in IO.h gives it a clay file's transform).
+/// @throw Error if massPerVoxel <= 0, dimensions is not 2 or 3, or the clay would hold no voxel (no
+///        voxel centre inside the shape, or none covered enough to hold a unit of mass).
+MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions = 3);
 
 } // namespace vdbclay

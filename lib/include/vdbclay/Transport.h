@@ -1,6 +1,6 @@
 /// @file Transport.h
 /// @brief Global transport: displaced clay moved through the body to where there is room, in one
-///        pass per frame, before the paper's automaton cleans up locally (lib/src/Transport.cc).
+///        pass per frame, before the paper's automaton cleans up locally (lib/src/transport/).
 #pragma once
 
 #include "vdbclay/Types.h"
@@ -22,38 +22,25 @@ const char* transportName(Transport transport);
 /// "local" or "global". @throw Error naming @a name otherwise.
 Transport parseTransport(const std::string& name);
 
+/// What a caller chooses of the global layer (the solver's own tuning is internal).
 struct GlobalTransportOptions {
-    /// How far (face steps through full clay) from the over cells the layer may move clay: the
-    /// plastic zone. 0: the whole connected body. When a region within the reach has no room, the
-    /// reach is doubled until it has, or the whole body is reached (then NoRoom).
+    /// How far (face steps through full clay) from the over cells on the clay's boundary (where the
+    /// tool touched) the layer may move clay: the plastic zone. 0: the whole connected body. When a
+    /// region within the reach has no room, the reach is doubled until it has, or the whole body is
+    /// reached (then NoRoom).
     int64_t reach = 0;
     /// Only the cells over Tc in this box move (the push's region); empty: every cell of the grid.
     /// Either way nothing runs when the automaton holds no overload (residualOverload() == 0).
     Box seedRegion;
-    /// The reach counts from the over cells on the clay's boundary (a face on an obstacle, a tool or a
-    /// cell with room: where the tool touched), not from every over cell: the over cells a compress
-    /// push spread down its chains add no reach of their own (one the reach misses still starts its
-    /// own flood, 2 steps deep). false: `reach` from every over cell (round 4).
-    bool reachFromContact = true;
-    /// Active-set rounds (each one Poisson solve) at most.
-    int maxRounds = 12;
-    /// Conjugate gradients stop at this residual, relative to the right-hand side. The routing is
-    /// exact whatever it is; 1e-5 and 1e-3 gave the same squeezed shape (docs/TRANSPORT.md).
-    double tolerance = 1e-4;
-    /// The active-set rounds solve to this looser residual until the set stops changing (they only
-    /// locate the rim), then once more to `tolerance` from there (and on, if that changes the set).
-    /// At most `tolerance`: every round to `tolerance`. 64^3 press: 286 -> 192 CG iterations.
-    double roundTolerance = 1e-2;
-    /// Solves with at least this many unknowns are preconditioned by an aggregation multigrid
-    /// V-cycle (iterations nearly flat in N); smaller ones by MIC(0) (cheaper per iteration).
-    /// 0: always multigrid. 16,000 (round 5; 20,000 before): the compress strokes' domains (19,000-
-    /// 24,500) always take the multigrid (13 iterations a frame, against 36-49 with MIC(0) on the frames
-    /// under 20,000: the 512-wide stroke's every frame), the surface strokes' (11,800-14,400) MIC(0).
-    uint64_t multigridMin = 16000;
     /// Worker threads for the solver's vector operations: 0 all cores, 1 serial. The result does
     /// not depend on it (fixed chunks, partial sums added in chunk order).
     int threads = 0;
 };
+
+namespace transport_internal {
+struct Workspace;
+struct WorkspaceAccess;
+} // namespace transport_internal
 
 /// The global layer's arrays (cell lists, matrix, multigrid hierarchy, work vectors), kept between
 /// transportGlobally() calls. Opaque; not shared between threads. Its memory is what the largest call
@@ -65,8 +52,10 @@ public:
     GlobalTransportWorkspace(const GlobalTransportWorkspace&) = delete;
     GlobalTransportWorkspace& operator=(const GlobalTransportWorkspace&) = delete;
     void release();
-    struct Impl;
-    std::unique_ptr<Impl> mImpl;
+
+private:
+    friend struct transport_internal::WorkspaceAccess;
+    std::unique_ptr<transport_internal::Workspace> mImpl;
 };
 
 struct GlobalTransportReport {
@@ -77,7 +66,7 @@ struct GlobalTransportReport {
     uint64_t solves = 0;          ///< Poisson solves (active-set rounds, over every reach tried)
     uint64_t iterations = 0;      ///< conjugate-gradient iterations, all solves
     uint64_t multigridSolves = 0; ///< of the solves, those preconditioned by multigrid
-    uint64_t multigridReused = 0; ///< of those, the ones that reused the previous round's hierarchy
+    uint64_t multigridReused = 0; ///< of those, the ones that reused an earlier active-set round's hierarchy
     int64_t reach = 0;            ///< the reach finally used (0: the whole body)
     /// Some over clay is walled in (obstacles, tools) with no room in its connected body: its
     /// Poisson problem is singular. That clay is left where it is (the automaton reports NoRoom).
@@ -94,15 +83,16 @@ struct GlobalTransportReport {
 /// (m >= Tc, connected by faces, not obstacles) to cells with room, in integers: a pressure p
 /// solves the obstacle problem (Laplace p = m - Tc on the full cells and on every cell that would
 /// receive more than its room; p = 0 on the others; no flux into obstacles), by active-set rounds
-/// of MIC(0)-preconditioned conjugate gradients; then every solved cell, in order of decreasing p,
-/// sends its integer excess to its lower-p face neighbours pro rata of the drop (largest-remainder
-/// rounding). Every solved cell that had excess ends at exactly Tc; mass is exact by construction;
-/// obstacles are never entered or crossed. Deterministic for any thread count. Written through
-/// Automaton::edit(), so the automaton wakes the region for its cleanup.
-/// @throw Error if options are invalid; nothing is changed then.
+/// of preconditioned conjugate gradients (MIC(0) for small solves, an aggregation multigrid for
+/// large ones); then every solved cell, in order of decreasing p, sends its integer excess to its
+/// lower-p face neighbours pro rata of the drop (largest-remainder rounding). Every solved cell that
+/// had excess ends at exactly Tc; mass is exact by construction; obstacles are never entered or
+/// crossed. Deterministic for any thread count. Written through Automaton::setMasses(), so the
+/// automaton wakes the region for its cleanup.
+/// @throw Error if @a options.reach < 0; nothing is changed then.
 /// @a workspace (optional): arrays kept from one call to the next (a Sculptor keeps one), so that
-/// a frame reuses the last frame's memory instead of page-faulting fresh arrays (round 4: ~10 % of
-/// the 128^3 press was the kernel zeroing pages). Holds nothing a result depends on.
+/// a frame reuses the last frame's memory instead of page-faulting fresh arrays (zeroing fresh pages
+/// is ~10 % of the 128^3 press otherwise). Holds nothing a result depends on.
 GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransportOptions& options = {},
                                         GlobalTransportWorkspace* workspace = nullptr);
 

@@ -1,36 +1,34 @@
-// The virtual-clay automaton on a sparse OpenVDB grid: the public Automaton (see Automaton.h).
+// The automaton subsystem: the virtual-clay cellular automaton on a sparse OpenVDB grid, and the
+// public Automaton (Automaton.h) that drives it.
 //
-// Design
-// ======
-// The automaton is split along its concepts, one file each:
-//   BlockMasks.h   blocks, anchors and 64-bit block masks; the addressing tables (pure, no OpenVDB)
-//   Candidates.*   which blocks a step examines: the last two steps' changes, in anchor order; while
-//                  the leaf table is valid, accumulated per table anchor (dense mode, filled by the
-//                  pass itself), otherwise merged from sorted lists
-//   PassCrew.*     the threads a pass runs on, kept from one pass to the next (no fork/join a step)
-//   Kernel.*       the pass over the candidates: per anchor its leaves, per block the rule; and
-//                  the flat leaf table (LeafTable), which hands the pass an anchor's leaves by one
-//                  hash lookup; cleared on every edit, resync and grown leaf, rebuilt lazily
-//   this file      the state (mass, overload, bounds), the stages of a step, validation and scans,
-//                  edits, settle() and the no-room flood
+// Margolus phases on 8^3 leaves
+// =============================
+// A step applies the rule (Rules.h) to every block of its phase that can change: even steps use the
+// 2x2x2 blocks (2D: 2x2 in z = 0) whose minimum corner has even coordinates, odd steps the blocks
+// shifted by one voxel along every axis. The blocks of one phase are disjoint, so they can be
+// updated in any order and in parallel. OpenVDB leaves are 8^3 voxels: the 64 even blocks of a leaf
+// lie inside it; on odd steps the 64 blocks whose maximum corner lies in a leaf (its anchor) reach
+// into its lower neighbours (-x, -y, -z and their combinations) when they start at local -1. So
+// every block has one anchor leaf and one bit in a 64-bit mask per anchor (BlockMasks.h), and a
+// step's work list is one item per anchor: its candidate blocks.
 //
-// Stages of step(), each timed into StageSeconds:
-//   gather       Candidates::gather: one entry per anchor. Dense mode (nearly every step): in the
-//                leaf table's column order (x, then y, then z), a scan of the anchors marked by the
-//                last passes; on several threads the part of it below the other chunks' reach was
-//                already drained by the last pass's chunk 0 (predrain). Merged mode (after edits,
-//                no table): in layer order (y, z, x: the paper's horizontal p layers).
-//   repartition  contiguous ranges of that list (slabs of columns in dense mode: two chunks meet on
-//                a y-z face, where the paper's horizontal layers met on a whole x-z face inside the
-//                thin active slab under a tool; docs/PERFORMANCE.md round 16), one chunk per thread of about
-//                equal candidate blocks, run on the pass's crew (PassCrew.h: threads kept between
-//                passes; PassSplit.h for the other splits), each range through processRange
-//                (Kernel.h: what a task may write and why it is safe);
-//                in dense mode the pass also ORs its items' changes into the candidates of the
-//                next two steps (DenseSink, order-free), each thread into its own lane
-//                (Candidates::lanes), which the gathers OR together. Includes leaf table builds.
-//                Also measured: the thread-seconds the passes' shares ran and those their threads
-//                sat idle (StageSeconds::passBusy, passIdle: how well a pass used its threads).
+// Candidate blocks
+// ================
+// A block can change only if one of its cells changed in the previous two steps (Candidates.h):
+// the candidates of a step are the blocks changed two steps ago plus the blocks of this phase that
+// overlap one changed on the last step, pruned further to those whose cells can let them change.
+// After construction, resync() or an edit the region concerned is examined whole for two steps. The
+// cost of a step follows the blocks that changed recently, not the volume; a settled region costs
+// nothing. Two ways to build the list, same blocks: dense mode, while the flat leaf table
+// (LeafTable.h) is valid (nearly every step of a settling run), accumulates per table anchor and
+// is filled by the pass itself; merged mode (after edits) merges sorted lists.
+//
+// Stages of step(), each timed into StageSeconds
+// ==============================================
+//   gather       Candidates::gather: one entry per anchor, in the leaf table's column order (x,
+//                then y, then z) in dense mode, in layer order (y, z, x: the paper's horizontal
+//                layers) in merged mode.
+//   repartition  the pass over the work list (PassEngine.h, Kernel.h), leaf table builds included.
 //   grow         a block that must write into a missing leaf is not written in the pass but queued;
 //                afterwards, serially, its leaves are created (touchLeaf) and the block is updated.
 //                Since blocks of a phase are disjoint, doing it later gives the identical result.
@@ -40,41 +38,68 @@
 // arata, and under cells only gain), and a leaf is only created to receive clay, so no pruning is
 // needed after a step; edit() prunes leaves a tool emptied.
 //
-// Determinism. Each block's result depends only on its cells and on blockHash(origin, step, seed).
-// Blocks of a phase are disjoint, so neither the partition nor the order matters; the reductions are
-// integer sums and maxima. Results are bit-identical for any thread count and for threads = 1,
-// which runs the same body without TBB. tests/TestGolden.cc pins whole runs per rule and dimension.
+// The pass engine's threading model
+// =================================
+// On one thread (threads = 1) the calling thread runs the whole work list through processRange.
+// On n threads (PassEngine.h):
+//   chunks    the list is cut into n contiguous chunks, one per thread (in dense mode slabs of
+//             columns, which meet on small y-z faces); each item runs in exactly one chunk.
+//   crew      the chunks run on a PassCrew (PassCrew.h): helper threads kept from one pass to the
+//             next, a pass published by one atomic store, so a step pays no fork/join. Crew lane l
+//             records its items' changes into its own lane of the next steps' candidates
+//             (Candidates::lanes): plain ORs, no word written by two threads.
+//   balance   the cuts follow each chunk's measured seconds per candidate block in this phase
+//             (PassBalance.h), so that the chunks finish together.
+//   predrain  chunk 0, once done, drains the next step's candidates that the later chunks cannot
+//             reach (Candidates::predrain): that part of the serial gather runs while the other
+//             threads still work (chunk 0 starts with a smaller share for it).
+// What a task of the pass may write, and why that is safe, is Kernel.h's contract. The passes'
+// thread-seconds, busy and idle, are reported (StageSeconds::passBusy, passIdle).
+//
+// Determinism
+// ===========
+// Each block's result depends only on its cells and on blockHash(origin, step, seed). Blocks of a
+// phase are disjoint, so neither the cuts nor the order matter; the reductions are integer sums and
+// maxima, and the candidates' lanes are ORed (commutative and idempotent). Only where the list is
+// cut depends on time. Results are bit-identical for any thread count and for threads = 1, which
+// runs the same kernel on the calling thread; tests/TestAutomaton.cc runs one scene on 1, 2, 3 and 8
+// threads and tests/TestGolden.cc pins whole runs per rule and dimension.
 //
 // Overflow. No result can exceed the sum of its block, which is at most 8 times the largest cell.
 // The automaton tracks an upper bound of the largest cell; while 8 x bound fits in int32 nothing can
 // overflow. Above that, each step first runs the pass read-only and refuses (throws) before writing
 // if any block's result would not fit in int32.
+//
+// Files, lower first: BlockMasks.h (block masks and addressing, pure), Rules.cc and RulesImpl.h
+// (the rules), Candidates.* (which blocks a step examines), LeafTable.* (an anchor's leaves by one
+// lookup), Cpu.* (run-time instruction-set dispatch), OverFilter.* (the over-cell filter),
+// BlockSimd.h (a block in SSE2 registers), Kernel.* (the pass over a range), PassCrew.*,
+// PassBalance.* and PassEngine.* (the pass on several threads), NoRoom.* (the no-room flood), and
+// this file: the state (mass, overload, bounds), the stages of a step, validation and scans, edits
+// and settle().
 
 #include "vdbclay/Automaton.h"
 #include "vdbclay/Metrics.h"
 
+#include "automaton/AutomatonInternal.h"
 #include "automaton/BlockMasks.h"
 #include "automaton/Candidates.h"
-#include "core/Format.h"
 #include "automaton/Kernel.h"
-#include "automaton/PassBalance.h"
-#include "automaton/PassCrew.h"
-#include "automaton/PassSplit.h"
+#include "automaton/LeafTable.h"
+#include "automaton/NoRoom.h"
+#include "automaton/PassEngine.h"
+#include "core/Format.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
 #include <climits>
-#include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <sstream>
 #include <type_traits>
 #include <vector>
@@ -87,11 +112,7 @@ static_assert(std::is_same<ObstacleGrid, openvdb::MaskGrid>::value, "ObstacleGri
 namespace {
 
 using openvdb::Coord;
-using MassTree = openvdb::Int32Tree;
-using MassLeaf = MassTree::LeafNodeType;
-using ObsTree = openvdb::MaskTree;
-using ObsLeaf = ObsTree::LeafNodeType;
-using namespace automaton_internal;
+using namespace automaton_internal; // MassTree, MassLeaf, ObsTree, ObsLeaf (LeafTable.h) among them
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
@@ -157,18 +178,11 @@ struct Automaton::Impl {
     Candidates candidates;
     LeafTable leafTable;           // cleared whenever a leaf may appear or vanish, or the obstacles change
     uint64_t workWithoutTable = 0; // anchors passed through the accessors since the last build
-    bool prune = true;             // setPruneCandidates
+    bool prune = true;             // automaton_internal::setPruneCandidates
+    PassEngine engine;             // the pass on the automaton's threads
+    PassSeconds passSeconds;       // this step's passes so far: StageSeconds::passBusy, passIdle
 
-    // scratch, reused between steps
-    std::vector<WorkItem> work;
-    std::vector<size_t> bounds;          // runPassWeighted's chunks
-    std::vector<PassTotals> chunkTotals; // and their totals
-    std::vector<uint64_t> blockSums;     // and the candidate blocks up to each item
-    std::unique_ptr<PassCrew> crew;      // runPassWeighted's threads (PassSplit::crew), made at first use
-    PassBalance balance;                 // runPassWeighted's shares, from its chunks' measured speed
-    std::vector<uint64_t> cutTargets;    // runPassWeighted's cumulative block counts per cut
-    std::vector<PassBalance::Measure> chunkMeasures; // runPassWeighted's chunks' blocks and time
-    double passBusy = 0, passIdle = 0; // this step's passes so far: StageSeconds::passBusy, passIdle
+    std::vector<WorkItem> work; // the step's work list, reused between steps
 
     bool is3D() const { return opts.dimensions == 3; }
     /// The threads a pass may use: the Automaton's arena's, or (threads = 0) the caller's arena's.
@@ -184,8 +198,7 @@ struct Automaton::Impl {
     {
         if (threads < 0) throw Error("threads must be >= 0, got " + std::to_string(threads));
         opts.threads = threads;
-        crew.reset();
-        balance.reset();
+        engine.reset();
         arena.reset();
         if (threads > 1) arena = std::make_unique<tbb::task_arena>(threads);
     }
@@ -375,163 +388,20 @@ struct Automaton::Impl {
         in.dryRun = dryRun;
         in.table = leafTable.valid() ? &leafTable : nullptr;
         in.prune = prune;
-        // The pass records its items' changes as it goes; with several threads each into its own
-        // lane (atomic ORs into shared words cost the pass its second thread: press 128^3 1.1x, and
-        // recording serially after the pass left 0.4 s of 2.2 on one core).
-        if (!dryRun && in.table) {
-            in.sinkLanes = 1;
-            if (opts.threads != 1) in.sinkLanes = passLanes();
-            in.sink = candidates.lanes(in.sinkLanes);
-        }
         return in;
     }
 
+    /// The step's pass (or its overflow check, @a dryRun) over the work list, on the pass engine.
     PassTotals runPass(int phase, bool dryRun)
     {
-        PassTotals tot;
-        if (work.empty()) return tot;
+        if (work.empty()) return PassTotals();
         const PassInput in = passInput(phase, dryRun);
-        const auto start = Clock::now();
-        if (opts.threads == 1) {
-            processRange(in, work.data(), 0, work.size(), tot);
-            passBusy += secondsSince(start);
-            return tot;
-        }
-        // The pass's thread-seconds: every lane of the arena for its whole time, of which its
-        // shares ran `busy` (StageSeconds::passIdle is the rest).
-        const int lanes = passLanes();
-        double busy = 0;
-        if (passSplit().weighted) {
-            tot = runPassWeighted(in, busy);
-        } else {
-            tot = runPassAuto(in, busy);
-        }
-        const double span = secondsSince(start);
-        passBusy += busy;
-        passIdle += std::max(0.0, double(lanes) * span - busy);
-        return tot;
-    }
-
-    /// Round 4's split (VDBCLAY_PASS_SPLIT=auto): TBB's parallel_reduce over the items. Adds to
-    /// @a busy the seconds its ranges ran.
-    PassTotals runPassAuto(const PassInput& in, double& busy)
-    {
-        struct Body {
-            const PassInput* in;
-            WorkItem* work;
-            PassTotals tot;
-            double busy = 0;
-            Body(const PassInput* i, WorkItem* w) : in(i), work(w) {}
-            Body(Body& o, tbb::split) : in(o.in), work(o.work) {}
-            void operator()(const tbb::blocked_range<size_t>& r)
-            {
-                const auto start = Clock::now();
-                processRange(*in, work, r.begin(), r.end(), tot);
-                busy += secondsSince(start);
-            }
-            void join(Body& o)
-            {
-                tot.join(o.tot);
-                busy += o.busy;
-            }
-        };
-        Body body(&in, work.data());
-        inArena([&] { tbb::parallel_reduce(tbb::blocked_range<size_t>(0, work.size(), 4), body); });
-        busy += body.busy;
-        return std::move(body.tot);
-    }
-
-    /// The weighted split (passSplit). Same items, same per-item work, totals joined (sums, maxima,
-    /// the first overflow, deferred blocks sorted later): the result is that of any other partition.
-    /// Adds to @a busy the seconds its chunks ran.
-    PassTotals runPassWeighted(const PassInput& in, double& busy)
-    {
-        const PassSplit split = passSplit();
-        const size_t n = work.size();
-        // Candidate blocks per item, counted once (the cut below reads them again).
-        blockSums.resize(n);
-        uint64_t total = 0;
-        for (size_t i = 0; i < n; ++i) {
-            total += popcount64(work[i].mask);
-            blockSums[i] = total;
-        }
-        PassTotals tot;
-        if (total < split.minBlocks) {
-            PassInput one = in;
-            one.sinkLanes = 1; // this thread records into lane 0
-            const auto start = Clock::now();
-            processRange(one, work.data(), 0, n, tot);
-            busy += secondsSince(start);
-            return tot;
-        }
-        const int threads = passLanes();
-        const size_t chunks =
-            std::min({n, size_t(std::max(threads, 1)) * size_t(split.perThread), PassCrew::kMaxChunks});
-        // The chunks' shares of the blocks: by their measured speed in this phase (PassBalance.h),
-        // or until it is known (or with balance off) chunk 0 firstShare % of an even share (it also
-        // predrains) and the others the rest evenly.
-        if (split.balance)
-            balance.cuts(in.phase, chunks, total, split.firstShare, cutTargets);
-        else
-            PassBalance::fixedCuts(chunks, total, split.firstShare, cutTargets);
-        bounds.clear();
-        bounds.push_back(0);
-        size_t cut = 1;
-        for (size_t i = 0; i + 1 < n && cut < chunks; ++i) {
-            if (blockSums[i] >= cutTargets[cut]) {
-                bounds.push_back(i + 1);
-                ++cut;
-            }
-        }
-        bounds.push_back(n);
-        const size_t m = bounds.size() - 1;
-        chunkTotals.assign(m, PassTotals());
-        chunkMeasures.assign(m, PassBalance::Measure());
-        // Chunk 0, once done, drains the next step's candidates that the later chunks cannot reach
-        // (Candidates::predrain), on its thread while theirs still run: that much less serial gather.
-        const uint32_t firstOfRest =
-            split.predrain && in.sink && !in.dryRun && m >= 2 ? work[bounds[1]].entry : kNoEntry;
-        // One chunk, as any lane or task runs it: its items, then (chunk 0) the predrain.
-        auto runChunk = [&](size_t c, const PassInput& input) {
-            const auto start = Clock::now();
-            processRange(input, work.data(), bounds[c], bounds[c + 1], chunkTotals[c]);
-            if (c == 0 && firstOfRest != kNoEntry) candidates.predrain(in.phase, firstOfRest);
-            chunkMeasures[c] = {chunkTotals[c].examined, secondsSince(start)};
-        };
-        if (split.crew) {
-            // The crew has a lane per sink lane (both are the arena's concurrency): lane l records
-            // into sink lane l. (Were there more, a lane without a sink lane records nothing and
-            // flags its chunk sinkMissed: record() then records every item. It must not fall back
-            // to another lane's sink: two threads would write the same words.)
-            if (crew && crew->forked()) crew.reset(); // a fork's child: the helpers are the parent's
-            if (!crew || crew->lanes() != threads) crew = std::make_unique<PassCrew>(threads - 1);
-            const PassCrew::Body body = [&](size_t c, int lane) {
-                PassInput own = in;
-                if (in.sink) {
-                    own.sink = lane < in.sinkLanes ? in.sink + lane : nullptr;
-                    own.sinkLanes = 1;
-                }
-                runChunk(c, own);
-                if (in.sink && !own.sink) chunkTotals[c].sinkMissed = true;
-            };
-            crew->run(m, body);
-        } else {
-            inArena([&] {
-                tbb::parallel_for(
-                    tbb::blocked_range<size_t>(0, m, 1),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t c = r.begin(); c != r.end(); ++c)
-                            runChunk(c, in);
-                    },
-                    tbb::simple_partitioner());
-            });
-        }
-        for (const PassTotals& t : chunkTotals)
-            tot.join(t);
-        for (const PassBalance::Measure& c : chunkMeasures)
-            busy += c.seconds;
-        if (split.balance && !in.dryRun && m == chunks) balance.measured(in.phase, m, chunkMeasures.data());
-        return tot;
+        const int lanes = opts.threads == 1 ? 1 : passLanes();
+        // In dense mode the pass records its items' changes as it goes, each thread into its own
+        // lane (atomic ORs into shared words cost the pass its second thread, and recording
+        // serially after the pass costs a fifth of a step on one core).
+        const DenseSink* sinks = !dryRun && in.table ? candidates.lanes(lanes) : nullptr;
+        return engine.run(in, sinks, work, lanes, candidates, passSeconds);
     }
 
     [[noreturn]] void throwOverflow(const PassTotals& tot, int phase)
@@ -574,15 +444,15 @@ struct Automaton::Impl {
         rep.seconds.gather = secondsSince(t0);
 
         t0 = Clock::now();
-        passBusy = passIdle = 0;
+        passSeconds = PassSeconds();
         if (maxBound > INT32_MAX / 8) {
             const PassTotals check = runPass(phase, /*dryRun=*/true);
             if (check.overflow) throwOverflow(check, phase);
         }
         PassTotals tot = runPass(phase, /*dryRun=*/false);
         rep.seconds.repartition = buildSeconds + secondsSince(t0);
-        rep.seconds.passBusy = passBusy;
-        rep.seconds.passIdle = passIdle;
+        rep.seconds.passBusy = passSeconds.busy;
+        rep.seconds.passIdle = passSeconds.idle;
         if (tot.overflow) throwOverflow(tot, phase); // unreachable while maxBound holds
 
         t0 = Clock::now();
@@ -657,78 +527,32 @@ struct Automaton::Impl {
 
     bool settled() const { return overload == 0 || quietSteps >= 2; }
 
-    /// True when the overload provably cannot vanish: flooding from every over cell through the
-    /// non-obstacle cells (face neighbours; 2D: in z = 0) closes on walled-in regions that hold more
-    /// than Tc per cell. Gives up (false) as soon as the cells reached have room for the whole
-    /// overload, or are more than ceil(total mass / Tc) (they could hold all the clay there is):
-    /// the cost is bounded by the clay's volume.
     bool overloadHasNoRoom()
     {
-        if (overload == 0) return false;
-        const int64_t tc = rule.threshold;
-        const uint64_t limit = uint64_t((totalMass + tc - 1) / tc);
-        const ObsTree* ot = obsTree();
-        std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
-        if (ot) oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObsTree, false>>(*ot);
-        openvdb::MaskTree seen(false);
-        openvdb::tree::ValueAccessor<openvdb::MaskTree> sacc(seen);
-        openvdb::tree::ValueAccessor<const MassTree, false> macc(tree());
-        std::vector<Coord> stack;
-        for (auto it = tree().cbeginValueOn(); it; ++it) {
-            if (int64_t(*it) <= tc || obstacleAt(oacc.get(), it.getCoord())) continue;
-            stack.push_back(it.getCoord());
-            sacc.setValueOn(it.getCoord());
-        }
-        static const Coord kFace[6] = {Coord(1, 0, 0),  Coord(-1, 0, 0), Coord(0, 1, 0),
-                                       Coord(0, -1, 0), Coord(0, 0, 1),  Coord(0, 0, -1)};
-        const int faces = is3D() ? 6 : 4;
-        uint64_t cellsSeen = 0;
-        int64_t massSeen = 0, room = 0;
-        while (!stack.empty()) {
-            const Coord c = stack.back();
-            stack.pop_back();
-            if (++cellsSeen > limit) return false;
-            const int64_t m = macc.getValue(c);
-            massSeen += m;
-            if (m < tc && (room += tc - m) >= overload) return false;
-            for (int f = 0; f < faces; ++f) {
-                const Coord q = c + kFace[f];
-                if (sacc.isValueOn(q) || obstacleAt(oacc.get(), q)) continue;
-                sacc.setValueOn(q);
-                stack.push_back(q);
-            }
-        }
-        return massSeen > tc * int64_t(cellsSeen);
+        return automaton_internal::overloadHasNoRoom(tree(), obsTree(), rule.threshold, overload, totalMass,
+                                                     is3D());
     }
 };
 
+// ---- the library's own hooks (AutomatonInternal.h) -------------------------------------------------
+
 namespace automaton_internal {
-PassSplit& passSplit()
+
+struct AutomatonAccess {
+    static Automaton::Impl& impl(Automaton& a) { return *a.mImpl; }
+    static const Automaton::Impl& impl(const Automaton& a) { return *a.mImpl; }
+};
+
+void setPruneCandidates(Automaton& automaton, bool on)
 {
-    static PassSplit split = [] {
-        PassSplit p;
-        const char* env = std::getenv("VDBCLAY_PASS_SPLIT");
-        if (env && std::strcmp(env, "auto") == 0) {
-            p.weighted = false;
-            return p;
-        }
-        const char* pre = std::getenv("VDBCLAY_PASS_PREDRAIN");
-        if (pre && std::strcmp(pre, "0") == 0) p.predrain = false;
-        const char* crew = std::getenv("VDBCLAY_PASS_CREW");
-        if (crew && std::strcmp(crew, "0") == 0) p.crew = false;
-        const char* balance = std::getenv("VDBCLAY_PASS_BALANCE");
-        if (balance && std::strcmp(balance, "0") == 0) p.balance = false;
-        if (!env || std::strncmp(env, "weighted", 8) != 0) return p;
-        int k = 1, first = p.firstShare;
-        unsigned long long m = 0;
-        const int got = std::sscanf(env, "weighted:%d:%llu:%d", &k, &m, &first);
-        if (got >= 1 && k >= 1 && k <= 64) p.perThread = k;
-        p.minBlocks = m;
-        if (got >= 3 && first >= 1 && first <= 100) p.firstShare = first;
-        return p;
-    }();
-    return split;
+    AutomatonAccess::impl(automaton).prune = on;
 }
+
+bool pruneCandidates(const Automaton& automaton)
+{
+    return AutomatonAccess::impl(automaton).prune;
+}
+
 } // namespace automaton_internal
 
 // ---- public API ----------------------------------------------------------------------------------
@@ -966,16 +790,6 @@ const AutomatonOptions& Automaton::options() const
 {
     return mImpl->opts;
 }
-void Automaton::setPruneCandidates(bool on)
-{
-    mImpl->prune = on;
-}
-
-bool Automaton::pruneCandidates() const
-{
-    return mImpl->prune;
-}
-
 uint64_t Automaton::stepCount() const
 {
     return mImpl->stepCount;

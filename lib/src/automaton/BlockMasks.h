@@ -251,7 +251,7 @@ template <bool D3> inline uint32_t neededLeaves(uint64_t mask)
     return need;
 }
 
-/// Addressing of the over-cell filter (Kernel.cc, overBlocks), 3D. A column is the 4 blocks of one
+/// Addressing of the over-cell filter (OverFilter.cc, overBlocks), 3D. A column is the 4 blocks of one
 /// phase with the same (bx, by), numbered col = bx + 4 by (so block bit = col + 16 bz). Its cells lie
 /// in 4 z-rows of a leaf (8 consecutive int32, z = 0-7), row r = dx + 2 dy at local x = 2 bx - phase
 /// + dx, y = 2 by - phase + dy: in the anchor's leaf, or on the odd phase at local -1 in its -x / -y
@@ -291,7 +291,7 @@ struct ColumnTables {
 inline constexpr ColumnTables kColumns{};
 
 /// Bits set in a 64-bit mask (SWAR, inline: the builtin is a call into libgcc where the build targets
-/// no POPCNT instruction, the default x86-64; the pass and the weighted split count every item's blocks).
+/// no POPCNT instruction, the default x86-64; the pass and the pass engine count every item's blocks).
 inline uint64_t popcount64(uint64_t x)
 {
     x = x - ((x >> 1) & 0x5555555555555555ull);

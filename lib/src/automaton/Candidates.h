@@ -8,7 +8,7 @@
 // an over cell (only blocks with an over cell can change), after an edit every block touching the
 // edited box. The cost of a step follows the blocks that changed recently, not the volume.
 //
-// Pruned (round 8, dense mode, the pass's sink: sinkActive). Sharper: a block can change exactly
+// Pruned (dense mode, the pass's sink: sinkActive). Sharper: a block can change exactly
 // when it holds an over cell and a valid cell that is not over (every rule then changes it). A cell
 // that changed from not over to not over (it received clay and stayed at or below Tc: most cells
 // a settling step touches) changes neither set of its block, so it wakes nothing; the blocks of the
@@ -16,7 +16,7 @@
 // looked at again two steps on only if it still holds both kinds of cell. By induction on the steps
 // every block that can change is still a candidate: the same results, fewer blocks examined
 // (press128 at 0.8 Tc: 72 M instead of 199 M). The merged lists, record() and a pass with
-// pruning off (Automaton::setPruneCandidates) keep the full rule above; the two may alternate,
+// pruning off (automaton_internal::setPruneCandidates) keep the full rule above; the two may alternate,
 // since each keeps every block that can change.
 //
 // Two ways to build the list, same blocks:
@@ -25,7 +25,7 @@
 //   anchor's upper and lower neighbours). record() ORs each changed mask into a per-anchor accumulator of the
 //   step two steps on (same phase), and its dilation into the next step's, marking the anchors in a
 //   bit set; gather() scans that bit set in index order (column order: the pass's chunks are slabs
-//   of columns, which meet on small faces; round 16). No merge, no sort:
+//   of columns, which meet on small faces). No merge, no sort:
 //   the cost follows the changed anchors (plus n / 64 words of bit set). Anchors outside the table
 //   have no leaf within reach: their blocks read zeros, never hold an over cell, never change, and
 //   are dropped (so blocksVisited counts a few blocks fewer than the merged lists would).
@@ -81,7 +81,7 @@ struct AnchorIndex {
 /// pass ORs each item's changed blocks in as soon as the item is done, in its own task, instead of
 /// record() doing it serially after the pass. OR is commutative and idempotent, so the result does
 /// not depend on the order or the partition. With several threads each writes its own lane (plain
-/// ORs, nothing shared: atomic ORs into shared words measured slower, docs/PERFORMANCE.md round 4).
+/// ORs, nothing shared: atomic ORs into shared words measure slower).
 struct DenseSink {
     uint64_t* acc[2] = {nullptr, nullptr};
     uint64_t* touched[2] = {nullptr, nullptr};
@@ -121,7 +121,7 @@ template <int P, bool D3> inline void sinkChanges(const DenseSink& s, uint32_t e
 /// a cell that changed from not over to not over leaves both sets of its block as they were, and
 /// the block could not change before). Cells that only received clay below Tc, the common case,
 /// wake nothing. A subset of sinkChanges(e, changed), which it equals when again and every act[k]
-/// are @a changed. docs/PERFORMANCE.md, round 8.
+/// are @a changed.
 template <int P, bool D3>
 inline void sinkActive(const DenseSink& s, uint32_t e, uint64_t again, const uint64_t act[8])
 {

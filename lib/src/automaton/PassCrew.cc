@@ -51,7 +51,7 @@ uint32_t forksSoFar()
     static const bool registered = [] {
         return pthread_atfork(nullptr, nullptr, [] { gForks.fetch_add(1, std::memory_order_relaxed); }) == 0;
     }();
-    (void)registered; // (without a handler, forked() stays false: as before fork-safety)
+    (void)registered; // (without a handler, forked() stays false: a fork is not detected)
     return gForks.load(std::memory_order_relaxed);
 }
 

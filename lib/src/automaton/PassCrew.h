@@ -19,9 +19,9 @@
 // chunk's exception is caught on its lane and the lowest chunk's is rethrown by run() once every
 // chunk has finished.
 //
-// The helpers are the crew's own threads (std::thread), made when the automaton first splits a pass
-// and joined with it; TBB's workers serve the other parallel stages (push, scans, output) and sleep
-// while a settle runs, as the crew's helpers sleep during those stages.
+// The helpers are the crew's own threads (std::thread), made at the automaton's first pass on
+// several threads and joined with it; TBB's workers serve the other parallel stages (push, scans,
+// output) and sleep while a settle runs, as the crew's helpers sleep during those stages.
 //
 // fork(). A child process has the crew's memory but none of its helpers (fork copies only the
 // calling thread), so a crew made before a fork must not be used or stopped in the child: forked()

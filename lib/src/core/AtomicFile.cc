@@ -8,7 +8,7 @@
 // (async-signal-safe), so an interrupted write leaves nothing behind either.
 #include "core/AtomicFile.h"
 
-#include "vdbclay/IO.h"
+#include "vdbclay/AtomicWrite.h"
 #include "vdbclay/Types.h"
 
 #include <atomic>

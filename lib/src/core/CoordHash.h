@@ -1,7 +1,7 @@
 // A voxel coordinate's hash for the library's hash maps and sets of voxels and slots.
 #pragma once
 
-#include <openvdb/math/Coord.h>
+#include <openvdb/Types.h> // openvdb::Coord
 
 #include <cstddef>
 #include <cstdint>

@@ -1,5 +1,5 @@
-// The metadata names of a clay file's "mass" grid (and "density"): written by writeClayFile and the
-// checkpoint (IO.cc), read back by readClayFile and, without the voxels, by the memory estimate
+// The metadata names of a clay file's "mass" grid (and "density"): written by writeClayFile (ClayFile.cc,
+// checkpoints too), read back by readClayFile and, without the voxels, by the memory estimate
 // (MemoryEstimate.cc). They are the file format: docs/INTEROP.md lists them, and tests pin them.
 #pragma once
 

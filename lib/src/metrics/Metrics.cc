@@ -1,10 +1,20 @@
+// Whole-grid measurements (Metrics.h), whatever the tree's layout.
+//
+// totalMass, residualOverload and clayVoxelCount walk every value once, tiles included, in 64-bit
+// integers; contentHash adds a hash of each voxel's coordinate and value (the automaton's block
+// hash, rules_internal::hashKey), so the order of the walk does not matter. measureClay takes each
+// leaf's integer sums and interior mask in parallel, then adds them up: exact, so the same numbers on
+// any thread count. compareShapes compares occupied sets as masks and measures the distances between
+// their surface voxels with a static 3D tree of voxel centres (exact integer squared distances).
+// metrics/ stands on core/, automaton/ (the hash) and shapes/ (rasterised reference shapes).
 #include "vdbclay/Metrics.h"
 
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
 
-#include "core/ParallelFor.h"
 #include "automaton/RulesImpl.h"
+#include "core/ParallelFor.h"
+#include "shapes/Voxels.h"
 
 #include <openvdb/openvdb.h>
 
@@ -133,7 +143,7 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                         int threads)
 {
     checkArgs("measureClay", threshold, dims);
-    // Tiles first (only the levels above the leaves): a nonzero one is refused, as before any sum.
+    // Tiles first (only the levels above the leaves): a nonzero one is refused before any sum.
     {
         auto it = mass.tree().cbeginValueAll();
         it.setMaxDepth(it.getLeafDepth() - 1);
@@ -386,8 +396,8 @@ ShapeError compareShapes(const MassGrid& clay, int32_t threshold, const Shape& r
     checkArgs("compareShapes", threshold, dims);
     auto ref = openvdb::MaskGrid::create(false);
     auto acc = ref->getAccessor();
-    forEachVoxelInside(reference, dims,
-                       [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(Coord(x, y, z)); });
+    shapes_internal::forEachVoxelInside(
+        reference, dims, [&](int32_t x, int32_t y, int32_t z) { acc.setValueOn(Coord(x, y, z)); });
     return compareSets(*occupiedSet(clay, threshold, dims, "compareShapes"), *ref, dims);
 }
 

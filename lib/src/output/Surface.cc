@@ -1,3 +1,16 @@
+// The fields derived from clay that clay files, meshes and pictures share (Surface.h).
+//
+// The density m / Tc is a fog volume on the mass tree's own topology, its leaves filled in parallel
+// (each leaf by one task; no topology changes in the pass). The clay surface, where a cell is half
+// full, is a narrow-band level set computed from the density directly, with no mesh between: the
+// density's topology grown by the band (SurfaceFog.cc), then the fast sweeping method over the voxels
+// within reach of the band only (SurfaceSweep.cc), bit for bit what OpenVDB's fogToSdf and a clip to
+// the band give, on any thread count. Its cost follows the clay's surface, not its bounding box. The
+// surface as polygons is openvdb::tools::volumeToMesh of the density, its faces turned outward.
+//
+// On these stand the writers: io/ClayFile.cc (the "density" and "surface" grids of a clay file),
+// SurfaceMesh.cc (OBJ and PLY files), Render.cc (PNG pictures, through Png.cc). output/ stands on
+// core/ and metrics/ only.
 #include "output/Surface.h"
 
 #include "vdbclay/Types.h"
@@ -13,19 +26,6 @@
 
 namespace vdbclay {
 namespace io_internal {
-
-openvdb::math::Transform::Ptr clayTransform(double voxelSize, UpAxis up)
-{
-    if (!(voxelSize > 0) || !std::isfinite(voxelSize)) {
-        throw Error("the voxel size must be positive and finite");
-    }
-    if (up == UpAxis::Y) return openvdb::math::Transform::createLinearTransform(voxelSize);
-    // Rx(+90 deg) exactly (no rounding in sin and cos): (x, y, z) -> (x, -z, y), then scaled.
-    // OpenVDB maps row vectors (world = index * M): row i is the image of index axis i.
-    const double v = voxelSize;
-    return openvdb::math::Transform::createLinearTransform(
-        openvdb::Mat4d(v, 0., 0., 0., /**/ 0., 0., v, 0., /**/ 0., -v, 0., 0., /**/ 0., 0., 0., 1.));
-}
 
 openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize)
 {

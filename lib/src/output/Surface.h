@@ -4,7 +4,6 @@
 #pragma once
 
 #include "vdbclay/Fwd.h"
-#include "vdbclay/Shapes.h"
 
 #include <openvdb/openvdb.h>
 
@@ -15,13 +14,9 @@
 namespace vdbclay {
 namespace io_internal {
 
-/// @a voxelSize world units per voxel, then for UpAxis::Z a rotation of +90 degrees about x (index
-/// y becomes world z). @throw Error if voxelSize is not positive and finite.
-openvdb::math::Transform::Ptr clayTransform(double voxelSize, UpAxis up);
-
-/// The density m / Tc of every voxel or tile holding nonzero mass (active or not: all clay) (active there,
-/// background 0), a GRID_FOG_VOLUME named "density" with a linear transform of @a voxelSize. Built leaf by
-/// leaf in parallel on the mass tree's topology.
+/// The density m / Tc of every voxel or tile holding nonzero mass, active or not (all of it is clay),
+/// active there on background 0: a GRID_FOG_VOLUME named "density" with a linear transform of
+/// @a voxelSize. Built leaf by leaf in parallel on the mass tree's topology.
 /// @throw Error if threshold <= 0 or voxelSize is not positive and finite.
 openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize);
 

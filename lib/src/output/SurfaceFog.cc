@@ -3,7 +3,7 @@
 // surfaceFog() returns exactly what density.deepCopy() and then
 // openvdb::tools::dilateActiveValues(tree, radius, NN_FACE_EDGE_VERTEX, IGNORE_TILES) give, for a
 // density without tiles (the automaton voxelizes its clay; a fog with tiles goes to OpenVDB): the same
-// leaves, values and active states, bit for bit (tests/TestOutputStages.cc). radius iterations of the
+// leaves, values and active states, bit for bit (tests/TestSurface.cc). radius iterations of the
 // 26-neighbour dilation make a box: a voxel is active when one within Chebyshev distance radius was,
 // and a box is separable, so here it is three passes over flat leaf masks, one per axis, each ORing
 // shifted copies of a leaf's mask words and of its two neighbours' along that axis (radius < 8:

@@ -38,7 +38,7 @@
 // +-FLT_MAX, which the finalisation turns into the extreme finite values: of band or more whenever
 // some swept value is (checked; otherwise, clay thinner than the band, the whole fog is swept), as
 // in the full sweep; clipped to the band, they are what the full sweep gives. The clipping itself
-// (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestOutputStages.cc
+// (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestSurface.cc
 // checks the band against OpenVDB's fogToSdf, clipped alike, bit for bit.
 #include "output/Surface.h"
 

@@ -29,7 +29,7 @@
 // 27 leaves per initial leaf (a step moves clay one voxel), a leaf per unit of mass, and clay over Tc
 // at least over its settled volume.
 //
-// The global layer's domain (Transport.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
+// The global layer's domain (transport/Domain.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
 // touch clay runs the layer with reach r0 = frame_policy::layerReach(contact) (contact: sqrt of the
 // voxels a tool entered, 2D their number; at most those inside the tool at one frame) on the cells
 // over Tc within the push's region. Its cells are the full cells within `reach` face steps of those
@@ -41,7 +41,7 @@
 // those seeds (layerReach):
 // - compress push: S = its chains' depth (as deep as the contact is wide); F = max(r0, 2E), 4 for an
 //   inner seed's margin, 1 for the Dirichlet cells;
-// - surface push: its targets (within maxSearch + 2 of the tool: Push.cc's region), then the
+// - surface push: its targets (within maxSearch + 2 of the tool: the push's region), then the
 //   automaton's try (frame_policy::tryAfterPush ...), which may run c steps before the layer, moving
 //   the overload a voxel per axis (three face steps) a step, while the layer looks for its seeds in
 //   the push's region only. So a seed lies within the region, moved at most c = min(steps, maxSearch
@@ -85,9 +85,9 @@
 #include "sculpt/EstimateGeometry.h"
 #include "sculpt/MemoryEstimate.h"
 #include "sculpt/FramePolicy.h"
-#include "transport/CellIndex.h"
+#include "transport/SolverTuning.h"
 #include "core/TreeBytes.h"
-#include "io/VdbCheck.h"
+#include "core/VdbCheck.h"
 
 #include <openvdb/openvdb.h>
 
@@ -148,7 +148,7 @@ struct FileGrid {
     uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
     uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
-    /// Its largest cell as the writer recorded it (vdbclay_max_mass, IO.cc: readClayFile refuses a
+    /// Its largest cell as the writer recorded it (vdbclay_max_mass, io/ClayFile.cc: readClayFile refuses a
     /// file whose voxels exceed it, so a run never holds more); -1 when not recorded.
     int64_t maxMass = -1;
 };
@@ -656,7 +656,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                        e.anchorLeaves * (kAutomatonBytesPerAnchor + lanes * kAutomatonLaneBytesPerAnchor);
     // A push: each tool's clay voxels inside it (no more than the clay has), and with the compress push
     // a tool that covers the clay pools its clay over every column under it, in an Int32 tree per tool
-    // (Push.cc) that can reach every leaf of the clay.
+    // (push/Compress.cc) that can reach every leaf of the clay.
     // A clay voxel inside several tools is one source (of the tool it lies deepest in).
     const uint64_t clayVoxels = e.clayLeavesGrown > UINT64_MAX / 512 ? UINT64_MAX : e.clayLeavesGrown * 512;
     uint64_t sources = 0;
@@ -670,7 +670,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             pools |= covers(toolBoxes[t], areas[a].box);
         if (pools) e.pushBytes += treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
     }
-    // The global layer (transport/Transport.cc): kTransportBytesPerCell per cell of its domain. Its
+    // The global layer (transport/): kTransportBytesPerCell per cell of its domain. Its
     // domain holds the full cells (at least Tc each: no more than the mass over Tc) it reaches and
     // their face neighbours: at most 7 cells per full cell; and at most the clay's leaves' voxels.
     // Near the tools' sweeps, where the bound of the file comment (the layer's domain) holds, it is at
@@ -763,7 +763,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         e.transportBytes = bytes;
         e.transportCells = counted;
     }
-    // Writing a .vdb (io/IO.cc, writeClayFile): the float density grid on the clay's leaves, and the
+    // Writing a .vdb (io/ClayFile.cc, writeClayFile): the float density grid on the clay's leaves, and the
     // surface level set swept over the density's leaves and those of its band around them
     // (output/SurfaceSweep.cc), with its per-leaf scratch; both held until the file is written.
     std::vector<Box> aroundBoxes;

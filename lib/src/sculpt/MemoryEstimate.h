@@ -30,7 +30,7 @@ constexpr uint64_t kProcessBytes = uint64_t(48) << 20;
 /// long settle of a 160-wide sphere at Tc (the table built) holds ~1.4 KB a leaf with the table.
 constexpr uint64_t kAutomatonBytesPerLeaf = 3 * (12 + 2 * 24 + 10 * 24 + 8 * 24 + 2 * 24 + 3 * 32) / 2;
 /// Per anchor (a leaf's origin, or one of its upper neighbours' origins: anchorLeaves bounds them),
-/// the kernel's leaf table (automaton/Kernel.cc, LeafTable: built over every leaf once the work
+/// the kernel's leaf table (automaton/LeafTable.h: built over every leaf once the work
 /// without it reaches four times the leaves): an entry of 264 bytes, its key (12), its 16 neighbour
 /// indices (64) and up to 4 hash slots of 16 bytes; and the candidates' two 8-byte accumulators
 /// (Candidates.h, dense mode) with their bit sets.
@@ -43,7 +43,7 @@ constexpr uint64_t kAutomatonLaneBytesPerAnchor = 16 + 1;
 /// each), the per-slot mask cover() fills (64) and the obstacle leaf it goes into (the mask tree's
 /// leaf is counted with the tree).
 constexpr uint64_t kToolBytesPerSlot = 2 * 80 + 2 * 48 + 64;
-/// Per clay voxel inside a tool at one push (push/Push.cc): its Source (32 bytes) and the per-leaf
+/// Per clay voxel inside a tool at one push (push/Pusher.h): its Source (32 bytes) and the per-leaf
 /// copy it is gathered from (32), what its search found (56), its Move (28), its target in the
 /// planned clay (a hash node of ~48 bytes, a bucket of 8, an entry of 24 doubled for growth) and the
 /// two cell masses written (16 each).
@@ -53,7 +53,7 @@ constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2
 /// hash node, ~32), the leaf made (8); the sweep's per-leaf record (184), input (8), key (12), face
 /// neighbours (48), reach masks (2 x 64) and order (16).
 constexpr uint64_t kOutputScratchPerLeaf = 12 + 2 * 64 + 8 + 32 + 8 + 184 + 8 + 12 + 48 + 2 * 64 + 16;
-/// Scene::transport global: per cell of the layer's domain (transport/Transport.cc, Buffers): its
+/// Scene::transport global: per cell of the layer's domain (transport/Domain.h: the workspace's arrays): its
 /// coordinates (twice, 24 bytes), mass, distance and current mass (24), kinds and flags (10), six
 /// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, diagonal,
 /// right-hand side and inverse (40), six work vectors (48), the routing's lists and sort (~60) and

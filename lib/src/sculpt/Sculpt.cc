@@ -39,11 +39,13 @@
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
 
+#include "automaton/AutomatonInternal.h"
 #include "push/ClayLeaves.h"
 #include "core/CoordHash.h"
 #include "shapes/InsideBox.h"
 #include "core/Format.h"
 #include "sculpt/MemoryEstimate.h"
+#include "sculpt/MemoryWatchdog.h"
 #include "core/ParallelFor.h"
 #include "shapes/Rasterize.h"
 #include "sculpt/FramePolicy.h"
@@ -185,6 +187,10 @@ struct Sculptor::Impl {
     bool stopped = false;
     ClayMeta startMeta;
     std::unique_ptr<MemoryEstimate> estimate; ///< estimateSceneMemory(scene), once computed
+    // The memory watchdog (none without a budget), and what the run needed when it last asked to
+    // stop (0 when the last stop poll was the caller's, or asked nothing).
+    std::unique_ptr<sculpt_internal::MemoryWatchdog> watchdog;
+    uint64_t budgetStop = 0;
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -194,7 +200,15 @@ struct Sculptor::Impl {
         return tools;
     }
 
-    bool stopRequested() const { return stopPoll && stopPoll(); }
+    /// The caller's stop poll, then the memory watchdog (budgetStop says whether it asked).
+    bool stopRequested()
+    {
+        budgetStop = 0;
+        if (stopPoll && stopPoll()) return true;
+        if (!watchdog || !watchdog->outgrown(*mass)) return false;
+        budgetStop = watchdog->needs();
+        return true;
+    }
 
     /// Closes the open frame. After the scene's last frame the global layer's arrays are freed: no
     /// later call needs them, and what follows a run (writing its output) has that memory back
@@ -304,11 +318,11 @@ struct Sculptor::Impl {
         struct FullVisits {
             Automaton& a;
             const bool was;
-            explicit FullVisits(Automaton& x) : a(x), was(x.pruneCandidates())
+            explicit FullVisits(Automaton& x) : a(x), was(automaton_internal::pruneCandidates(x))
             {
-                a.setPruneCandidates(false);
+                automaton_internal::setPruneCandidates(a, false);
             }
-            ~FullVisits() { a.setPruneCandidates(was); }
+            ~FullVisits() { automaton_internal::setPruneCandidates(a, was); }
         } fullVisits(*automaton);
         for (;;) {
             const StepReport r =
@@ -405,7 +419,7 @@ struct Sculptor::Impl {
             if (is2D) tb = intersect(tb, Box{{{INT32_MIN, INT32_MIN, 0}}, {{INT32_MAX, INT32_MAX, 0}}});
             // An unrotated box tool (a plate): its cells are a box (InsideBox.h), no distance per cell.
             Box cellsBox;
-            const bool boxed = shape_internal::insideVoxelBox(*t, cellsBox);
+            const bool boxed = shapes_internal::insideVoxelBox(*t, cellsBox);
             if (boxed) tb = intersect(tb, cellsBox);
             // Per slot, the mask of its cells inside the tool (merged whole leaves at a time below,
             // instead of a cell at a time through the accessor: press 128^3, ~0.1 M cells a frame).
@@ -524,6 +538,9 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     if (scene.memoryBudget != kNoMemoryBudget) {
         im.estimate = std::make_unique<MemoryEstimate>(estimateSceneMemory(scene));
         checkMemoryBudget(scene, *im.estimate);
+        im.watchdog = std::make_unique<sculpt_internal::MemoryWatchdog>(
+            scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget(),
+            im.estimate->processBytes + im.estimate->obstacleBytes + im.estimate->toolBytes);
     }
     im.scene = scene;
     AutomatonOptions opt;
@@ -659,6 +676,14 @@ void Sculptor::setStopRequest(std::function<bool()> poll)
 bool Sculptor::stopped() const
 {
     return mImpl->stopped;
+}
+uint64_t Sculptor::memoryBudget() const
+{
+    return mImpl->watchdog ? mImpl->watchdog->budget() : kNoMemoryBudget;
+}
+uint64_t Sculptor::outgrewBudget() const
+{
+    return mImpl->stopped ? mImpl->budgetStop : 0;
 }
 const ClayMeta& Sculptor::startMeta() const
 {

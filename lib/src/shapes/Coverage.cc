@@ -2,7 +2,7 @@
 //
 // Analytic shapes (spheres, boxes, ... in voxel indices) fill a voxel by its centre
 // (forEachVoxelInside). Meshes and level sets stand for a volume in world units; clay made from them
-// gives each boundary voxel round(m0 x covered fraction) (IO.cc, makeClay), so its mass is the
+// gives each boundary voxel round(m0 x covered fraction) (makeClay, MakeClay.cc), so its mass is the
 // volume x m0 however the surface falls between voxel centres.
 //
 // Closed meshes: exact, by column integrals. Along a vertical line the inside of a closed,
@@ -16,15 +16,16 @@
 // the columns and slabs they pass through; the interior is filled by the running sum. The same sum
 // over a non-manifold but consistently oriented mesh is the winding number's integral, clamped to 1.
 // A trilinear level set cannot give this: interpolating the distance across a convex edge or corner
-// rounds it inward (the previous attempt, 4^3 sign samples of the mesh's level set, lost 2.4 % at
-// edges; tests/TestInterop.cc measures it against this).
+// rounds it inward (4^3 sign samples of the mesh's level set lose 2.4 % at edges; tests/TestInterop.cc
+// measures them against this).
 //
 // Everything else (level sets, meshes that are open or inconsistently oriented, shapes placed by a
 // transform, 2D clay): clamp(1/2 - d, 0, 1) from the signed distance d at the voxel centre, the part
-// of the voxel below a plane at distance d, averaged over the plane's orientations (Shapes.h).
+// of the voxel below a plane at distance d, averaged over the plane's orientations (Shapes.h, makeClay).
 
 #include "shapes/Coverage.h"
 #include "shapes/DistanceCoverage.h"
+#include "shapes/Voxels.h"
 
 #include <algorithm>
 #include <cmath>
@@ -179,8 +180,6 @@ void meshCoverage(const std::vector<Vec3>& points, const std::vector<std::array<
     }
 }
 
-} // namespace shapes_internal
-
 void forEachVoxelCovered(const Shape& shape, int dimensions,
                          const std::function<void(int32_t, int32_t, int32_t, double)>& covered)
 {
@@ -199,7 +198,7 @@ void forEachVoxelCovered(const Shape& shape, int dimensions,
     if (b.empty()) return;
     if (dimensions == 3) {
         // Planes, edges and corners recognised in the distance field (DistanceCoverage.cc).
-        shapes_internal::distanceCoverage(shape, b, covered);
+        distanceCoverage(shape, b, covered);
         return;
     }
     // 2D: the z = 0 layer by the ramp (the 3D distance's planes do not bound a 2D section).
@@ -211,4 +210,5 @@ void forEachVoxelCovered(const Shape& shape, int dimensions,
             }
 }
 
+} // namespace shapes_internal
 } // namespace vdbclay

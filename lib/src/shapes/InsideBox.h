@@ -6,7 +6,7 @@
 #include "vdbclay/Shapes.h"
 
 namespace vdbclay {
-namespace shape_internal {
+namespace shapes_internal {
 
 /// When the voxels whose centre lies inside @a shape (distance() < 0, exactly as
 /// forEachVoxelInside tests it) are the voxels of one box, sets @a voxels to that box (empty when
@@ -14,5 +14,5 @@ namespace shape_internal {
 /// makeBox and makeBox moved by makeTransformed with no rotation (any translation and pivot).
 bool insideVoxelBox(const Shape& shape, Box& voxels);
 
-} // namespace shape_internal
+} // namespace shapes_internal
 } // namespace vdbclay

@@ -1,15 +1,15 @@
 // Rasterising an analytic shape into a tree leaf by leaf, on several threads.
 //
-// forEachVoxelInside (Shapes.h) visits the shape's bounds voxel by voxel and the callers wrote each
-// voxel through a tree accessor: for the 128^3 clay box and the scene's floor that was ~3.4 M
-// distance evaluations and accessor writes, all on one core before the first step. Here the leaf
-// slots (8^3, aligned) of the same bounds are cut into chunks; within a chunk every slot is
-// evaluated in parallel (the same voxels, the same test: distance at the voxel centre < 0) into a
-// leaf of its own, and the chunk's leaves then go into the tree serially, in slot order. The voxels
-// set, their values and the tree's topology are those of the voxel loop, whatever the thread count:
-// a slot with no voxel inside makes no leaf, a slot whose leaf the tree lacks gets the new leaf
-// (its other voxels inactive background, as an accessor write leaves them), and a slot the tree
-// already holds (a leaf, or a tile) is written voxel by voxel as before.
+// forEachVoxelInside (Voxels.h) visits the shape's bounds voxel by voxel; writing each voxel through
+// a tree accessor, the 128^3 clay box and the scene's floor would take ~3.4 M distance evaluations
+// and accessor writes, all on one core before the first step. Here the leaf slots (8^3, aligned) of
+// the same bounds are cut into chunks; within a chunk every slot is evaluated in parallel (the same
+// voxels, the same test: distance at the voxel centre < 0) into a leaf of its own, and the chunk's
+// leaves then go into the tree serially, in slot order. The voxels set, their values and the tree's
+// topology are those of the voxel loop, whatever the thread count: a slot with no voxel inside makes
+// no leaf, a slot whose leaf the tree lacks gets the new leaf (its other voxels inactive background,
+// as an accessor write leaves them), and a slot the tree already holds (a leaf, or a tile) is written
+// voxel by voxel through the accessor.
 #pragma once
 
 #include "shapes/InsideBox.h"
@@ -43,7 +43,7 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
     }
     // An unrotated box: its inside voxels are a box, every voxel of it inside (InsideBox.h).
     Box cells;
-    const bool boxed = shape_internal::insideVoxelBox(shape, cells);
+    const bool boxed = shapes_internal::insideVoxelBox(shape, cells);
     if (boxed) b = intersect(b, cells);
     if (b.empty()) return 0;
     const int64_t lo[3] = {int64_t(b.min[0]) >> 3, int64_t(b.min[1]) >> 3, int64_t(b.min[2]) >> 3};
@@ -93,7 +93,7 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
                 acc.addLeaf(leaf); // an empty slot: the leaf as the accessor writes would make it
                 continue;
             }
-            // The tree holds this slot already (a leaf or a tile): voxel by voxel, as before.
+            // The tree holds this slot already (a leaf or a tile): voxel by voxel.
             std::unique_ptr<LeafT> own(leaf);
             for (auto it = own->cbeginValueOn(); it; ++it)
                 acc.setValueOn(it.getCoord(), value);

@@ -1,5 +1,14 @@
-// Signed distance fields: analytic shapes and rigid poses (level sets: ShapesLevelSet.cc, meshes:
-// ShapesMesh.cc).
+// Shapes: signed distance fields in the clay's index space (Shapes.h), and clay made from them.
+//
+// Shapes.cc holds the analytic shapes (sphere, box, cylinder, capsule) and the placements (a rigid
+// pose, a transform with scale). ShapesLevelSet.cc reads level sets from .vdb files (their layout
+// checked first, core/VdbCheck.h) and ShapesMesh.cc turns meshes (OBJ, STL, PLY) into level sets;
+// both are sampled by LevelSetShape.h. A voxel is inside a shape when the distance at its centre is
+// < 0 (Voxels.h, forEachVoxelInside); Rasterize.h sets those voxels leaf by leaf on several threads,
+// and InsideBox.h finds them with no distance at all for unrotated boxes. Shapes that keep their
+// volume (meshes, level sets) give each voxel the part of it they cover instead: exactly for closed
+// meshes (Coverage.cc), from the distance field otherwise (DistanceCoverage.cc). MakeClay.cc turns
+// either into clay. shapes/ stands on core/ only.
 //
 // Every analytic shape computes its bounds once, at construction, as the smallest voxel box that
 // contains the whole shape taken as a continuous solid (not only the voxel centres inside it):
@@ -268,7 +277,7 @@ private:
 
 // ---- Boxes ---------------------------------------------------------------------------------------
 
-namespace shape_internal {
+namespace shapes_internal {
 
 bool insideVoxelBox(const Shape& shape, Box& voxels)
 {
@@ -304,7 +313,7 @@ bool insideVoxelBox(const Shape& shape, Box& voxels)
     return true;
 }
 
-} // namespace shape_internal
+} // namespace shapes_internal
 
 // ---- Pose, Shape ---------------------------------------------------------------------------------
 

@@ -4,7 +4,7 @@
 #include "vdbclay/Shapes.h"
 
 #include "shapes/LevelSetShape.h"
-#include "io/VdbCheck.h"
+#include "core/VdbCheck.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>

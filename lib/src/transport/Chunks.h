@@ -1,4 +1,4 @@
-// Fixed-chunk loops for the global transport's row arrays (Transport.cc, Multigrid.cc).
+// Fixed-chunk loops for the global transport's row arrays (its solver, routing and multigrid).
 //
 // Every loop runs over fixed chunks of kChunk rows, whatever the thread count: a chunk is the unit
 // of parallel work, and a reduction adds its per-chunk partial sums in chunk order. So each

@@ -1,5 +1,4 @@
-// Aggregation multigrid (Multigrid.h: the design). Split out of Transport.cc in round 6, unchanged
-// but for the rows' coordinates (RowCoord, not openvdb::Coord): the same operations in the same order.
+// Aggregation multigrid (Multigrid.h: the design).
 
 #include "transport/Multigrid.h"
 #include "transport/Chunks.h"
@@ -13,7 +12,7 @@ namespace vdbclay {
 namespace transport_internal {
 
 void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                      const std::vector<RowCoord>& coord, bool serial)
+                      const std::vector<CellCoord>& coord, bool serial)
 {
     mSerial = serial;
     mUsed = 1;
@@ -32,7 +31,7 @@ void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vecto
 }
 
 void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                       const std::vector<RowCoord>& coord, const std::vector<int32_t>& oldRow, bool serial)
+                       const std::vector<CellCoord>& coord, const std::vector<int32_t>& oldRow, bool serial)
 {
     mSerial = serial;
     Level& f = mLevels.front();
@@ -60,7 +59,7 @@ void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vect
 void Multigrid::apply(const std::vector<double>& in, std::vector<double>& out)
 {
     Level& f = mLevels.front();
-    f.rhs = in.data(); // read in place (round 6: the copy into f.r was 1.8 % of a stroke frame)
+    f.rhs = in.data(); // read in place (a copy into f.r would be 1.8 % of a stroke frame)
     cycle(0);
     out.swap(f.x);
     out.resize(f.n);
@@ -121,7 +120,7 @@ void Multigrid::setCsr(Level& f, size_t n, const std::vector<int32_t>& nb)
     f.start[n] = uint32_t(mCounts[chunks]);
 }
 
-void Multigrid::colour(Level& l, const std::vector<RowCoord>& block)
+void Multigrid::colour(Level& l, const std::vector<CellCoord>& block)
 {
     const size_t n = l.n, chunks = (n + kChunk - 1) / kChunk;
     std::vector<size_t>& red = mCounts; // per chunk: its red rows, then their offsets
@@ -178,9 +177,9 @@ bool Multigrid::coarsen()
     std::vector<int32_t>& parent = mScratch;
     parent.resize(n);
     std::iota(parent.begin(), parent.end(), 0);
-    auto half = [](const RowCoord& c) { return RowCoord{c.x >> 1, c.y >> 1, c.z >> 1}; };
+    auto half = [](const CellCoord& c) { return CellCoord{c.x >> 1, c.y >> 1, c.z >> 1}; };
     for (size_t k = 0; k < n; ++k) {
-        const RowCoord bk = half(f.block[k]);
+        const CellCoord bk = half(f.block[k]);
         for (uint32_t e = f.start[k]; e < f.start[k + 1]; ++e) {
             const int32_t j = f.col[e];
             if (j >= int32_t(k) || half(f.block[size_t(j)]) != bk) continue;
@@ -381,7 +380,7 @@ void Multigrid::cycle(size_t li)
     }
     // Pre-smoothing from x = 0: red rows x = D^-1 r (their neighbours are 0), then a black
     // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t. (Every
-    // row's x and t is written here before it is read: no zero fill, round 6.)
+    // row's x and t is written here before it is read: no zero fill.)
     {
         const std::vector<int32_t>& red = l.colour[0];
         forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {

@@ -1,4 +1,5 @@
-// Aggregation multigrid: the preconditioner of the global transport's large solves (Transport.cc).
+// Aggregation multigrid: the preconditioner of the global transport's large solves (Poisson.h picks it
+// from SolverTuning::multigridMin rows).
 //
 // Level 0 is the solve's matrix (a graph Laplacian, Dirichlet faces on the diagonal: SPD). Each
 // coarser level aggregates the face-connected rows of one 2x2x2 block of the level below (2x2 in 2D:
@@ -14,9 +15,12 @@
 // count. The coarsening and the dense factor are serial.
 //
 // Data. It works on row arrays alone (6 neighbour rows per row, the diagonal, each row's cell), no
-// grids: the caller (the transport's Solver) numbers the cells. The levels' arrays are kept from one
+// grids: the caller (PoissonSolver) numbers the cells. The levels' arrays are kept from one
 // build to the next (no fresh pages each frame); nothing of an earlier build is read.
 #pragma once
+
+#include "transport/CellCoord.h"
+#include "transport/Pcg.h"
 
 #include <cstddef>
 #include <cstdint>
@@ -25,19 +29,13 @@
 namespace vdbclay {
 namespace transport_internal {
 
-/// A row's cell (or, on a coarse level, its block) coordinates.
-struct RowCoord {
-    int32_t x = 0, y = 0, z = 0;
-    bool operator!=(const RowCoord& o) const { return x != o.x || y != o.y || z != o.z; }
-};
-
-class Multigrid {
+class Multigrid final : public Preconditioner {
 public:
     static constexpr size_t kDense = 512;
-    /// Measured on the 64^3 press (MG iterations, 10 frames, tolerance 1e-4 every round): damped
-    /// Jacobi (omega 0.8) 370, red-black Gauss-Seidel 286 (alpha 1.5; 1.0: 393, 1.3: 286, 1.8:
-    /// 310), and with roundTolerance 1e-2: 192. Round 2 (Jacobi): alpha 1.0: 583, 1.8: 574 against
-    /// 507; nu 2: 341 but no less time; omega 2/3: 592.
+    /// The coarsest level's damped Jacobi sweeps (when coarsening stalls), their omega, and the
+    /// coarse correction's alpha. Measured on the 64^3 press (MG iterations, 10 frames, tolerance
+    /// 1e-4 every active-set round): red-black Gauss-Seidel smoothing 286 (alpha 1.5; 1.0: 393, 1.3:
+    /// 286, 1.8: 310), damped Jacobi smoothing (omega 0.8) 370; with roundTolerance 1e-2: 192.
     static constexpr int kCoarseSweeps = 8;
     static constexpr double kOmega = 0.8, kAlpha = 1.5;
 
@@ -45,7 +43,7 @@ public:
     /// diagonal; @a coord: the rows' cells. The levels' arrays of an earlier build are reused (their
     /// capacity kept: no fresh pages each frame); nothing of the earlier build is read.
     void build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-               const std::vector<RowCoord>& coord, bool serial);
+               const std::vector<CellCoord>& coord, bool serial);
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
     /// leave at the rim, < 2 % of them) without coarsening again: row k keeps the aggregate of the
@@ -55,10 +53,10 @@ public:
     /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
     /// still in fixed chunks and row order. Needs levels() >= 2.
     void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                const std::vector<RowCoord>& coord, const std::vector<int32_t>& oldRow, bool serial);
+                const std::vector<CellCoord>& coord, const std::vector<int32_t>& oldRow, bool serial);
 
     /// out = M^-1 in (one V-cycle).
-    void apply(const std::vector<double>& in, std::vector<double>& out);
+    void apply(const std::vector<double>& in, std::vector<double>& out) override;
 
     size_t levels() const { return mUsed; }
     /// The finest level's rows at a fixed width: 6 per row, the neighbour row or n (none).
@@ -71,7 +69,7 @@ private:
         std::vector<int32_t> col;
         std::vector<float> w; ///< off-diagonal weights (the matrix holds -w); empty: all 1 (level 0)
         std::vector<double> diag, invDiag;
-        std::vector<RowCoord> block;       ///< the rows' coordinates on this level's grid
+        std::vector<CellCoord> block;      ///< the rows' coordinates on this level's grid
         std::vector<int32_t> agg;          ///< row -> its aggregate (a row of the next level)
         std::vector<uint32_t> memberStart; ///< the rows of the level above in each row (CSR)
         std::vector<int32_t> members;      ///<   in row order
@@ -93,7 +91,7 @@ private:
     /// never coupled (a level's couplings join face-adjacent blocks only: face-connected rows of one
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
     /// Both colours in one count and one write pass (per fixed chunk: the lists of two selectIndices).
-    void colour(Level& l, const std::vector<RowCoord>& block);
+    void colour(Level& l, const std::vector<CellCoord>& block);
     void finish(Level& l);
     static int32_t find(std::vector<int32_t>& parent, int32_t a);
     /// Builds the next level; false if it would not shrink the problem enough.

@@ -1,0 +1,220 @@
+// The command-line tool's shared parts (cli.h): argument checks, output checks, signal handling.
+#include "cli.h"
+
+#include "vdbclay/AtomicWrite.h"
+#include "vdbclay/IO.h"
+
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace vdbclay_cli {
+
+vdbclay::BatchHeap gHeap;
+
+std::string printable(const std::string& text)
+{
+    return vdbclay::printableText(text);
+}
+
+CLI::Validator nonEmpty(const char* what)
+{
+    return CLI::Validator(
+        [what](std::string& v) {
+            return v.empty() ? std::string("expected ") + what + ", got an empty string" : std::string();
+        },
+        "", "non-empty");
+}
+
+CLI::Validator fileName()
+{
+    return nonEmpty("a file name");
+}
+
+CLI::Validator finiteIn(double lo, double hi, bool open)
+{
+    return CLI::Validator(
+        [=](std::string& v) -> std::string {
+            double d = 0;
+            size_t used = 0;
+            try {
+                d = std::stod(v, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            char range[96];
+            std::snprintf(range, sizeof range, open ? "a number in (%g, %g)" : "a number in [%g, %g]", lo,
+                          hi);
+            const bool in = open ? (d > lo && d < hi) : (d >= lo && d <= hi);
+            if (used == 0 || used != v.size() || !std::isfinite(d) || !in)
+                return "expected " + std::string(range) + ", got " + v;
+            return "";
+        },
+        "", "finite");
+}
+
+CLI::Validator unsignedInteger()
+{
+    return CLI::Validator(
+        [](std::string& v) -> std::string {
+            if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos) {
+                return "expected a non-negative integer, got " + v;
+            }
+            return "";
+        },
+        "", "unsigned");
+}
+
+vdbclay::UpAxis upOption(const std::string& up)
+{
+    return parsedOption("--up", [&] { return vdbclay::parseUpAxis(up); });
+}
+
+int32_t thresholdOf(const vdbclay::ClayFile& f, int32_t override)
+{
+    if (override > 0) return override;
+    return f.meta.rule.threshold;
+}
+
+namespace {
+
+/// What makes two paths the same file: device and inode for an existing regular file, the
+/// directory's device and inode plus the name for a file to be created; "" for an existing file
+/// that is not regular (a device such as /dev/null may take several outputs).
+std::string fileIdentity(const std::string& path)
+{
+    struct stat st;
+    if (::stat(path.c_str(), &st) == 0) {
+        if (!S_ISREG(st.st_mode)) return "";
+        return "f" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino);
+    }
+    const auto slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
+    const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
+    if (::stat(dir.c_str(), &st) == 0)
+        return "d" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino) + "/" + name;
+    return "p" + path;
+}
+
+/// Refuses, before any work, an output that cannot be written: a directory, a path through a
+/// missing directory or a symbolic-link loop, an unwritable directory. A device or FIFO that
+/// exists is written through (never replaced), so it only has to be writable.
+void checkWritable(const FileArg& o)
+{
+    if (o.path.empty()) return;
+    const std::string& path = o.path;
+    struct stat st;
+    std::string dirOf = path;
+    if (::stat(path.c_str(), &st) == 0) {
+        if (S_ISDIR(st.st_mode)) throw vdbclay::Error(o.text() + ": is a directory, expected a file name");
+        if (!S_ISREG(st.st_mode)) {
+            if (::access(path.c_str(), W_OK) != 0)
+                throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+            return;
+        }
+        if (char* real = ::realpath(path.c_str(), nullptr)) { // a link: the file it points to is replaced
+            dirOf = real;
+            std::free(real);
+        }
+    } else if (errno != ENOENT) {
+        throw vdbclay::Error("cannot write " + path + ": " + std::strerror(errno));
+    }
+    const auto slash = dirOf.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : dirOf.substr(0, slash));
+    if (::access(dir.c_str(), W_OK) != 0) {
+        throw vdbclay::Error("cannot write " + path + ": directory " + dir + ": " + std::strerror(errno));
+    }
+}
+
+} // namespace
+
+void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputArg>& inputs)
+{
+    for (const FileArg& o : outputs)
+        checkWritable(o);
+    for (size_t i = 0; i < outputs.size(); ++i) {
+        if (outputs[i].path.empty()) continue;
+        const std::string id = fileIdentity(outputs[i].path);
+        if (id.empty()) continue;
+        for (size_t j = 0; j < i; ++j) {
+            if (!outputs[j].path.empty() && fileIdentity(outputs[j].path) == id) {
+                throw vdbclay::Error(outputs[i].text() + ": the same file as " + outputs[j].text() +
+                                     "; give each output its own file");
+            }
+        }
+        for (const InputArg& in : inputs) {
+            if (in.file.path.empty() || fileIdentity(in.file.path) != id) continue;
+            if (std::find(in.mayReplace.begin(), in.mayReplace.end(), outputs[i].option) !=
+                in.mayReplace.end())
+                continue;
+            throw vdbclay::Error(outputs[i].text() + ": that is " + in.file.text() +
+                                 "; refusing to write over an input");
+        }
+    }
+}
+
+void checkMeshName(const FileArg& o)
+{
+    if (o.path.empty()) return;
+    const auto slash = o.path.find_last_of('/');
+    const auto dot = o.path.find_last_of('.');
+    std::string ext =
+        dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : o.path.substr(dot);
+    for (char& c : ext)
+        c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext != ".obj" && ext != ".ply") {
+        throw vdbclay::Error(o.text() + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
+    }
+}
+
+// ---- signals -------------------------------------------------------------------------------------
+
+std::atomic<int> gStopSignal{0};
+std::atomic<bool> gStopAtOnce{true};
+std::atomic<bool> gWriting{false};
+static_assert(std::atomic<int>::is_always_lock_free, "the signal flag must be lock-free");
+
+namespace {
+
+extern "C" void onStopSignal(int sig)
+{
+    if (gStopAtOnce.load() || gStopSignal.load() != 0) {
+        vdbclay::removePendingTempFile();
+        if (gWriting.load()) {
+            static const char msg[] =
+                "vdbclay: interrupted while writing an output; that file was left as it was\n";
+            (void)!::write(2, msg, sizeof msg - 1);
+        }
+        ::signal(sig, SIG_DFL);
+        ::raise(sig); // delivered when this handler returns: the process ends as killed by @a sig
+        return;
+    }
+    gStopSignal.store(sig, std::memory_order_relaxed);
+}
+
+} // namespace
+
+void catchSignals()
+{
+    ::signal(SIGXFSZ, SIG_IGN);
+    struct sigaction sa;
+    std::memset(&sa, 0, sizeof sa);
+    sa.sa_handler = onStopSignal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART; // no EINTR in the middle of writing a file
+    for (int sig : {SIGINT, SIGTERM}) {
+        struct sigaction old;
+        if (::sigaction(sig, nullptr, &old) == 0 && sig == SIGINT && old.sa_handler == SIG_IGN) continue;
+        ::sigaction(sig, &sa, nullptr);
+    }
+}
+
+} // namespace vdbclay_cli

@@ -1,0 +1,401 @@
+// The global transport's domain (Domain.h: the design): seeds, the flood, the cell index, the parts
+// with no room.
+
+#include "transport/Domain.h"
+#include "transport/SolverTuning.h"
+
+#include "vdbclay/Automaton.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/ValueAccessor.h>
+
+#include <algorithm>
+#include <climits>
+#include <cstdlib>
+
+namespace vdbclay {
+namespace transport_internal {
+
+namespace {
+
+using openvdb::Coord;
+
+/// What the flood found at an unknown cell's face (Domain::link): linked or a wall (an obstacle, or a
+/// face the dimensions leave out), a cell with room, full clay beyond the reach.
+enum FaceFound : uint8_t { kFaceDone = 0, kFaceRoom = 1, kFaceFull = 2 };
+
+Coord toCoord(const CellCoord& c)
+{
+    return Coord(c.x, c.y, c.z);
+}
+
+CellCoord toCell(const Coord& c)
+{
+    return CellCoord{c.x(), c.y(), c.z()};
+}
+
+} // namespace
+
+struct Domain::Grids {
+    explicit Grids(const Automaton& a)
+        : mass(a.mass()->constTree()), massAcc(mass),
+          obs(a.obstacles() ? &a.obstacles()->constTree() : nullptr)
+    {
+        if (obs) obsAcc = std::make_unique<openvdb::tree::ValueAccessor<const openvdb::MaskTree>>(*obs);
+    }
+    bool isObstacle(const Coord& c) const { return obsAcc && obsAcc->isValueOn(c); }
+
+    const openvdb::Int32Tree& mass;
+    /// Cached lookups for the serial flood and linking (the tree's own getValue starts at the root).
+    openvdb::tree::ValueAccessor<const openvdb::Int32Tree> massAcc;
+    const openvdb::MaskTree* obs;
+    std::unique_ptr<openvdb::tree::ValueAccessor<const openvdb::MaskTree>> obsAcc;
+    std::unique_ptr<openvdb::Int32Tree> index; ///< the cell index beyond the dense box (made on demand)
+    std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> indexAcc;
+};
+
+Domain::Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact)
+    : mTc(automaton.options().rule.threshold), mDirs(automaton.options().dimensions == 2 ? 4 : 6),
+      mFromContact(reachFromContact), mB(arrays), mC(arrays.cells), mGrids(std::make_unique<Grids>(automaton))
+{
+}
+
+Domain::~Domain() = default;
+
+bool Domain::isObstacle(const CellCoord& c) const
+{
+    return mGrids->isObstacle(toCoord(c));
+}
+
+int32_t Domain::massAt(const CellCoord& c) const
+{
+    return mGrids->massAcc.getValue(toCoord(c));
+}
+
+int64_t Domain::seeds(const Box& region, std::vector<CellCoord>& seeds) const
+{
+    int64_t overload = 0;
+    auto seed = [&](const Coord& c, int32_t m) {
+        if (m > mTc && !mGrids->isObstacle(c)) {
+            seeds.push_back(toCell(c));
+            overload += int64_t(m) - mTc;
+        }
+    };
+    const openvdb::Int32Tree& mass = mGrids->mass;
+    if (region.empty()) {
+        for (auto it = mass.cbeginValueOn(); it; ++it)
+            seed(it.getCoord(), *it);
+        return overload;
+    }
+    // The leaves that meet the region, in x, y, z order of their origins.
+    const Box& r = region;
+    openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(mass);
+    const int32_t lo[3] = {r.min[0] & ~7, r.min[1] & ~7, r.min[2] & ~7};
+    for (int32_t x = lo[0]; x <= r.max[0]; x += 8)
+        for (int32_t y = lo[1]; y <= r.max[1]; y += 8)
+            for (int32_t z = lo[2]; z <= r.max[2]; z += 8) {
+                const auto* leaf = acc.probeConstLeaf(Coord(x, y, z));
+                if (!leaf) continue;
+                for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                    const Coord c = it.getCoord();
+                    if (c.x() < r.min[0] || c.x() > r.max[0] || c.y() < r.min[1] || c.y() > r.max[1] ||
+                        c.z() < r.min[2] || c.z() > r.max[2])
+                        continue;
+                    seed(c, *it);
+                }
+            }
+    return overload;
+}
+
+bool Domain::fitsNearby(const std::vector<CellCoord>& seeds, int64_t excess) const
+{
+    std::vector<Coord> near;
+    for (int dx = -2; dx <= 2; ++dx)
+        for (int dy = -2; dy <= 2; ++dy)
+            for (int dz = mDirs == 6 ? -2 : 0; dz <= (mDirs == 6 ? 2 : 0); ++dz) {
+                const int l1 = std::abs(dx) + std::abs(dy) + std::abs(dz);
+                if (l1 >= 1 && l1 <= 2) near.emplace_back(dx, dy, dz);
+            }
+    openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(mGrids->mass);
+    std::vector<Coord> room;
+    for (const CellCoord& s : seeds) {
+        const Coord c = toCoord(s);
+        bool any = false;
+        for (const Coord& o : near) {
+            const Coord q = c + o;
+            if (acc.getValue(q) >= mTc || mGrids->isObstacle(q)) continue;
+            any = true;
+            room.push_back(q);
+        }
+        if (!any) return false;
+    }
+    std::sort(room.begin(), room.end());
+    room.erase(std::unique(room.begin(), room.end()), room.end());
+    int64_t total = 0;
+    for (const Coord& q : room)
+        total += int64_t(mTc) - acc.getValue(q);
+    return total >= excess;
+}
+
+int32_t Domain::indexOf(const CellCoord& c) const
+{
+    if (mDense) {
+        // One unsigned comparison per axis: a negative offset wraps past every dimension.
+        const uint64_t x = uint64_t(int64_t(c.x) - mDenseLo.x), y = uint64_t(int64_t(c.y) - mDenseLo.y),
+                       z = uint64_t(int64_t(c.z) - mDenseLo.z);
+        if (x < uint64_t(mDenseDim[0]) && y < uint64_t(mDenseDim[1]) && z < uint64_t(mDenseDim[2]))
+            return mB.denseIndex[size_t((x * uint64_t(mDenseDim[1]) + y) * uint64_t(mDenseDim[2]) + z)];
+    }
+    return mGrids->indexAcc ? mGrids->indexAcc->getValue(toCoord(c)) : -1;
+}
+
+void Domain::setIndex(const CellCoord& c, int32_t i)
+{
+    if (mDense) {
+        const int64_t x = int64_t(c.x) - mDenseLo.x, y = int64_t(c.y) - mDenseLo.y,
+                      z = int64_t(c.z) - mDenseLo.z;
+        if (x >= 0 && y >= 0 && z >= 0 && x < mDenseDim[0] && y < mDenseDim[1] && z < mDenseDim[2]) {
+            mB.denseIndex[size_t((x * mDenseDim[1] + y) * mDenseDim[2] + z)] = i;
+            return;
+        }
+    }
+    Grids& g = *mGrids;
+    if (!g.indexAcc) {
+        g.index = std::make_unique<openvdb::Int32Tree>(-1);
+        g.indexAcc = std::make_unique<openvdb::tree::ValueAccessor<openvdb::Int32Tree>>(*g.index);
+    }
+    g.indexAcc->setValue(toCoord(c), i);
+}
+
+void Domain::resetIndex(const std::vector<CellCoord>& seeds, int64_t reach)
+{
+    mGrids->indexAcc.reset();
+    mGrids->index.reset();
+    mDense = false;
+    if (reach <= 0 || seeds.empty() || reach > (int64_t(1) << 20)) return;
+    CellCoord lo = seeds.front(), hi = lo;
+    for (const CellCoord& c : seeds) {
+        lo.minComponent(c);
+        hi.maxComponent(c);
+    }
+    const int64_t g = reach + 2;
+    int64_t volume = 1;
+    for (int a = 0; a < 3; ++a) {
+        const int64_t grow = (a == 2 && mDirs == 4) ? 0 : g;
+        mDenseDim[a] = int64_t(hi[a]) - lo[a] + 1 + 2 * grow;
+        volume *= mDenseDim[a];
+        if (volume > kDenseIndexMax) return;
+    }
+    mDenseLo = CellCoord{int32_t(int64_t(lo.x) - g), int32_t(int64_t(lo.y) - g),
+                         int32_t(int64_t(lo.z) - (mDirs == 4 ? 0 : g))};
+    if (int64_t(lo.x) - g < INT32_MIN || int64_t(lo.y) - g < INT32_MIN || int64_t(lo.z) - g < INT32_MIN)
+        return;
+    mB.denseIndex.assign(size_t(volume), -1);
+    mDense = true;
+}
+
+int32_t Domain::addCell(const CellCoord& c, uint8_t kind, int32_t m)
+{
+    const int32_t i = int32_t(mC.size());
+    mC.at.push_back(c);
+    mC.m0.push_back(m);
+    mC.kind.push_back(kind);
+    mC.nb.insert(mC.nb.end(), 6, -1);
+    mC.hasNb.push_back(0);
+    setIndex(c, i);
+    return i;
+}
+
+uint8_t Domain::faceAt(const CellCoord& q, int32_t& m) const
+{
+    if (isObstacle(q)) return kFaceDone;
+    m = massAt(q);
+    return m < mTc ? kFaceRoom : kFaceFull;
+}
+
+bool Domain::link(int32_t i, const uint8_t* face)
+{
+    bool cut = false;
+    const CellCoord c = mC.at[size_t(i)];
+    for (int d = 0; d < mDirs; ++d) {
+        if (face && face[d] == kFaceDone) continue;
+        const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+        int32_t j = indexOf(q);
+        if (j < 0) {
+            int32_t m = 0;
+            const uint8_t found = face ? face[d] : faceAt(q, m);
+            if (found == kFaceDone) continue;
+            if (found == kFaceFull) {
+                cut = true; // beyond the reach: a wall for this solve
+                continue;
+            }
+            j = addCell(q, kDirichlet);
+        }
+        linkPair(i, d, j);
+    }
+    mC.hasNb[size_t(i)] = 1;
+    return cut;
+}
+
+bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t margin, bool& cut)
+{
+    std::vector<int32_t>& comp = mB.comp;
+    std::vector<int32_t>& parent = mB.compParent;
+    std::vector<uint8_t>& face = mB.face;
+    comp.clear();
+    parent.clear();
+    face.clear();
+    auto find = [&](int32_t a) {
+        while (parent[size_t(a)] != a) {
+            parent[size_t(a)] = parent[size_t(parent[size_t(a)])];
+            a = parent[size_t(a)];
+        }
+        return a;
+    };
+    mC.at.clear();
+    mC.m0.clear();
+    mC.kind.clear();
+    mC.nb.clear();
+    mC.hasNb.clear();
+    mB.dist.clear();
+    resetIndex(seeds, reach);
+    // The queue is the cells themselves: the flood appends the unknown cells in the order it
+    // reaches them (the Dirichlet cells come after it, in link()), so cells [head, size) are queued.
+    size_t head = 0;
+    auto start = [&](const CellCoord& s, int64_t dist) {
+        addCell(s, kUnknown);
+        mB.dist.push_back(dist);
+        comp.push_back(int32_t(parent.size()));
+        parent.push_back(int32_t(parent.size()));
+    };
+    // The reach counts from the contact: the seeds on the clay's boundary (a face on an obstacle,
+    // a tool, or a cell with room) start the flood; a seed inside the full clay (down a compress
+    // chain) is reached through it at its depth. One the reach did not get to (a chain deeper, in
+    // face steps, than the reach: a diagonal one) starts a flood of its own afterwards, with a
+    // margin of @a margin steps around it (it already lies in the plastic zone). So a compress
+    // push's chains add next to no reach beyond the contact.
+    const bool fromContact = mFromContact;
+    const int64_t innerDist = reach > margin ? reach - margin : 0;
+    bool innerStarted = !fromContact;
+    if (fromContact) {
+        std::vector<int32_t>& inner = mB.innerSeeds;
+        inner.clear();
+        for (size_t si = 0; si < seeds.size(); ++si) {
+            const CellCoord& s = seeds[si];
+            if (indexOf(s) >= 0) continue;
+            bool boundary = false;
+            for (int d = 0; d < mDirs && !boundary; ++d) {
+                const CellCoord q = s.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                boundary = isObstacle(q) || massAt(q) < mTc;
+            }
+            if (boundary)
+                start(s, 0);
+            else
+                inner.push_back(int32_t(si));
+        }
+    } else {
+        for (const CellCoord& s : seeds)
+            if (indexOf(s) < 0) start(s, 0);
+    }
+    cut = false;
+    for (;;) {
+        if (head == mC.size()) { // the seeds the contact's flood did not reach start their own
+            if (innerStarted) break;
+            innerStarted = true;
+            for (const int32_t si : mB.innerSeeds)
+                if (indexOf(seeds[size_t(si)]) < 0) start(seeds[size_t(si)], innerDist);
+            continue;
+        }
+        const int32_t i = int32_t(head++);
+        const CellCoord c = mC.at[size_t(i)];
+        const int64_t di = mB.dist[size_t(i)];
+        face.resize(size_t(i + 1) * 6, kFaceDone); // cells are taken in index order
+        for (int d = 0; d < mDirs; ++d) {
+            const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+            const int32_t k = indexOf(q);
+            if (k >= 0) { // every face between two domain cells is seen here, from one side
+                linkPair(i, d, k);
+                if (comp[size_t(i)] == comp[size_t(k)]) continue; // one label: one part already
+                const int32_t a = find(comp[size_t(i)]), b = find(comp[size_t(k)]);
+                if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+                continue;
+            }
+            int32_t m = 0;
+            const uint8_t found = faceAt(q, m);
+            if (found == kFaceDone) continue;
+            // Room, or full clay beyond the reach: link() makes the Dirichlet cell or marks the cut
+            // (unless a later flood gets there).
+            if (found == kFaceRoom || (reach > 0 && di >= reach)) {
+                face[size_t(i) * 6 + size_t(d)] = found;
+                continue;
+            }
+            linkPair(i, d, addCell(q, kUnknown, m));
+            mB.dist.push_back(di + 1);
+            comp.push_back(comp[size_t(i)]);
+        }
+    }
+    // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
+    // the parts that touch a Dirichlet cell.
+    std::vector<uint8_t>& room = mB.compRoom;
+    room.assign(parent.size(), 0);
+    const size_t unknowns = mC.size();
+    for (size_t i = 0; i < unknowns; ++i) {
+        cut |= link(int32_t(i), &face[i * 6]);
+        for (int d = 0; d < mDirs; ++d) {
+            const int32_t j = mC.nb[i * 6 + size_t(d)];
+            if (j >= 0 && mC.kind[size_t(j)] == kDirichlet) {
+                room[size_t(find(comp[i]))] = 1;
+                break;
+            }
+        }
+    }
+    for (size_t r = 0; r < parent.size(); ++r)
+        if (parent[r] == int32_t(r) && !room[r]) return false;
+    return true;
+}
+
+void Domain::freezeSingular(bool cut, bool& grow, GlobalTransportReport& rep)
+{
+    grow = false;
+    std::vector<uint8_t>& seen = mB.seen;
+    seen.assign(mC.size(), 0);
+    std::vector<int32_t>& part = mB.part;
+    for (size_t s = 0; s < mC.size(); ++s) {
+        if (mC.kind[s] != kUnknown || seen[s]) continue;
+        part.clear();
+        part.push_back(int32_t(s));
+        seen[s] = 1;
+        bool room = false, partCut = false;
+        for (size_t k = 0; k < part.size(); ++k) {
+            const size_t i = size_t(part[k]);
+            const CellCoord c = mC.at[i];
+            for (int d = 0; d < mDirs; ++d) {
+                const int32_t j = mC.nb[i * 6 + size_t(d)];
+                if (j < 0) {
+                    const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                    if (!isObstacle(q)) partCut = true; // a full cell beyond the reach
+                    continue;
+                }
+                if (mC.kind[size_t(j)] == kDirichlet)
+                    room = true;
+                else if (mC.kind[size_t(j)] == kUnknown && !seen[size_t(j)]) {
+                    seen[size_t(j)] = 1;
+                    part.push_back(j);
+                }
+            }
+        }
+        if (room) continue;
+        if (partCut && cut) {
+            grow = true;
+            return;
+        }
+        rep.noRoom = true;
+        for (int32_t i : part) {
+            mC.kind[size_t(i)] = kFrozen;
+            rep.massNoRoom += std::max<int64_t>(0, mC.m0[size_t(i)] - mTc);
+        }
+    }
+}
+
+} // namespace transport_internal
+} // namespace vdbclay

@@ -1,0 +1,107 @@
+// The global transport's sorts of cell lists (RadixSort.h: the design).
+
+#include "transport/RadixSort.h"
+
+#include <algorithm>
+#include <cstring>
+
+namespace vdbclay {
+namespace transport_internal {
+
+namespace {
+
+/// The radix sorts' digits: six of 11 bits (the last one of 9).
+constexpr int kBits = 11, kDigits = 6;
+constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
+
+} // namespace
+
+void radixSort(std::vector<int32_t>& order, RadixScratch& s)
+{
+    const size_t n = order.size();
+    std::vector<uint64_t>& key = s.key;
+    std::vector<uint64_t>& keyTmp = s.keyTmp;
+    std::vector<int32_t>& tmp = s.tmp;
+    keyTmp.resize(n);
+    tmp.resize(n);
+    std::vector<size_t>& count = s.count;
+    count.assign(size_t(kDigits) << kBits, 0);
+    for (size_t u = 0; u < n; ++u)
+        for (int d = 0; d < kDigits; ++d)
+            ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];
+    for (int d = 0; d < kDigits; ++d) {
+        size_t* c = &count[size_t(d) << kBits];
+        if (c[(key[0] >> (kBits * d)) & kMask] == n) continue; // one digit for all: the order stands
+        size_t sum = 0;
+        for (size_t b = 0; b <= kMask; ++b) {
+            const size_t k = c[b];
+            c[b] = sum;
+            sum += k;
+        }
+        for (size_t u = 0; u < n; ++u) {
+            const size_t at = c[(key[u] >> (kBits * d)) & kMask]++;
+            keyTmp[at] = key[u];
+            tmp[at] = order[u];
+        }
+        key.swap(keyTmp);
+        order.swap(tmp);
+    }
+}
+
+void sortByCoord(std::vector<int32_t>& order, size_t from, const std::vector<CellCoord>& at, RadixScratch& s)
+{
+    const size_t n = order.size() - from;
+    if (n < 2) return;
+    const auto before = [&](int32_t a, int32_t b) { return at[size_t(a)] < at[size_t(b)]; };
+    CellCoord lo = at[size_t(order[from])], hi = lo;
+    for (size_t u = from; u < order.size(); ++u) {
+        lo.minComponent(at[size_t(order[u])]);
+        hi.maxComponent(at[size_t(order[u])]);
+    }
+    constexpr int64_t kAxis = int64_t(1) << 21;
+    if (n < 64 || int64_t(hi.x) - lo.x >= kAxis || int64_t(hi.y) - lo.y >= kAxis ||
+        int64_t(hi.z) - lo.z >= kAxis) {
+        std::sort(order.begin() + std::ptrdiff_t(from), order.end(), before);
+        return;
+    }
+    std::vector<int32_t>& part = s.part;
+    part.assign(order.begin() + std::ptrdiff_t(from), order.end());
+    std::vector<uint64_t>& key = s.key;
+    key.resize(n);
+    for (size_t u = 0; u < n; ++u) {
+        const CellCoord& c = at[size_t(part[u])];
+        key[u] = uint64_t(int64_t(c.x) - lo.x) << 42 | uint64_t(int64_t(c.y) - lo.y) << 21 |
+                 uint64_t(int64_t(c.z) - lo.z);
+    }
+    radixSort(part, s);
+    std::copy(part.begin(), part.end(), order.begin() + std::ptrdiff_t(from));
+}
+
+void sortByPotential(std::vector<int32_t>& order, const HigherPotential& higher, RadixScratch& s)
+{
+    const size_t n = order.size();
+    if (n < 2) return;
+    std::vector<uint64_t>& key = s.key;
+    key.resize(n);
+    for (size_t u = 0; u < n; ++u) {
+        // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
+        // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
+        const double v = higher.p[size_t(order[u])] + 0.0;
+        uint64_t b;
+        std::memcpy(&b, &v, sizeof b);
+        b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
+        key[u] = ~b;
+    }
+    radixSort(order, s);
+    for (size_t u = 0; u < n;) {
+        size_t e = u + 1;
+        while (e < n && key[e] == key[u])
+            ++e;
+        if (e - u > 1)
+            std::sort(order.begin() + std::ptrdiff_t(u), order.begin() + std::ptrdiff_t(e), higher);
+        u = e;
+    }
+}
+
+} // namespace transport_internal
+} // namespace vdbclay
