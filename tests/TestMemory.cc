@@ -24,9 +24,9 @@
 
 #include <unistd.h>
 
-#include "AllocationCounter.h"     // the byte-counting operator new and delete
-#include "sculpt/FramePolicy.h"    // frame_policy::tryStepsBeforeLayer
-#include "sculpt/MemoryEstimate.h" // memory_internal: voxelsWithinFaceSteps, the bytes per part
+#include "AllocationCounter.h"      // the byte-counting operator new and delete
+#include "sculpt/FramePolicy.h"     // frame_policy::tryStepsBeforeLayer
+#include "sculpt/MemoryEstimate.h"  // memory_internal: voxelsWithinFaceSteps, the bytes per part
 #include "transport/SolverTuning.h" // transport_internal::kDenseIndexMax
 #include "TestRng.h"
 
