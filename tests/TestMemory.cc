@@ -1,10 +1,13 @@
-// The memory estimate against the heap a run really takes (the global layer's estimate follows the
-// tools' reach, not the whole body).
+// The memory estimate against the heap a run really takes: each part against what the run allocates
+// for it (the clay's leaves, the output grids, the whole run), above it and within a small factor,
+// and the global layer's bound following the tools' reach, not the whole body.
 //
 // This executable counts the heap through tests/AllocationCounter.h: the live bytes malloc handed out
 // and their peak. Aligned new keeps the library's own implementation and is not counted. The figures
 // do not depend on time or load; they depend on the allocator only through the usable sizes, which
-// only make the measured peak larger (a stricter test of an upper bound).
+// only make the measured peak larger (a stricter test of an upper bound). The estimate's program part
+// (MemoryEstimate::processBytes: code, libraries, threads) is no heap: the heap figures are compared
+// with the rest (heapOf).
 #include <vdbclay/IO.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/Scene.h>
@@ -21,8 +24,10 @@
 
 #include <unistd.h>
 
-#include "AllocationCounter.h"     // the byte-counting operator new and delete
-#include "sculpt/MemoryEstimate.h" // memory_internal::voxelsWithinFaceSteps
+#include "AllocationCounter.h"      // the byte-counting operator new and delete
+#include "sculpt/FramePolicy.h"     // frame_policy::tryStepsBeforeLayer
+#include "sculpt/MemoryEstimate.h"  // memory_internal: voxelsWithinFaceSteps, the bytes per part
+#include "transport/SolverTuning.h" // transport_internal::kDenseIndexMax
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -33,6 +38,12 @@ class MemoryTest : public ::testing::Test {
 protected:
     static void SetUpTestSuite() { openvdb::initialize(); }
 };
+
+/// The estimate's heap: all of it but the program.
+uint64_t heapOf(const MemoryEstimate& e)
+{
+    return e.total() - e.processBytes;
+}
 
 /// The heap's peak above what was in use before, over building the Sculptor and running @a scene.
 uint64_t peakOfRun(const std::string& json, int threads)
@@ -46,17 +57,42 @@ uint64_t peakOfRun(const std::string& json, int threads)
     return uint64_t(alloc_counter::peakBytes.load() - before);
 }
 
-/// The stroke of transport_study (a sphere tool r 6 dipped 9 into a clay sphere @a w wide at Tc,
-/// slid 2 voxels a frame for 12 frames), global transport, with @a push and a step budget of
-/// @a maxSteps per frame. 2D (@a dims 2): a disc and a circle tool in the z = 0 plane.
-std::string stroke(int w, const std::string& push = "compress", uint64_t maxSteps = 1000000, int dims = 3)
+/// The heap's peak above what was in use before, over building the Sculptor, running @a scene and
+/// writing its output (what `vdbclay run SCENE -o OUT.vdb` does); @a held: what the Sculptor holds
+/// after the run; @a outputPeak: the part of the peak the write took above that.
+uint64_t peakOfRunAndOutput(const std::string& json, int threads, uint64_t* held = nullptr,
+                            uint64_t* outputPeak = nullptr)
+{
+    const std::string path = "/tmp/vdbclay-memory-out-" + std::to_string(::getpid()) + ".vdb";
+    alloc_counter::resetPeak();
+    const int64_t before = alloc_counter::liveBytes.load();
+    int64_t runPeak = 0;
+    {
+        Sculptor sc(parseScene(json, "s.json", ""), threads);
+        sc.run();
+        runPeak = alloc_counter::peakBytes.load();
+        const int64_t atEnd = alloc_counter::liveBytes.load();
+        if (held) *held = uint64_t(atEnd - before);
+        alloc_counter::resetPeak();
+        writeClayFile(path, *sc.mass(), sc.checkpointMeta());
+        if (outputPeak) *outputPeak = uint64_t(alloc_counter::peakBytes.load() - atEnd);
+    }
+    std::remove(path.c_str());
+    return uint64_t(std::max(runPeak, alloc_counter::peakBytes.load()) - before);
+}
+
+/// transport_study's stroke (a sphere tool r 6 dipped 9 into a clay sphere @a w wide, slid 2 voxels a
+/// frame for 12 frames), global transport, with @a push and a step budget of @a maxSteps per frame,
+/// the clay at @a mass per voxel (Tc: 1000). 2D (@a dims 2): a disc and a circle tool in the z = 0 plane.
+std::string stroke(int w, const std::string& push = "compress", uint64_t maxSteps = 1000000, int dims = 3,
+                   int mass = 1000)
 {
     const int r = w / 2;
     const std::string z = dims == 2 ? "0" : std::to_string(r);
     return R"({"dimensions": )" + std::to_string(dims) +
            R"(, "threshold": 1000, "rule": "prorata", "seed": 1, "transport": "global", "push": ")" + push +
            R"(", "clay": [{"shape": "sphere", "center": [)" + std::to_string(r) + ", " + std::to_string(r) +
-           ", " + z + R"(], "radius": )" + std::to_string(r) + R"(, "mass": 1000}],
+           ", " + z + R"(], "radius": )" + std::to_string(r) + R"(, "mass": )" + std::to_string(mass) + R"(}],
         "tools": [{"shape": "sphere", "center": [)" +
            std::to_string(r - 12) + ", " + std::to_string(2 * r - 3) + ", " + z +
            R"(], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 12}]}],
@@ -75,10 +111,12 @@ Scene withObstacleBesideTheStroke(Scene s)
     return s;
 }
 
-/// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body).
+/// The global layer's bytes were it to cover every voxel of the clay's leaves (its whole body), with
+/// a dense index as large as it gets (a tool's push seeds it).
 uint64_t wholeBody(const MemoryEstimate& e)
 {
-    return e.clayLeavesGrown * 512 * 360;
+    return e.clayLeavesGrown * 512 * memory_internal::kTransportBytesPerCell +
+           4 * uint64_t(transport_internal::kDenseIndexMax);
 }
 
 } // namespace
@@ -101,28 +139,91 @@ TEST_F(MemoryTest, TheEstimateIsAboveTheHeapARunTakes)
     for (const std::string& json : {press, poke, surface, stroke(64), stroke(128)}) {
         const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
         for (int threads : {1, 2}) {
-            const uint64_t peak = peakOfRun(json, threads);
-            EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe() << "\n" << json;
+            const uint64_t peak = peakOfRunAndOutput(json, threads);
+            EXPECT_GE(heapOf(e), peak) << threads << " threads: " << e.describe() << "\n" << json;
         }
+    }
+}
+
+TEST_F(MemoryTest, TheClayLeavesCountedBoundTheLeavesBuilt)
+{
+    // Analytic shapes are counted leaf by leaf from their distance: at least the leaves the clay is
+    // built in, and close to them (a leaf whose centre lies within a leaf's half-diagonal of the
+    // surface may hold no voxel centre inside). A box is counted exactly; 2D, one layer of leaves.
+    const char* shapes[] = {
+        R"({"shape": "sphere", "center": [3.3, 70.1, -5.2], "radius": 61.7, "mass": 800})",
+        R"({"shape": "cylinder", "center": [0, 0, 0], "radius": 40, "height": 90, "mass": 800})",
+        R"({"shape": "capsule", "a": [-40, -10, 7], "b": [50, 30, 7], "radius": 17, "mass": 800})",
+        R"({"shape": "box", "min": [-13, 5, 0], "max": [60, 41, 33], "mass": 800})",
+        R"({"shape": "box", "min": [-13, 5, 0], "max": [60, 41, 33], "mass": 800,
+            "transform": {"rotate": [30, 10, 0], "pivot": [20, 20, 16]}})",
+        R"({"shape": "sphere", "center": [0, 0, 0], "radius": 20, "mass": 800,
+            "transform": {"scale": [2.5, 1, 0.7], "translate": [5, 0, 0]}})"};
+    for (int dims : {3, 2}) {
+        for (const char* shape : shapes) {
+            const std::string json =
+                R"({"dimensions": )" + std::to_string(dims) + R"(, "clay": [)" + shape + "]}";
+            Scene scene;
+            try {
+                scene = parseScene(json, "s.json", "");
+            } catch (const Error&) {
+                continue; // a field the 2D scene does not take
+            }
+            const MemoryEstimate e = estimateSceneMemory(scene);
+            Sculptor sc(scene, 1);
+            const uint64_t built = sc.mass()->tree().leafCount();
+            EXPECT_GE(e.clayLeaves, built) << json;
+            EXPECT_LE(e.clayLeaves, built + built / 2 + 8) << json << ": " << built << " built";
+            EXPECT_EQ(e.clayLeavesGrown, e.clayLeaves) << json; // at most Tc, no tool: it never moves
+            EXPECT_GE(e.clayBytes, uint64_t(sc.mass()->memUsage())) << json;
+            const bool plainBox = std::string(shape).find("transform") == std::string::npos &&
+                                  std::string(shape).find("box") != std::string::npos;
+            if (plainBox) {
+                EXPECT_EQ(e.clayLeaves, built) << json;
+            }
+        }
+    }
+}
+
+TEST_F(MemoryTest, EachPartBoundsWhatTheRunAllocatesForIt)
+{
+    // A sphere 128 wide at Tc, alone and stroked by a small tool (the automaton settling it: its leaf
+    // table built): writing the .vdb takes, beyond the run's own grids, no more than the output's
+    // figure and more than half of it; the clay's tree, the tools' cells and the automaton's state
+    // after the run no more than theirs; the whole run's and write's peak no more than the estimate's
+    // heap, and more than half of it.
+    const std::string still =
+        R"({"clay": [{"shape": "sphere", "center": [64, 64, 64], "radius": 64, "mass": 1000}]})";
+    const std::string stroked =
+        R"({"rule": "prorata", "seed": 1, "clay": [{"shape": "sphere", "center": [64, 64, 64], "radius": 64, "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [52, 125, 64], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 4}]}]})";
+    for (const std::string& json : {still, stroked}) {
+        const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+        uint64_t held = 0, output = 0;
+        const uint64_t peak = peakOfRunAndOutput(json, 1, &held, &output);
+        EXPECT_GE(e.outputBytes, output) << e.describe();
+        EXPECT_LE(e.outputBytes, 2 * output) << e.describe() << "; the write takes " << output;
+        EXPECT_GE(e.clayBytes + e.obstacleBytes + e.toolBytes + e.automatonBytes, held) << e.describe();
+        EXPECT_GE(heapOf(e), peak) << e.describe();
+        EXPECT_LE(heapOf(e), 2 * peak) << e.describe() << "; the run peaks at " << peak;
     }
 }
 
 TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
 {
     // A small tool stroking a large sphere (compress push, no obstacle near): the layer's domain is the
-    // clay within the tool's reach, so the estimate counts that, not every voxel of the body (round 4b:
-    // 50.1 GiB of 54.2 for the 512-wide stroke, whose whole run peaks at 664 MB; now 1.6 of 5.7 GiB).
+    // clay within the tool's reach, so the estimate counts that, not every voxel of the body.
     const Scene s = parseScene(stroke(512), "s.json", "");
     const MemoryEstimate e = estimateSceneMemory(s);
-    const uint64_t whole = e.clayLeavesGrown * 512 * 360;
-    EXPECT_LT(e.transportBytes * 20, whole) << e.describe();
-    EXPECT_LT(e.total(), uint64_t(8) << 30) << e.describe();
-    // The same stroke 160 wide: the estimate stays above the run's heap, within a small factor.
+    EXPECT_LT(e.transportBytes * 20, wholeBody(e)) << e.describe();
+    EXPECT_LT(e.total(), uint64_t(2) << 30) << e.describe();
+    // The same stroke 160 wide: the estimate stays above the run's heap, within a small factor (the
+    // layer's domain bound, 82 voxels around the tool, spans most of a body this small).
     const std::string small = stroke(160);
     const MemoryEstimate es = estimateSceneMemory(parseScene(small, "s.json", ""));
-    const uint64_t peak = peakOfRun(small, 1);
-    EXPECT_GE(es.total(), peak) << es.describe();
-    EXPECT_LE(es.total(), 20 * peak) << es.describe() << "; peak " << peak;
+    const uint64_t peak = peakOfRunAndOutput(small, 1);
+    EXPECT_GE(heapOf(es), peak) << es.describe();
+    EXPECT_LE(heapOf(es), 10 * peak) << es.describe() << "; peak " << peak;
     // A tool that covers the clay (a plate wider than it) compresses all of it: the whole body.
     Scene covered = s;
     covered.tools[0] = parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
@@ -130,21 +231,19 @@ TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
                                   "t.json", "")
                            .tools[0];
     const MemoryEstimate ec = estimateSceneMemory(covered);
-    EXPECT_EQ(ec.transportBytes, ec.clayLeavesGrown * 512 * 360);
+    EXPECT_EQ(ec.transportBytes, wholeBody(ec));
     // An obstacle beside the tool may wall the clay in (the reach then doubles up to the whole body).
     const MemoryEstimate ew = estimateSceneMemory(withObstacleBesideTheStroke(s));
-    EXPECT_EQ(ew.transportBytes, ew.clayLeavesGrown * 512 * 360);
+    EXPECT_EQ(ew.transportBytes, wholeBody(ew));
 }
 
 TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHeap)
 {
-    // Round 6: the surface push's layer runs after the automaton's try; under a step budget of at most
-    // 16 a frame the try cannot run before the layer (a chunk that reaches the budget ends the frame),
-    // so the domain is bounded by the tool's reach as for the compress push. Round 7: the layer's seeds
-    // stay in the push's region whatever the try did, so the bound holds under any step budget (the
-    // try can have moved them across that region, 18 voxels: a larger margin). These strokes' frames
-    // settle in 0-1 steps after the layer. 3D: a 256-wide sphere (the grown sweep does not span it);
-    // 2D: a 1024-wide disc (a 2D contact is the number of voxels entered, a reach of ~170).
+    // The surface push's layer runs after the automaton's try (frame_policy); its seeds stay in the
+    // push's region whatever the try did, so the domain is bounded by the tool's reach under any step
+    // budget. These strokes' frames settle in 0-1 steps after the layer. 3D: a 256-wide sphere (the
+    // grown sweep does not span it); 2D: a 1024-wide disc (a 2D contact is the number of voxels
+    // entered, a reach of ~170).
     for (uint64_t maxSteps : {uint64_t(16), uint64_t(100000)})
         for (const std::string& json :
              {stroke(256, "surface", maxSteps), stroke(1024, "surface", maxSteps, 2)}) {
@@ -153,37 +252,41 @@ TEST_F(MemoryTest, TheSurfacePushsLayerEstimateFollowsTheToolAndStaysAboveTheHea
             EXPECT_GT(e.transportBytes, 0u);
             for (int threads : {1, 2}) {
                 const uint64_t peak = peakOfRun(json, threads);
-                EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe() << "\n" << json;
+                EXPECT_GE(heapOf(e), peak) << threads << " threads: " << e.describe() << "\n" << json;
             }
         }
-    // The 512-wide surface stroke: the layer's figure is a small part of the whole body's.
+    // The 512-wide surface stroke at Tc: saturated clay, where the try never runs (trySaturated), so
+    // one figure under any step budget, a small part of the whole body's.
     const MemoryEstimate e512 = estimateSceneMemory(parseScene(stroke(512, "surface", 16), "s.json", ""));
     EXPECT_LT(e512.transportBytes * 20, wholeBody(e512)) << e512.describe();
-    EXPECT_LT(e512.total(), uint64_t(6) << 30) << e512.describe();
-    // Any budget up to 16 gives the same bound (no try); 17 lets the try run 16 steps first, a larger
-    // margin; from 33 on (the try's 32 steps or more can cross the push's region) one figure, that of
-    // the scene's default budget (100000; round 6: the whole 512-wide body).
-    EXPECT_EQ(estimateSceneMemory(parseScene(stroke(512, "surface", 1), "s.json", "")).transportBytes,
-              e512.transportBytes);
-    const uint64_t at17 =
-        estimateSceneMemory(parseScene(stroke(512, "surface", 17), "s.json", "")).transportBytes;
-    EXPECT_GT(at17, e512.transportBytes);
-    const MemoryEstimate eDefault =
-        estimateSceneMemory(parseScene(stroke(512, "surface", 100000), "s.json", ""));
-    EXPECT_GT(eDefault.transportBytes, at17);
-    for (uint64_t maxSteps : {uint64_t(33), uint64_t(5000000)})
+    EXPECT_LT(e512.total(), uint64_t(2) << 30) << e512.describe();
+    for (uint64_t maxSteps : {uint64_t(1), uint64_t(17), uint64_t(100000), uint64_t(5000000)})
         EXPECT_EQ(
             estimateSceneMemory(parseScene(stroke(512, "surface", maxSteps), "s.json", "")).transportBytes,
-            eDefault.transportBytes)
+            e512.transportBytes)
             << maxSteps;
+    // At 0.9 Tc the try may run before the layer: any budget up to 16 gives the figure with no try
+    // (a chunk that reaches the budget ends the frame); 17 lets the try run 16 steps first, a larger
+    // margin; from 33 on (the try's 32 steps or more can cross the push's region) one figure.
+    const auto loose = [](uint64_t maxSteps) {
+        return estimateSceneMemory(parseScene(stroke(512, "surface", maxSteps, 3, 900), "s.json", ""));
+    };
+    EXPECT_EQ(frame_policy::tryStepsBeforeLayer(16), 0u);
+    EXPECT_EQ(frame_policy::tryStepsBeforeLayer(17), 16u);
+    EXPECT_EQ(frame_policy::tryStepsBeforeLayer(33), 32u);
+    EXPECT_EQ(loose(1).transportBytes, loose(16).transportBytes);
+    EXPECT_EQ(loose(16).transportBytes, e512.transportBytes);
+    const uint64_t at17 = loose(17).transportBytes;
+    EXPECT_GT(at17, e512.transportBytes);
+    const MemoryEstimate eDefault = loose(100000);
+    EXPECT_GT(eDefault.transportBytes, at17);
+    for (uint64_t maxSteps : {uint64_t(33), uint64_t(5000000)})
+        EXPECT_EQ(loose(maxSteps).transportBytes, eDefault.transportBytes) << maxSteps;
     EXPECT_LT(eDefault.transportBytes * 4, wholeBody(eDefault)) << eDefault.describe();
-    // Round 9: the cells within the reach's face steps, not a cube of leaves: 6.8 GiB in all (round 7:
-    // 13.7 GiB, refused by a 12 GB budget; the run peaks at 1.7 GB).
-    EXPECT_LT(eDefault.total(), uint64_t(8) << 30) << eDefault.describe();
-    EXPECT_LT(eDefault.transportBytes * 12, wholeBody(eDefault)) << eDefault.describe();
-    // Round 9: the layer's arrays serve one frame at a time, so its figure is the largest frame's and
-    // does not grow with the stroke's length (before, the whole sweep's: +36 % at 50 frames).
-    std::string longer = stroke(512, "surface", 100000);
+    EXPECT_LT(eDefault.total(), uint64_t(6) << 30) << eDefault.describe();
+    // The layer's arrays serve one frame at a time, so its figure is the largest frame's and does not
+    // grow with the stroke's length.
+    std::string longer = stroke(512, "surface", 100000, 3, 900);
     longer.replace(longer.find(R"("frames": 12)"), 12, R"("frames": 48)");
     const MemoryEstimate eLong = estimateSceneMemory(parseScene(longer, "s.json", ""));
     EXPECT_LE(eLong.transportCells, eDefault.transportCells + eDefault.transportCells / 50)
@@ -268,9 +371,9 @@ TEST_F(MemoryTest, TheLayersCountedCellsBoundTheCellsEveryFrameSolves)
 
 TEST_F(MemoryTest, ClayFromAFileThatRecordsItsLargestCellKeepsTheReachBound)
 {
-    // Round 7: a clay file records its largest cell (vdbclay_max_mass); at most Tc, the clay cannot
-    // overflow with no tool near, so the surface stroke on clay read from a file keeps the tool's
-    // bound (before: the whole body, its largest cell unknown without reading its voxels). The estimate
+    // A clay file records its largest cell (vdbclay_max_mass); at most Tc, the clay cannot overflow
+    // with no tool near, so the surface stroke on clay read from a file keeps the tool's bound (without
+    // the record: the whole body, its largest cell unknown without reading its voxels). The estimate
     // reads the record from the file's metadata only; it stays above the run's heap.
     const std::string dir = "/tmp/vdbclay-memory-" + std::to_string(::getpid());
     const std::string path = dir + "-sphere.vdb", bare = dir + "-bare.vdb", over = dir + "-over.vdb";
@@ -296,7 +399,7 @@ TEST_F(MemoryTest, ClayFromAFileThatRecordsItsLargestCellKeepsTheReachBound)
     EXPECT_LT(e.transportBytes, wholeBody(e)) << e.describe(); // the bound applies
     for (int threads : {1, 2}) {
         const uint64_t peak = peakOfRun(json, threads);
-        EXPECT_GE(e.total(), peak) << threads << " threads: " << e.describe();
+        EXPECT_GE(heapOf(e), peak) << threads << " threads: " << e.describe();
     }
     for (const std::string& file : {bare, over}) {
         const MemoryEstimate w = estimateSceneMemory(parseScene(fromFile(file), "s.json", ""));
@@ -355,8 +458,8 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
         over.clay[0].mass = 1200;
         const MemoryEstimate eo = estimateSceneMemory(over);
         EXPECT_EQ(eo.transportBytes, wholeBody(eo)) << push;
-        // So does clay where two shapes overlap and add up over Tc (round 7: the scene's first frame
-        // runs the layer over every over cell even when no tool touches clay).
+        // So does clay where two shapes overlap and add up over Tc (the scene's first frame runs the
+        // layer over every over cell even when no tool touches clay: frame_policy::layerRuns).
         Scene overlap = s;
         overlap.clay.push_back(
             parseScene(
@@ -368,12 +471,36 @@ TEST_F(MemoryTest, WhereTheReachBoundDoesNotHoldTheLayerCountsTheWholeBody)
     }
 }
 
+TEST_F(MemoryTest, TheWholeBodysCellsAreNoMoreThanSevenPerFullCell)
+{
+    // The layer's domain holds full cells (at least Tc each: no more than the mass over Tc) and their
+    // faces: a cylinder squeezed by a plate wider than it (the whole body) counts that, not every voxel
+    // of the leaves its clay may reach; at least 7 per voxel of the clay as built, at most 7 per voxel
+    // of its bounds (the mass bound counts those at Tc).
+    const Scene squeeze = parseScene(
+        R"({"threshold": 1000, "rule": "prorata", "push": "compress", "transport": "global",
+        "clay": [{"shape": "cylinder", "center": [0, 15.5, 0], "radius": 16, "height": 32, "mass": 1000}],
+        "tools": [{"shape": "box", "min": [-64, 32, -64], "max": [64, 35, 64], "path": [{"translate": [0, -1, 0], "frames": 16}]}],
+        "obstacles": [{"shape": "box", "min": [-96, -3, -96], "max": [96, -1, 96]}]})",
+        "s.json", "");
+    const MemoryEstimate e = estimateSceneMemory(squeeze);
+    EXPECT_LT(e.transportCells, e.clayLeavesGrown * 512) << e.describe();
+    EXPECT_LE(e.transportCells, 7u * 33u * 32u * 33u) << e.describe();
+    Sculptor sc(squeeze, 1);
+    EXPECT_GE(e.transportCells, 7 * sc.mass()->activeVoxelCount()) << e.describe();
+    uint64_t most = 0;
+    while (!sc.done())
+        most = std::max(most, sc.runFrame().transport.unknowns);
+    EXPECT_GT(most, 0u);
+    EXPECT_GE(e.transportCells, most);
+}
+
 TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)
 {
     // A plate 256 x 4 x 256 voxels (a transformed box's bounds are up to two voxels loose on every
     // side) pressing 1 voxel a frame for 40 frames: each frame's bounds are tightened to the voxels
     // inside (the first frame's box, moved), not only while the distance budget lasts (2^21
-    // evaluations: the first frames only; before round 6 the later ones counted 260 x 8 x 260).
+    // evaluations: the first frames only; the later ones would count 260 x 8 x 260).
     const Scene press =
         parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [127,127,127], "mass": 800}],
         "tools": [{"shape": "box", "min": [-64,128,-64], "max": [191,131,191], "path": [{"translate": [0,-1,0], "frames": 40}]}]})",

@@ -127,9 +127,9 @@ TEST_F(RunReportTest, BudgetIsResolvedOrNone)
 
 TEST_F(RunReportTest, OutgrownBudgetStopsTheRunWhereItsCheckpointResumesExactly)
 {
-    const Scene scene = denseScene("8M");
+    const Scene scene = denseScene("56M"); // the program's 48 MiB, and 8 MiB for the clay
     Sculptor sc(scene, 2);
-    EXPECT_EQ(sc.memoryBudget(), uint64_t(8) << 20);
+    EXPECT_EQ(sc.memoryBudget(), uint64_t(56) << 20);
     sc.run();
     ASSERT_TRUE(sc.stopped());
     EXPECT_GT(sc.outgrewBudget(), sc.memoryBudget());

@@ -257,12 +257,12 @@ class FilesAndScenes(unittest.TestCase):
         dense.write(os.path.join(d, "dense.vdb"))
         text = ('{"dimensions": 2, "settle": {"max_steps": 160}, '
                 '"clay": [{"shape": "vdb", "file": "dense.vdb"}]}')
-        scene = vdbclay.Scene.from_json(text, base_dir=d, memory_budget="8M")
-        self.assertEqual(scene.memory_budget, 8 << 20)
+        scene = vdbclay.Scene.from_json(text, base_dir=d, memory_budget="56M")  # 48 MiB: the program
+        self.assertEqual(scene.memory_budget, 56 << 20)
         s = vdbclay.Sculptor(scene, threads=2)
         with self.assertRaises(vdbclay.Error) as e:
             s.run()
-        self.assertIn("the clay outgrew the memory budget of 8.00 MiB", str(e.exception))
+        self.assertIn("the clay outgrew the memory budget of 56.0 MiB", str(e.exception))
         self.assertTrue(s.stopped)
         self.assertTrue(s.frame_open)
         checkpoint = os.path.join(d, "dense-checkpoint.vdb")

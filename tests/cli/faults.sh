@@ -119,8 +119,8 @@ refused mesh-scaled-too-big "clay\[0\]: c40.obj: turning the mesh into a level s
 #    once its grids outgrow the budget, instead of growing until the machine runs out.
 cube 3 small-cube.obj
 "$bin" import small-cube.obj -o dense.vdb --mass 2147483647 > /dev/null || fail "import of dense clay"
-printf '{"memory_budget": "40M", "settle": {"max_steps": 400}, "clay": [{"shape": "vdb", "file": "dense.vdb"}]}' > dense.json
-refused budget-while-running "stopped: the clay outgrew the memory budget of 40.0 MiB" "$bin" run dense.json -q -o dense-out.vdb
+printf '{"memory_budget": "56M", "settle": {"max_steps": 400}, "clay": [{"shape": "vdb", "file": "dense.vdb"}]}' > dense.json
+refused budget-while-running "stopped: the clay outgrew the memory budget of 56.0 MiB" "$bin" run dense.json -q -o dense-out.vdb
 [ -e dense-out.vdb ] && fail "budget while running: the output was written"
 "$bin" info dense-out.checkpoint.vdb > /dev/null 2>&1 || fail "budget while running: no checkpoint"
 no_temp_files budget-while-running

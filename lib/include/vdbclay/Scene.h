@@ -81,12 +81,12 @@ struct Scene {
     /// "transport": how displaced clay travels (default: the paper's local automaton).
     Transport transport = Transport::Local;
     /// "sweep": the push acts on the volume each tool sweeps between two frames (the move split into
-    /// sub-steps of at most half a voxel), so clay never passes through a thin or fast tool.
+    /// sub-steps of at most a quarter voxel), so clay never passes through a thin or fast tool.
     bool sweep = false;
     uint64_t frames = 0; ///< frames to run (default: the longest tool path)
     std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty
     OutputSpec outputs;
-    /// Bytes the run may need (estimateSceneMemory in Sculpt.h); 0: defaultMemoryBudget();
+    /// Bytes the run may need (estimateSceneMemory in MemoryEstimate.h); 0: defaultMemoryBudget();
     /// kNoMemoryBudget: unlimited. Scene files: "memory_budget": "8G" (or a byte count, or "none").
     uint64_t memoryBudget = 0;
 };

@@ -24,8 +24,8 @@ struct FrameReport {
     /// resumed open frame does not repeat it).
     GlobalTransportReport transport;
     /// Scene::transport global: the steps the automaton ran before the global layer (its bounded
-    /// try, docs/TRANSPORT.md; counted in settle too). The layer did not run when the try
-    /// settled the frame. A resumed open frame is past its try and its layer: 0.
+    /// try, docs/TRANSPORT.md; counted in settle too). The layer did not run when the try settled
+    /// the frame. A resumed open frame is past its try and its layer: 0.
     uint64_t trySteps = 0;
     StepReport settle;
     /// false when a stop request (Sculptor::setStopRequest) cut the frame's settling short: the

@@ -1,71 +1,79 @@
-// The memory estimate of a scene (estimateSceneMemory, checkMemoryBudget; Sculpt.h), computed before
-// any grid is built, and what a run's clay takes as it grows (clayMemoryInUse).
+// The memory estimate of a scene (estimateSceneMemory, checkMemoryBudget; MemoryEstimate.h), computed
+// before any grid is built, and what a run's clay takes as it grows (clayMemoryInUse).
 //
-// What is counted. Every figure is a byte count of OpenVDB nodes as allocated (TreeBytes.h: sizeof
-// of each node plus glibc's overhead) or of the arrays of the parts that keep per-leaf or per-cell
-// lists (the automaton, the push, the global layer), each constant documented where it is defined:
-// - clay: the Int32 mass tree over the leaves the clay may reach. From the shapes' bounds (tightened
-//   to the faces that hold a voxel centre inside the shape), clay from .vdb files from the file's
-//   statistics and its walked topology (VdbCheck.h), never from its voxels. Growth: clay spreads
-//   over each group of touching clay boxes and tool sweeps, grown by a leaf; at most 27 leaves per
-//   initial leaf (a step moves clay one voxel), at most a leaf per unit of mass, and clay over Tc
-//   over its settled volume;
-// - obstacles (two masks), tools (their voxels' cells and push scratch; the compress push's Int32
-//   tree per tool), the automaton's per-leaf lists (and a lane per extra thread), the output grids
-//   writing a .vdb builds;
-// - the global layer (Scene::transport global): per cell of its domain (Transport.cc), see
-//   kTransportBytesPerCell, over the whole body or the bound below.
+// What is counted. Each part follows what the run allocates, in bytes of OpenVDB nodes as allocated
+// (TreeBytes.h: sizeof of each node plus glibc's overhead) or of the arrays the automaton, the push,
+// the global layer and the output keep per leaf, per anchor, per tool slot, per source or per cell,
+// each figure documented where it is defined (kAutomatonBytesPerLeaf ... kTransportBytesPerCell):
+// - the program (kProcessBytes: its code, libraries and threads, measured);
+// - clay: the Int32 mass tree over the leaves the clay may reach (clayLeavesGrown), and the
+//   automaton's lists per leaf and its leaf table per anchor (anchorLeaves: the leaves within one
+//   leaf of those);
+// - obstacles (two masks), the tools' cells (a mask per leaf slot of their bounds: all of them with
+//   the global layer, frame_policy::toolCellsOverWholeBounds, else those near the clay, no more);
+// - then the larger of: a push's scratch (per clay voxel inside a tool; the compress push's pool,
+//   an Int32 tree over the clay, for a tool that may cover the clay) with the global layer's arrays
+//   (kept from frame to frame: they are there during the next push), and writing the output (the
+//   float density on the clay's leaves and the surface level set on those and its band, with its
+//   scratch; the layer's arrays are freed after the last frame, Sculpt.cc).
 //
-// The global layer's domain (Sculpt.cc's runFrame, Transport.cc; layerReach). A frame whose tools
-// touch clay runs the layer with reach r0 = ceil(contact) + 2 (contact: sqrt of the voxels a tool
-// entered, 2D their number; at most sqrt of the voxels of the tool's bounds at one frame) on the
-// cells over Tc within the push's region. Its unknowns are the full cells within `reach` face steps
-// of those seeds (an inner seed floods a margin of 2 x 2^k < reach), the Dirichlet cells one more;
-// where a part the reach cut has no room the reach doubles, so it ends below twice an over cell's
-// distance to room (or r0), which a tool entering the clay from its surface finds within its
-// extent E (the diagonal of its bounds: around the tool to where it sticks out, or to the cells it
-// left). So the layer's seeds lie within a tool's sweep grown by S voxels (on every axis), and its
-// cells within F face steps of those seeds (layerReach):
-// - compress push (round 5): S = its chains' depth (as deep as the contact is wide); F = max(r0,
-//   2E), 4 for an inner seed's margin, 1 for the Dirichlet cells;
-// - surface push (round 6): its targets (within maxSearch + 2 of the tool: Push.cc's region), then
-//   the automaton's try (settleBounded), which may run S steps before the layer, moving the
-//   overload a voxel per axis (three face steps) a step. Round 7: the layer then looks for its seeds
-//   in the push's region only (runFrame; round 6 looked S further, so S = 4096 under the default
-//   max_steps grew the sweep by ~28,700 voxels: the whole body). So a seed lies within the region,
-//   moved at most c = min(S, maxSearch + 2) voxels from its target, and room lies E + 3c face steps
-//   away: S = region, F = max(r0, 2 (E + 3c)) + 4 + 1. The try runs in chunks of kTryChunk steps
-//   and gives up at kTrySteps; a chunk that reaches the scene's max_steps ends the frame with no
-//   layer: S < max_steps, a multiple of kTryChunk, so c = 0 when max_steps <= 16 (trySteps), 16 up
-//   to 32, then 18 whatever the budget. The try is skipped on saturated clay (mean density near the
-//   tool >= kTrySaturated), but nothing here can know that before the run.
-// The cells counted are those of the clay's extent within F face steps of the sweep grown by S
-// (round 9: an octahedron's corners around the box, voxelsWithinFaceSteps; round 7 counted every
-// voxel of the leaves meeting the sweep grown by S + F on every axis, a cube), for the frame that
+// The clay's leaves. At the start: those of the shapes (an analytic shape, whose distance is exact
+// or a lower bound: the leaves within its tightened bounds whose centre lies less than a leaf's
+// half-diagonal from it, decided a 128^3 node at a time where a node's centre settles it; other
+// shapes: their bounds), and of files (their walked topology, VdbCheck.h). Growth, group by group of
+// touching clay boxes and tool sweeps (each grown by a leaf): clay no tool reaches, at most Tc, keeps
+// its leaves; clay a tool pokes spreads within a leaf of itself and of the tools' sweeps (what a push
+// moves lands beside the tool, the global layer writes only the cells its domain touches, next to the
+// clay); clay a tool covers (a sweep spanning its box on two axes: squeezed over the whole footprint),
+// clay over Tc and clay from files that may hold some spread over the group's box. Never more than
+// 27 leaves per initial leaf (a step moves clay one voxel), a leaf per unit of mass, and clay over Tc
+// at least over its settled volume.
+//
+// The global layer's domain (transport/Domain.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
+// touch clay runs the layer with reach r0 = frame_policy::layerReach(contact) (contact: sqrt of the
+// voxels a tool entered, 2D their number; at most those inside the tool at one frame) on the cells
+// over Tc within the push's region. Its cells are the full cells within `reach` face steps of those
+// seeds (an inner seed floods a margin of 2 x 2^k < reach) and their face neighbours; where a part the
+// reach cut has no room the reach doubles, so it ends below twice an over cell's distance to room
+// (or r0), which a tool entering the clay from its surface finds within its extent E (the diagonal of
+// its bounds: around the tool to where it sticks out, or to the cells it left). So the layer's seeds
+// lie within a tool's sweep grown by S voxels (on every axis), and its cells within F face steps of
+// those seeds (layerReach):
+// - compress push: S = its chains' depth (as deep as the contact is wide); F = max(r0, 2E), 4 for an
+//   inner seed's margin, 1 for the Dirichlet cells;
+// - surface push: its targets (within maxSearch + 2 of the tool: the push's region), then the
+//   automaton's try (frame_policy::tryAfterPush ...), which may run c steps before the layer, moving
+//   the overload a voxel per axis (three face steps) a step, while the layer looks for its seeds in
+//   the push's region only. So a seed lies within the region, moved at most c = min(steps, maxSearch
+//   + 2) voxels from its target, and room lies E + 3c face steps away: S = region, F = max(r0, 2 (E +
+//   3c)) + 4 + 1. The try's steps before the layer: frame_policy::tryStepsBeforeLayer (0 under a step
+//   budget of at most 16, then 16 up to 32, then 18 whatever the budget); none where the try never
+//   runs: after a compress push, and on clay whose shapes all start saturated
+//   (frame_policy::trySaturated), which pushes move but do not thin.
+// The cells counted are the clay's (the leaves the grown clay may hold) within F face steps of the
+// sweep grown by S (an octahedron's corners around the box, voxelsWithinFaceSteps), for the frame that
 // holds most (layerCellsAlong: each frame's push lies between the tool's bounds at that frame and the
-// one before; the layer's arrays serve one frame at a time). The 512-wide stroke
-// under the default budget: S 18, F 159; 2.96 GiB for the layer, 6.42 GiB in all (round 7: 10.3 and
-// 13.7 GiB; its run peaks at 1.7 GB); at max_steps <= 16, 393 MiB for the layer (928 MiB); the whole
-// body 50.1 GiB.
-// The whole body where the bound does not hold: a tool's sweep spanning a clay shape's box on two
-// axes (it covers the clay: compressed all the way, a contact as wide as the body); a sweep with no
-// corner outside every clay shape (the tool starts inside the clay: no room near it); an obstacle
-// within the grown sweep (clay walled in: the reach doubles up to the whole body); clay over Tc (it
-// overflows anywhere, no tool near), or from a file that does not record its largest cell at most
-// Tc (vdbclay_max_mass, written by writeClayFile and the checkpoint since round 7; read from the
-// file's metadata, never its voxels; a file whose voxels exceed it is refused when the run reads
-// it). A tool's corner inside a file's bounds counts as inside its clay (its voxels are not read).
-// A frame whose tools touch no clay runs the layer with no reach (over every over cell) only as the
-// scene's first frame (round 7, runFrame; before, also after a frame that ended unsettled: a hole
-// here): its over cells are clay that starts over Tc, counted above (a shape over Tc, two shapes that
-// overlap and add up over Tc, a file that does not record its largest cell at most Tc).
+// one before; the layer's arrays serve one frame at a time); and never more than 7 per full cell (a
+// full cell and its faces: the mass over Tc). The whole body where the bound does not hold: a tool's
+// sweep spanning a clay shape's box on two axes (it covers the clay: compressed all the way, a contact
+// as wide as the body); a sweep with no corner outside every clay shape (the tool starts inside the
+// clay: no room near it); an obstacle within the grown sweep (clay walled in: the reach doubles up to
+// the whole body); clay over Tc (it overflows anywhere, no tool near), or from a file that does not
+// record its largest cell at most Tc (vdbclay_max_mass, written by writeClayFile and the checkpoint;
+// read from the file's metadata, never its voxels; a file whose voxels exceed it is refused when the
+// run reads it). A tool's corner inside a file's bounds counts as inside its clay (its voxels are not
+// read). A frame whose tools touch no clay runs the layer with no reach (over every over cell) only as
+// the scene's first frame (frame_policy::layerRuns): its over cells are clay that starts over Tc,
+// counted above (a shape over Tc, two shapes that overlap and add up over Tc, a file that does not
+// record its largest cell at most Tc).
 //
-// Cost. Proportional to the shapes, tools and files named, not to their volume: bounds are tightened
-// within a budget of distance evaluations (kTightenBudget; a large face sampled first, a tool's pose
-// moved by whole voxels from one tightened before takes that box, moved: round 6), leaves are
-// counted on boxes, a file's voxels are read only when it lacks OpenVDB's grid statistics; the
-// layer's cells a row at a time over the grown sweep's rows (at most kFaceStepRowsMax, else the
-// leaves' voxels).
+// Cost. Proportional to the shapes, tools and files named and to the clay's surface, not to its
+// volume: bounds are tightened within a budget of distance evaluations (kTightenBudget; a large face
+// sampled first, a tool's pose moved by whole voxels from one tightened before takes that box, moved),
+// leaves are counted by distance near a shape's surface only, within kCoverBudget evaluations (else
+// on boxes), a file's voxels are read only when it lacks OpenVDB's grid statistics; the layer's cells
+// a leaf at a time over the clay's leaves near each frame (at most kFrameLeavesMax, else the rows of
+// the grown sweep, at most kFaceStepRowsMax, else the leaves' voxels).
 #include "vdbclay/MemoryEstimate.h"
 #include "vdbclay/Sculpt.h"
 
@@ -74,6 +82,7 @@
 #include "io/ClayFileMeta.h"
 #include "push/ClayLeaves.h"
 #include "core/Format.h"
+#include "sculpt/EstimateGeometry.h"
 #include "sculpt/MemoryEstimate.h"
 #include "sculpt/FramePolicy.h"
 #include "transport/SolverTuning.h"
@@ -115,161 +124,9 @@ template <typename TreeT> constexpr uint64_t upperNodeBytes()
     return sizeof(typename TreeT::RootNodeType::ChildNodeType) + kMallocOverhead + 64;
 }
 
-/// Per clay leaf, the automaton's lists (lib/src/Automaton.cc): the leaf in hotLeaves (a Coord, 12
-/// bytes), its changed-block masks of the last two steps (two Anchors of 24 bytes), up to 10
-/// candidate contributions (the leaf's own, 8 from dilating the other phase, an edited region) and
-/// one WorkItem (40 bytes); doubled for vector growth. Plus the kernel's leaf table (Kernel.h):
-/// an entry of 264 bytes, up to 64 bytes of hash slots, 64 bytes of neighbour indices and the
-/// candidates' two 8-byte accumulators (Candidates.h, dense mode) per anchor that reaches a leaf, at
-/// most 8 anchors per leaf (isolated leaves; compact clay has ~1.3).
-constexpr uint64_t kAutomatonBytesPerLeaf = 2 * (12 + 2 * 24 + 10 * 24 + 40) + 8 * (264 + 64 + 64 + 16);
-/// Per clay leaf and thread beyond the first: the thread's own lane of those two accumulators and their
-/// bit sets (Candidates::lanes), for up to 8 anchors.
-constexpr uint64_t kAutomatonLaneBytesPerLeaf = 8 * (16 + 1);
-/// Per tool voxel: its cell in Sculptor's toolCells (12 bytes, doubled for growth) and, for clay
-/// inside a tool, push's scratch: a Source (32 bytes), a Move (28) and a std::map node (~64).
-constexpr uint64_t kToolBytesPerVoxel = 24 + 32 + 28 + 64;
-
 using frame_policy::growBox;
-using memory_internal::voxelsWithinFaceSteps;
+using namespace memory_internal; // the byte figures (MemoryEstimate.h), the geometry (EstimateGeometry.h)
 using transport_internal::kDenseIndexMax;
-
-/// Scene::transport global: bytes per cell of the layer's domain (estimateSceneMemory says which).
-constexpr uint64_t kTransportBytesPerCell = 2 * 90 + 4 + 88 + 88;
-
-int64_t leafIndex(int32_t v, int log2)
-{
-    return int64_t(v) >> log2;
-} // floor division
-
-/// Number of nodes of side 2^log2 voxels that @a b touches (2D boxes are clipped to z = 0 first).
-uint64_t nodesIn(const Box& b, int log2)
-{
-    if (b.empty()) return 0;
-    uint64_t n = 1;
-    for (int a = 0; a < 3; ++a)
-        n *= uint64_t(leafIndex(b.max[a], log2) - leafIndex(b.min[a], log2) + 1);
-    return n;
-}
-uint64_t voxelsIn(const Box& b)
-{
-    if (b.empty()) return 0;
-    uint64_t n = 1;
-    for (int a = 0; a < 3; ++a)
-        n *= uint64_t(int64_t(b.max[a]) - int64_t(b.min[a]) + 1);
-    return n;
-}
-Box clip2D(Box b, int dims)
-{
-    if (dims == 2) {
-        b.min[2] = std::max(b.min[2], 0);
-        b.max[2] = std::min(b.max[2], 0);
-    }
-    return b;
-}
-/// @a b (a shape's bounds) without the faces that hold no voxel centre inside @a shape: bounds()
-/// may be a voxel or two larger than the voxels inside, which at leaf boundaries counts whole extra
-/// layers of leaves. Spends at most @a budget distance evaluations (shared by all calls of one
-/// estimate, so that huge or many shapes cost well under a second); a face it cannot afford stays.
-/// A large face (over 4 kFaceSamples voxels) is tried first at its centre and on a coarse lattice
-/// (kFaceSamples points: a convex shape's voxels on a face lie around its middle), then voxel by
-/// voxel: the same faces dropped.
-constexpr uint64_t kFaceLattice = 8, kFaceSamples = 1 + (kFaceLattice + 1) * (kFaceLattice + 1);
-Box tighten(const Shape& shape, Box b, int dims, uint64_t& budget)
-{
-    auto inside = [&](int64_t x, int64_t y, int64_t z) {
-        --budget;
-        return shape.distance(Vec3{{double(x), double(y), double(z)}}) < 0;
-    };
-    auto anyInside = [&](const Box& face, bool sample) {
-        auto at = [&](int a, uint64_t i, uint64_t n) { // point i of n + 1 spread over the face's axis a
-            return int64_t(face.min[a]) + int64_t(uint64_t(int64_t(face.max[a]) - face.min[a]) * i / n);
-        };
-        if (sample) {
-            if (inside(at(0, 1, 2), at(1, 1, 2), at(2, 1, 2))) return true;
-            // The face is flat along one axis; the lattice spans the others (2D: one, z = 0 is flat too).
-            int free[2] = {-1, -1}, nFree = 0;
-            for (int a = 0; a < 3; ++a)
-                if (face.min[a] != face.max[a] && nFree < 2) free[nFree++] = a;
-            for (uint64_t i = 0; i <= kFaceLattice; ++i)
-                for (uint64_t j = 0; j <= (nFree == 2 ? kFaceLattice : 0); ++j) {
-                    int64_t c[3] = {face.min[0], face.min[1], face.min[2]};
-                    if (nFree > 0) c[free[0]] = at(free[0], i, kFaceLattice);
-                    if (nFree > 1) c[free[1]] = at(free[1], j, kFaceLattice);
-                    if (inside(c[0], c[1], c[2])) return true;
-                }
-        }
-        for (int64_t x = face.min[0]; x <= face.max[0]; ++x)
-            for (int64_t y = face.min[1]; y <= face.max[1]; ++y)
-                for (int64_t z = face.min[2]; z <= face.max[2]; ++z)
-                    if (inside(x, y, z)) return true;
-        return false;
-    };
-    for (int a = 0; a < (dims == 2 ? 2 : 3); ++a) {
-        for (int side = 0; side < 2; ++side) {
-            for (int k = 0; k < 4 && b.min[a] < b.max[a]; ++k) {
-                Box face = b;
-                if (side == 0)
-                    face.max[a] = b.min[a];
-                else
-                    face.min[a] = b.max[a];
-                const uint64_t n = voxelsIn(face);
-                const bool sample = n > 4 * kFaceSamples;
-                if (n > budget || (sample && budget - n < kFaceSamples) || anyInside(face, sample)) break;
-                if (side == 0)
-                    ++b.min[a];
-                else
-                    --b.max[a];
-            }
-        }
-    }
-    return b;
-}
-
-/// Distance evaluations one estimate may spend tightening bounds (~0.1 s).
-constexpr uint64_t kTightenBudget = uint64_t(1) << 21;
-
-bool touches(const Box& a, const Box& b)
-{
-    return !intersect(a, b).empty();
-}
-
-/// Whether two of the boxes @a boxOf(i), i in @a ids, touch while @a pair(i, j) holds for them (a
-/// sweep along x: a box meets only those that start before it ends).
-template <typename BoxOf, typename Pair>
-bool anyTouchingPair(std::vector<size_t> ids, const BoxOf& boxOf, const Pair& pair)
-{
-    std::sort(ids.begin(), ids.end(), [&](size_t a, size_t b) { return boxOf(a).min[0] < boxOf(b).min[0]; });
-    for (size_t i = 0; i < ids.size(); ++i)
-        for (size_t j = i + 1; j < ids.size() && boxOf(ids[j]).min[0] <= boxOf(ids[i]).max[0]; ++j)
-            if (touches(boxOf(ids[i]), boxOf(ids[j])) && pair(ids[i], ids[j])) return true;
-    return false;
-}
-
-/// Distinct nodes of side 2^@a log2 voxels that @a boxes touch: counted one by one while there are
-/// at most 2^20 of them (boxes that share a node count it once: 20000 copies of one tool, or
-/// 100000 one-voxel boxes in a few leaves), else bounded by their sum and by their bounding box.
-uint64_t distinctNodes(const std::vector<Box>& boxes, int log2)
-{
-    uint64_t sum = 0;
-    Box all;
-    for (const Box& b : boxes) {
-        sum += nodesIn(b, log2);
-        all = unite(all, b);
-    }
-    if (sum > (uint64_t(1) << 20)) return std::min(sum, nodesIn(all, log2));
-    std::vector<std::array<int64_t, 3>> keys;
-    keys.reserve(size_t(sum));
-    for (const Box& b : boxes) {
-        if (b.empty()) continue;
-        for (int64_t x = leafIndex(b.min[0], log2); x <= leafIndex(b.max[0], log2); ++x)
-            for (int64_t y = leafIndex(b.min[1], log2); y <= leafIndex(b.max[1], log2); ++y)
-                for (int64_t z = leafIndex(b.min[2], log2); z <= leafIndex(b.max[2], log2); ++z)
-                    keys.push_back({{x, y, z}});
-    }
-    std::sort(keys.begin(), keys.end());
-    return uint64_t(std::unique(keys.begin(), keys.end()) - keys.begin());
-}
 
 /// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
 /// internal nodes).
@@ -291,7 +148,7 @@ struct FileGrid {
     uint64_t leaves = 0; ///< leaves its topology really holds (VdbCheck), whatever its metadata says
     uint64_t lowerNodes = 0, upperNodes = 0; ///< its internal nodes, likewise (0 if not walked)
     uint64_t memBytes = 0; ///< the tree's in-memory size when it was written (0 if not recorded)
-    /// Its largest cell as the writer recorded it (vdbclay_max_mass, IO.cc: readClayFile refuses a
+    /// Its largest cell as the writer recorded it (vdbclay_max_mass, io/ClayFile.cc: readClayFile refuses a
     /// file whose voxels exceed it, so a run never holds more); -1 when not recorded.
     int64_t maxMass = -1;
 };
@@ -371,168 +228,17 @@ FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
     return out;
 }
 
-/// Groups boxes that touch (directly or through others); returns each group's box indices.
-std::vector<std::vector<size_t>> groupsOfTouching(const std::vector<Box>& boxes)
-{
-    std::vector<size_t> parent(boxes.size());
-    for (size_t i = 0; i < parent.size(); ++i)
-        parent[i] = i;
-    auto root = [&](size_t i) {
-        while (parent[i] != i)
-            i = parent[i] = parent[parent[i]];
-        return i;
-    };
-    // Pairwise: beyond 4000 boxes (16 million pairs) they are taken as one group.
-    for (size_t i = 0; i < boxes.size(); ++i)
-        for (size_t j = i + 1; j < boxes.size(); ++j)
-            if (boxes.size() > 4000 || touches(boxes[i], boxes[j])) parent[root(j)] = root(i);
-    std::vector<std::vector<size_t>> groups(boxes.size());
-    for (size_t i = 0; i < boxes.size(); ++i)
-        groups[root(i)].push_back(i);
-    groups.erase(
-        std::remove_if(groups.begin(), groups.end(), [](const std::vector<size_t>& g) { return g.empty(); }),
-        groups.end());
-    return groups;
-}
-
-/// Leaves (8^3 voxels) touched by the union of @a boxes, counted exactly on the grid the boxes'
-/// leaf-aligned faces cut (at most 40 boxes; more: distinctNodes()).
-uint64_t unionLeaves(const std::vector<Box>& boxes)
-{
-    struct LeafBox {
-        int64_t lo[3], hi[3]; // half-open, in leaves
-    };
-    std::vector<LeafBox> lb;
-    Box all;
-    for (const Box& b : boxes) {
-        if (b.empty()) continue;
-        all = unite(all, b);
-        LeafBox l;
-        for (int a = 0; a < 3; ++a) {
-            l.lo[a] = leafIndex(b.min[a], 3);
-            l.hi[a] = leafIndex(b.max[a], 3) + 1;
-        }
-        lb.push_back(l);
-    }
-    if (lb.size() > 40) return distinctNodes(boxes, 3);
-    std::vector<int64_t> cuts[3];
-    for (int a = 0; a < 3; ++a) {
-        for (const LeafBox& l : lb) {
-            cuts[a].push_back(l.lo[a]);
-            cuts[a].push_back(l.hi[a]);
-        }
-        std::sort(cuts[a].begin(), cuts[a].end());
-        cuts[a].erase(std::unique(cuts[a].begin(), cuts[a].end()), cuts[a].end());
-    }
-    uint64_t n = 0;
-    for (size_t i = 0; i + 1 < cuts[0].size(); ++i)
-        for (size_t j = 0; j + 1 < cuts[1].size(); ++j)
-            for (size_t k = 0; k + 1 < cuts[2].size(); ++k) {
-                const int64_t c[3] = {cuts[0][i], cuts[1][j], cuts[2][k]};
-                const bool in = std::any_of(lb.begin(), lb.end(), [&](const LeafBox& l) {
-                    return l.lo[0] <= c[0] && c[0] < l.hi[0] && l.lo[1] <= c[1] && c[1] < l.hi[1] &&
-                           l.lo[2] <= c[2] && c[2] < l.hi[2];
-                });
-                if (in) {
-                    n += uint64_t(cuts[0][i + 1] - c[0]) * uint64_t(cuts[1][j + 1] - c[1]) *
-                         uint64_t(cuts[2][k + 1] - c[2]);
-                }
-            }
-    return n;
-}
-
-/// Whether @a x is a multiple of 2^-20 below 2^30 in magnitude: sums and differences of such values
-/// and of voxel coordinates (below 2^31) are exact in a double.
-bool exactCoordinate(double x)
-{
-    const double s = std::ldexp(x, 20);
-    return std::abs(x) < 1073741824.0 && s == std::floor(s);
-}
-
-/// Whether pose @a b is pose @a a moved by a whole number of voxels @a d (same rotation, same pivot,
-/// exact coordinates): a shape placed at @a b then holds exactly the voxels it holds at @a a, moved by
-/// @a d (Shapes.cc: a transformed shape's distance at p is the inner shape's at R^T (p - t - c) + c,
-/// which for p + d and t + d is the same double; a pose that is the identity uses the shape itself,
-/// the same only with no rotation at all).
-bool wholeVoxelMove(const Pose& a, const Pose& b, int dims, int64_t d[3])
-{
-    const bool identity = a.isIdentity() || b.isIdentity();
-    for (int i = 0; i < 3; ++i) {
-        if (a.rotationDeg[i] != b.rotationDeg[i] || a.pivot[i] != b.pivot[i]) return false;
-        if (identity && a.rotationDeg[i] != 0.0) return false;
-        if (!exactCoordinate(a.translation[i]) || !exactCoordinate(b.translation[i]) ||
-            !exactCoordinate(a.pivot[i]))
-            return false;
-        const double diff = b.translation[i] - a.translation[i];
-        if (diff != std::floor(diff)) return false;
-        d[i] = int64_t(diff);
-    }
-    return dims == 3 || d[2] == 0;
-}
-
-/// The bounds of @a tool over frames 0..@a frames (every frame up to 100000 of them, else 100000
-/// evenly spaced ones and the path's segment ends), and the most voxels its bounds hold at once.
-/// Each frame's bounds are tightened while @a budget lasts (tighten()); a frame whose pose is one
-/// tightened before moved by whole voxels (a press, a stroke: every frame) takes that box, moved.
-/// @a frameBoxes, when given, receives every frame's bounds in frame order (empty when frames were
-/// sampled).
-std::pair<Box, uint64_t> sweep(const ToolSpec& tool, uint64_t frames, int dims, uint64_t& budget,
-                               std::vector<Box>* frameBoxes = nullptr)
-{
-    const uint64_t end = std::min(frames, tool.pathFrames()); // then the tool stays where it is
-    Box all;
-    uint64_t most = 0;
-    std::vector<std::pair<Pose, Box>> tightened; // poses tightened (at most 16: a short search)
-    auto at = [&](uint64_t f) {
-        const Pose pose = tool.poseAt(f);
-        Box b;
-        bool moved = false;
-        for (const auto& pb : tightened) {
-            int64_t d[3];
-            if (!wholeVoxelMove(pb.first, pose, dims, d)) continue;
-            b = pb.second;
-            for (int a = 0; a < 3 && !b.empty(); ++a) {
-                b.min[a] = int32_t(std::max<int64_t>(INT32_MIN, int64_t(b.min[a]) + d[a]));
-                b.max[a] = int32_t(std::min<int64_t>(INT32_MAX, int64_t(b.max[a]) + d[a]));
-            }
-            moved = true;
-            break;
-        }
-        if (!moved) {
-            const ShapePtr s = makeTransformed(tool.shape.shape, pose);
-            b = tighten(*s, clip2D(s->bounds(), dims), dims, budget);
-            if (tightened.size() < 16) tightened.emplace_back(pose, b);
-        }
-        all = unite(all, b);
-        most = std::max(most, voxelsIn(b));
-        if (frameBoxes) frameBoxes->push_back(b);
-    };
-    const uint64_t stride = std::max<uint64_t>(1, end / 100000);
-    for (uint64_t f = 0; f <= end; f += stride)
-        at(f);
-    if (stride > 1) {
-        if (frameBoxes) frameBoxes->clear();
-        frameBoxes = nullptr;
-        uint64_t f = 0;
-        for (const PathSegment& seg : tool.path) {
-            f += seg.frames;
-            if (f <= end) at(f);
-        }
-        at(end);
-    }
-    return {all, most};
-}
-
 /// What the global layer's domain bound (file comment) depends on.
 struct LayerBound {
     PushMode push = PushMode::Surface;
     int dims = 3;
-    uint64_t toolMost = 0;  ///< voxels of the largest tool's bounds at one frame
-    double toolExtent = 0;  ///< the largest tool's diagonal
-    uint64_t maxSteps = 0;  ///< the scene's step budget per frame
-    bool clayMoves = false; ///< clay from a file or over Tc: it may overflow with no tool near
-    bool covers = false;    ///< a tool's sweep spans a clay shape's box on two axes
-    bool buried = false;    ///< no corner of a tool's sweep lies outside the clay: it starts inside
+    uint64_t toolInside = 0; ///< the most voxels inside a tool at one frame (a push enters no more)
+    double toolExtent = 0;   ///< the largest tool's diagonal
+    uint64_t maxSteps = 0;   ///< the scene's step budget per frame
+    bool trySkipped = false; ///< the automaton's try never runs before the layer (FramePolicy.h)
+    bool clayMoves = false;  ///< clay from a file or over Tc: it may overflow with no tool near
+    bool covers = false;     ///< a tool's sweep spans a clay shape's box on two axes
+    bool buried = false;     ///< no corner of a tool's sweep lies outside the clay: it starts inside
 };
 
 /// Where the global layer's domain lies around a tool's sweep (file comment): its seeds within the
@@ -548,7 +254,7 @@ LayerReach layerReach(const LayerBound& b)
     LayerReach r;
     if (b.clayMoves || b.covers || b.buried) return r;
     r.bounded = true;
-    const double contact = b.dims == 2 ? double(b.toolMost) : std::sqrt(double(b.toolMost));
+    const double contact = b.dims == 2 ? double(b.toolInside) : std::sqrt(double(b.toolInside));
     const int64_t reach = frame_policy::layerReach(contact);
     const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
     if (b.push == PushMode::Compress) {
@@ -558,45 +264,50 @@ LayerReach layerReach(const LayerBound& b)
     }
     // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
     // try's steps, each moving clay one voxel (three face steps) at most; the layer's seeds stay in
-    // the region (round 7), so the try moved them at most `region` voxels from the tool, whatever its
-    // steps.
+    // the region (frame_policy::layerOptions), so the try moved them at most `region` voxels from the
+    // tool, whatever its steps.
     const int64_t region = int64_t(PushOptions().maxSearch) + 2;
-    const int64_t steps = std::min(int64_t(frame_policy::tryStepsBeforeLayer(b.maxSteps)), region);
+    const int64_t steps =
+        b.trySkipped ? 0 : std::min(int64_t(frame_policy::tryStepsBeforeLayer(b.maxSteps)), region);
     r.seeds = region;
     r.faceSteps = std::max(reach, 2 * (room + 3 * steps)) + 4 + 1;
     return r;
 }
 
-/// Rows voxelsWithinFaceSteps may count for one tool's frames together (layerCellsAlong): ~50 ms.
-constexpr uint64_t kFrameRowsMax = uint64_t(1) << 25;
+/// Leaves ClayCover may visit for the global layer's domain of one tool's frames together
+/// (layerCellsAlong).
+constexpr uint64_t kFrameLeavesMax = uint64_t(1) << 22;
 
-/// The cells of the global layer's domain (the clay's @a extent within @a reach of the seeds) at the
-/// frame that holds most, for a tool whose bounds frame by frame are @a frames (round 9): a frame's
-/// layer runs after its push, whose region lies within the tool's bounds at this frame and the one
-/// before (the sub-steps of a sweep move between them), and the layer's arrays are reused from frame
-/// to frame, so its peak is the largest frame's, not the whole @a sweep's. The whole sweep where the
-/// frames are sampled or counting them all would take more than kFrameRowsMax rows.
+/// The cells of the global layer's domain at the frame that holds most, for a tool whose bounds
+/// frame by frame are @a frames: the clay's voxels (in the leaves @a clay may hold, within @a extent)
+/// within @a reach of the seeds. A frame's layer runs after its push, whose region lies within the
+/// tool's bounds at this frame and the one before (the sub-steps of a sweep move between them), and
+/// the layer's arrays are reused from frame to frame, so its peak is the largest frame's, not the
+/// whole @a sweep's. The whole sweep where the frames are sampled or counting them all would visit
+/// more than kFrameLeavesMax leaves (or @a budget ran out): then the voxels of @a extent itself.
 uint64_t layerCellsAlong(const std::vector<Box>& frames, const Box& sweep, const LayerReach& reach,
-                         const Box& extent, int dims)
+                         const Box& extent, const ClayCover& clay, uint64_t& budget, int dims)
 {
-    // The cells within reach of the seeds of a push whose tool's bounds are @a b.
-    const auto around = [&](const Box& b) {
-        return voxelsWithinFaceSteps(growBox(b, reach.seeds, dims), reach.faceSteps, extent, dims);
+    const auto whole = [&]() {
+        return voxelsWithinFaceSteps(growBox(sweep, reach.seeds, dims), reach.faceSteps, extent, dims);
     };
-    if (frames.empty()) return around(sweep);
-    const int64_t grow = 2 * (reach.seeds + reach.faceSteps);
-    uint64_t rows = 0, most = 0; // (each frame's pair lies within the sweep: most <= around(sweep))
+    if (frames.empty()) return whole();
+    uint64_t visited = 0, most = 0;
     Box last;
     for (size_t k = 0; k < frames.size(); ++k) {
         const Box pair = k ? unite(frames[k - 1], frames[k]) : frames[k];
         if (k && pair.min == last.min && pair.max == last.max) continue; // the tool stood still
         last = pair;
         if (pair.empty()) continue;
-        rows += uint64_t(int64_t(pair.max[0]) - pair.min[0] + 1 + grow) *
-                uint64_t(int64_t(pair.max[1]) - pair.min[1] + 1 + grow);
-        if (rows > kFrameRowsMax) return around(sweep);
-        const uint64_t n = around(pair);
-        if (n == UINT64_MAX) return around(sweep);
+        const Box seeds = growBox(pair, reach.seeds, dims);
+        const Box around = intersect(clip2D(growBox(seeds, reach.faceSteps, dims), dims), extent);
+        visited += nodesIn(around, 3);
+        if (visited > kFrameLeavesMax) return whole();
+        uint64_t n = 0;
+        if (!clay.forEachLeaf(around, false, budget, [&](const Box& leaf) {
+                n += voxelsWithinFaceSteps(seeds, reach.faceSteps, leaf, dims);
+            }))
+            return whole();
         most = std::max(most, n);
     }
     return most;
@@ -641,29 +352,38 @@ uint64_t voxelsWithinFaceSteps(const Box& b, int64_t r, Box within, int dims)
 
 uint64_t MemoryEstimate::total() const
 {
-    return clayBytes + obstacleBytes + toolBytes + automatonBytes + outputBytes + transportBytes;
+    return processBytes + clayBytes + obstacleBytes + toolBytes + automatonBytes +
+           std::max(pushBytes + transportBytes, outputBytes);
 }
 
 std::string MemoryEstimate::describe() const
 {
-    return "about " + formatBytes(total()) + " (clay " + formatBytes(clayBytes) + " for up to " +
-           std::to_string(clayLeavesGrown) + " leaves of 8^3 voxels, " + std::to_string(clayLeaves) +
-           " at the start; obstacles " + formatBytes(obstacleBytes) + "; tools " + formatBytes(toolBytes) +
-           "; automaton " + formatBytes(automatonBytes) + "; output grids " + formatBytes(outputBytes) +
-           (transportBytes ? "; global transport " + formatBytes(transportBytes) : std::string()) + ")";
+    return "about " + formatBytes(total()) + " (program " + formatBytes(processBytes) + "; clay " +
+           formatBytes(clayBytes) + " for up to " + std::to_string(clayLeavesGrown) +
+           " leaves of 8^3 voxels, " + std::to_string(clayLeaves) + " at the start; obstacles " +
+           formatBytes(obstacleBytes) + "; tools " + formatBytes(toolBytes) + "; automaton " +
+           formatBytes(automatonBytes) + "; then the larger of push " + formatBytes(pushBytes) +
+           (transportBytes ? " with global transport " + formatBytes(transportBytes) : std::string()) +
+           ", and output grids " + formatBytes(outputBytes) + ")";
 }
 
 MemoryEstimate estimateSceneMemory(const Scene& scene)
 {
     openvdb::initialize();
     const int dims = scene.dimensions;
+    const int64_t tc = scene.rule.threshold;
     MemoryEstimate e;
+    e.processBytes = kProcessBytes;
     uint64_t budget = kTightenBudget, toolBudget = kTightenBudget; // clay and obstacles; tools
+    uint64_t coverBudget = kCoverBudget;                           // clay leaves and the layer's cells
+    uint64_t voxelBudget = kTightenBudget;                         // clay voxels, for its mass
     struct Area {
         Box box;
-        bool clay;         ///< holds clay (else: a tool's sweep)
-        bool moves;        ///< may move: a tool, clay from a file, clay above Tc
-        bool file = false; ///< clay from a file
+        bool clay;                    ///< holds clay (else: a tool's sweep)
+        bool moves;                   ///< may move: a tool, clay from a file, clay above Tc
+        bool file = false;            ///< clay from a file
+        const Shape* shape = nullptr; ///< clay of an analytic shape: its distance is exact
+        bool overTc = false;          ///< clay that starts over Tc, or a file that may hold some
     };
     std::vector<Box> fileBoxes; // of clay from files: where a tool's corner may lie inside clay
     std::vector<Area> areas;
@@ -687,8 +407,11 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         fileTreeBytes += std::max(g.memBytes, real);
         fileLower += g.upperNodes ? g.lowerNodes : UINT64_MAX / 4;
         fileUpper += g.upperNodes ? g.upperNodes : UINT64_MAX / 4;
-        // It may overflow with no tool near unless it records its largest cell at most Tc (round 7).
-        areas.push_back({b, true, g.maxMass < 0 || g.maxMass > int64_t(scene.rule.threshold), true});
+        // It may overflow with no tool near unless it records its largest cell at most Tc.
+        const bool over = g.maxMass < 0 || g.maxMass > tc;
+        Area a{b, true, over, true};
+        a.overTc = over;
+        areas.push_back(a);
         fileBoxes.push_back(b);
         massBound = UINT64_MAX;
     };
@@ -707,31 +430,42 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             const Box b = tighten(*c.shape.shape, clip2D(c.shape.shape->bounds(), dims), dims, budget);
             clayBoxes.push_back(b);
             clayMasses.push_back(c.mass);
-            areas.push_back({b, true, c.mass > scene.rule.threshold});
-            const double m = double(c.mass) * double(voxelsIn(b));
+            Area a{b, true, c.mass > tc};
+            a.overTc = c.mass > tc;
+            // The analytic shapes (a voxel is clay by its centre, and the distance is exact or, scaled,
+            // a lower bound): their leaves are counted by distance; other shapes by their bounds.
+            if (!c.shape.shape->keepsVolume() && (c.shape.kind == "sphere" || c.shape.kind == "box" ||
+                                                  c.shape.kind == "cylinder" || c.shape.kind == "capsule"))
+                a.shape = c.shape.shape.get();
+            areas.push_back(a);
+            // Its mass: the voxels of an analytic shape counted (while the budget lasts), else its box's.
+            const double m =
+                double(c.mass) * double(a.shape ? voxelsInsideShape(*a.shape, b, voxelBudget) : voxelsIn(b));
             if (massBound != UINT64_MAX)
                 massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
-            const double settled =
-                c.mass > scene.rule.threshold ? std::ceil(m / double(scene.rule.threshold)) : 0.0;
+            const double settled = c.mass > tc ? std::ceil(m / double(tc)) : 0.0;
             settledVoxels =
                 settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
         }
     }
-    e.clayLeaves = distinctNodes(clayBoxes, 3) + fileLeaves;
-    uint64_t toolLeaves = 0;
+    const size_t clayAreas = areas.size();
+    // The tools: each one's bounds frame by frame, the voxels inside it at once (the pushes place it at
+    // the frames' poses, or with Scene::sweep between them: its bounds), the slots where its cells are
+    // marked (frame_policy::toolCellsOverWholeBounds: all of its bounds with the global layer, else
+    // those near the clay, at most the same).
+    std::vector<ToolSweep> sweeps;
     std::vector<Box> toolBoxes;
-    std::vector<std::vector<Box>> toolFrames; // each tool's bounds frame by frame (empty: sampled)
-    uint64_t toolMost = 0;                    // voxels of the largest tool's bounds at one frame
-    double toolExtent = 0;                    // the largest tool's diagonal
+    uint64_t toolInside = 0; // voxels inside the largest tool at one frame
+    double toolExtent = 0;   // the largest tool's diagonal
     for (const ToolSpec& t : scene.tools) {
-        toolFrames.emplace_back();
-        const auto sw = sweep(t, scene.frames, dims, toolBudget, &toolFrames.back());
-        areas.push_back({sw.first, false, true});
-        e.toolVoxels += sw.second;
-        toolLeaves += (sw.second + 511) / 512 + 1; // the densest frame, in leaves (at least)
-        toolBoxes.push_back(sw.first);
-        toolMost = std::max(toolMost, sw.second);
+        sweeps.push_back(sweep(t, scene.frames, dims, !scene.sweep, toolBudget));
+        const ToolSweep& sw = sweeps.back();
+        areas.push_back({sw.all, false, true});
+        e.toolVoxels += sw.most;
+        e.toolSlots += sw.slotsMost;
+        toolBoxes.push_back(sw.all);
+        toolInside = std::max(toolInside, sw.inside);
         const Box b = t.shape.shape->bounds(); // its diagonal: any pose's extent
         if (!b.empty()) {
             double d2 = 0;
@@ -740,43 +474,130 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             toolExtent = std::max(toolExtent, std::sqrt(d2));
         }
     }
-    // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and leaves
+    // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and slots
     // than their sweeps hold together.
     if (!toolBoxes.empty()) {
         Box all;
         for (const Box& b : toolBoxes)
             all = unite(all, b);
         e.toolVoxels = std::min(e.toolVoxels, voxelsIn(all));
-        toolLeaves = std::min(toolLeaves, distinctNodes(toolBoxes, 3));
+        e.toolSlots = std::min(e.toolSlots, distinctNodes(toolBoxes, 3));
     }
-    // Clay spreads around itself and where tools push it: over the clay's boxes and the tools'
-    // sweeps that touch clay (directly or through other such boxes), each grown by one leaf.
-    uint64_t grown = 0;
+    // Whether tool @a t's sweep spans clay area @a a's box on two axes: it covers that clay (a plate
+    // wider than it), compresses all of it and squeezes it out over its whole footprint.
+    auto covers = [&](const Box& t, const Box& a) {
+        int spans = 0;
+        for (int ax = 0; ax < 3; ++ax)
+            spans += t.min[ax] <= a.min[ax] && t.max[ax] >= a.max[ax] ? 1 : 0;
+        return spans >= 2; // in 2D z spans trivially: one more axis
+    };
+    // The clay's leaves, group by group (clay boxes and tool sweeps that touch, each grown by a leaf):
+    // at the start (the shapes' own), grown (as far as the run may move them), and within one leaf of
+    // those (grownPlus: the automaton's anchors, the surface's band).
+    //  - a group no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless its
+    //    shapes overlap and add up: it keeps its own leaves;
+    //  - a group whose tools poke the clay (none covers it, no clay over Tc, no file that may be): the
+    //    clay spreads a leaf around itself and around the tools' sweeps (what the tools push out lands
+    //    beside them; the global layer writes only the cells its domain touches);
+    //  - otherwise (a tool covers the clay and squeezes it out, or clay over Tc overflows) the clay may
+    //    spread over the group's box, grown by a leaf.
+    uint64_t startLeaves = 0, grown = 0, grownPlus = 0;
     std::vector<Box> boxes, grownBoxes;
     for (const Area& a : areas)
         boxes.push_back(growBox(a.box, 8, dims));
+    // Area @a i as a member of a cover: an analytic shape by its distance, anything else by its box.
+    auto add = [&](ClayCover& c, size_t i) {
+        if (areas[i].shape)
+            c.addShape(areas[i].shape, areas[i].box);
+        else
+            c.addBox(areas[i].box);
+    };
+    // The cover of group @a g's clay (files too when @a files) and, when @a sweeps, its tools' sweeps.
+    auto coverOf = [&](const std::vector<size_t>& g, int64_t margin, bool files, bool sweeps) {
+        ClayCover c;
+        c.margin = margin;
+        c.dims = dims;
+        for (size_t i : g)
+            if (areas[i].clay ? files || !areas[i].file : sweeps) add(c, i);
+        return c;
+    };
+    ClayCover everywhere; // the grown clay of every group: where the global layer's cells may lie
+    everywhere.margin = 8;
+    everywhere.dims = dims;
     for (const std::vector<size_t>& g : groupsOfTouching(boxes)) {
         if (std::none_of(g.begin(), g.end(), [&](size_t i) { return areas[i].clay; })) continue;
-        // Clay no tool reaches, at most Tc per voxel, never moves (nothing is overloaded), unless
-        // shapes overlap and add up: it keeps its own leaves.
-        bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
-        if (!moves) // overlaps
-            moves = anyTouchingPair(
-                g, [&](size_t i) -> const Box& { return areas[i].box; }, [](size_t, size_t) { return true; });
-        if (!moves) {
-            std::vector<Box> own;
-            for (size_t i : g)
+        std::vector<Box> own, members;
+        Box ownRegion;
+        for (size_t i : g) {
+            members.push_back(boxes[i]);
+            if (areas[i].clay && !areas[i].file) {
                 own.push_back(areas[i].box);
-            grown += distinctNodes(own, 3);
+                ownRegion = unite(ownRegion, areas[i].box);
+            }
+        }
+        uint64_t start = 0;
+        if (!coverOf(g, 0, false, false).count(ownRegion, false, coverBudget, start))
+            start = distinctNodes(own, 3);
+        startLeaves += start;
+        bool moves = std::any_of(g.begin(), g.end(), [&](size_t i) { return areas[i].moves; });
+        bool overlaps = false;
+        if (!moves) // overlaps
+            overlaps = anyTouchingPair(
+                g, [&](size_t i) -> const Box& { return areas[i].box; }, [](size_t, size_t) { return true; });
+        if (!moves && !overlaps) {
+            const ClayCover still = coverOf(g, 0, true, false);
+            Box region;
+            for (size_t i : g)
+                region = unite(region, areas[i].box);
+            uint64_t n = 0, plus = 0;
+            if (still.count(region, false, coverBudget, n) &&
+                still.count(growBox(region, 14, dims), true, coverBudget, plus)) {
+                grown += n;
+                grownPlus += plus;
+            } else {
+                grown += distinctNodes(own, 3);
+                std::vector<Box> around;
+                for (const Box& b : own)
+                    around.push_back(neighbourhood(b, true, dims));
+                grownPlus += distinctNodes(around, 3);
+            }
             grownBoxes.insert(grownBoxes.end(), own.begin(), own.end());
+            for (size_t i : g)
+                add(everywhere, i);
             continue;
         }
-        std::vector<Box> members;
-        for (size_t i : g)
-            members.push_back(boxes[i]);
-        grown += unionLeaves(members);
+        bool spreads = overlaps;
+        for (size_t i : g) {
+            if (areas[i].clay && (areas[i].file || areas[i].overTc)) spreads = true;
+            if (areas[i].clay) continue;
+            for (size_t j : g)
+                if (areas[j].clay && covers(areas[i].box, areas[j].box)) spreads = true;
+        }
         grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
+        if (!spreads) {
+            const ClayCover poked = coverOf(g, 8, true, true);
+            Box region;
+            for (const Box& b : members)
+                region = unite(region, b);
+            uint64_t n = 0, plus = 0;
+            if (poked.count(region, false, coverBudget, n) &&
+                poked.count(growBox(region, 14, dims), true, coverBudget, plus)) {
+                grown += n;
+                grownPlus += plus;
+                everywhere.members.insert(everywhere.members.end(), poked.members.begin(),
+                                          poked.members.end());
+                continue;
+            }
+        }
+        grown += unionLeaves(members);
+        std::vector<Box> around;
+        for (const Box& b : members)
+            around.push_back(neighbourhood(b, true, dims));
+        grownPlus += unionLeaves(around);
+        for (size_t i : g)
+            everywhere.addBox(areas[i].box);
     }
+    e.clayLeaves = startLeaves + fileLeaves;
     // Leaves, not boxes: settling grows clay by at most one leaf on every side of each leaf it holds
     // (27 per leaf, a bound that counts scattered voxels for what they are, not their bounding box),
     // and overloaded clay spreads over its settled volume (with a leaf of margin all round).
@@ -786,8 +607,13 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         settledVoxels == UINT64_MAX ? UINT64_MAX : 2 * ((settledVoxels + leafArea - 1) / leafArea);
     e.clayLeavesGrown = std::max(
         {e.clayLeaves, std::min({grown, massBound, aroundLeaves}), std::min(settledLeaves, massBound)});
+    // Within one leaf of those: at most 27 per leaf, and the grown leaves' own band.
+    e.anchorLeaves = std::max(
+        std::min(grownPlus, e.clayLeavesGrown > UINT64_MAX / 27 ? UINT64_MAX : 27 * e.clayLeavesGrown),
+        e.clayLeavesGrown);
     if (e.clayLeavesGrown > std::min(grown, massBound)) {
-        // Spreading past the boxes: its internal nodes, as for a cube of that many leaves.
+        // Spreading past the boxes: its internal nodes, as for a cube of that many leaves, and a band
+        // of a leaf around that cube.
         const double side =
             (dims == 2 ? std::sqrt(double(e.clayLeavesGrown)) : std::cbrt(double(e.clayLeavesGrown))) * 8;
         Box spread;
@@ -797,8 +623,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         }
         if (dims == 2) spread.max[2] = 0;
         grownBoxes.push_back(spread);
+        e.anchorLeaves = std::max(e.anchorLeaves, nodesIn(neighbourhood(spread, true, dims), 3));
     }
-    // A file's own figure (its tree's size when written) when that is more.
     // With clay from files, the nodes grown clay needs: the files' own, twice (growth by a leaf
     // rarely crosses into another internal node), and those of the shapes' and tools' areas.
     uint64_t lowerCap = UINT64_MAX, upperCap = UINT64_MAX;
@@ -812,6 +638,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lowerCap = 2 * fileLower + distinctNodes(others, 7);
         upperCap = 2 * fileUpper + distinctNodes(others, 12);
     }
+    // A file's own figure (its tree's size when written) when that is more.
     e.clayBytes =
         std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
 
@@ -823,34 +650,49 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     }
     // The static mask, and the automaton's copy, which also holds the tools' cells.
     e.obstacleBytes = 2 * treeBytes<MaskTreeT>(e.obstacleLeaves, obsBoxes);
-    e.toolBytes = e.toolVoxels * kToolBytesPerVoxel + treeBytes<MaskTreeT>(toolLeaves, toolBoxes);
-    // The compress push: a tool that covers the clay pools its clay over every column under it, in
-    // an Int32 tree per tool (Push.cc) that can reach every leaf of the clay.
-    if (scene.push == PushMode::Compress)
-        e.toolBytes +=
-            scene.tools.size() * treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
+    e.toolBytes = e.toolSlots * kToolBytesPerSlot + treeBytes<MaskTreeT>(e.toolSlots, toolBoxes);
     const uint64_t lanes = std::max(1u, std::thread::hardware_concurrency()) - 1; // at most one per thread
-    e.automatonBytes = e.clayLeavesGrown * (kAutomatonBytesPerLeaf + lanes * kAutomatonLaneBytesPerLeaf);
-    // The global layer (lib/src/Transport.cc) holds, per cell of its domain: its coordinate,
-    // mass, kind, six neighbours, distance, potential, row maps (~90 bytes, doubled for vector
-    // growth), the index (4 bytes a voxel) and the solver's seven vectors and neighbour table
-    // (~88 bytes), and the multigrid preconditioner of large solves (row lists, diagonal, three
-    // work vectors, coordinates, aggregates, members over every level: ~88 bytes). Its domain is at
-    // most the clay's leaves' voxels. Near the tools' sweeps, where the bound of the file comment
-    // (the layer's domain) holds, it is at most the voxels of the clay's extent within the reach's
-    // face steps of the seeds' box (voxelsWithinFaceSteps: round 9; before, every voxel of the
-    // leaves meeting that box grown by the reach as a cube, ~4x more for the 512-wide stroke); the
-    // index is then the dense array over the seeds' bounds grown by the reach + 2 (at most
-    // kDenseIndexMax entries) and a tree over the cells beyond it, counted as every voxel of those
-    // leaves.
+    e.automatonBytes = e.clayLeavesGrown * kAutomatonBytesPerLeaf +
+                       e.anchorLeaves * (kAutomatonBytesPerAnchor + lanes * kAutomatonLaneBytesPerAnchor);
+    // A push: each tool's clay voxels inside it (no more than the clay has), and with the compress push
+    // a tool that covers the clay pools its clay over every column under it, in an Int32 tree per tool
+    // (push/Compress.cc) that can reach every leaf of the clay.
+    // A clay voxel inside several tools is one source (of the tool it lies deepest in).
+    const uint64_t clayVoxels = e.clayLeavesGrown > UINT64_MAX / 512 ? UINT64_MAX : e.clayLeavesGrown * 512;
+    uint64_t sources = 0;
+    for (const ToolSweep& sw : sweeps)
+        sources = std::min(sources + sw.inside, e.toolVoxels);
+    e.pushBytes = std::min(sources, clayVoxels) * kPushBytesPerSource;
+    for (size_t t = 0; t < sweeps.size(); ++t) {
+        if (scene.push != PushMode::Compress) continue;
+        bool pools = false;
+        for (size_t a = 0; a < clayAreas; ++a)
+            pools |= covers(toolBoxes[t], areas[a].box);
+        if (pools) e.pushBytes += treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
+    }
+    // The global layer (transport/): kTransportBytesPerCell per cell of its domain. Its
+    // domain holds the full cells (at least Tc each: no more than the mass over Tc) it reaches and
+    // their face neighbours: at most 7 cells per full cell; and at most the clay's leaves' voxels.
+    // Near the tools' sweeps, where the bound of the file comment (the layer's domain) holds, it is at
+    // most the clay's voxels (in the leaves the grown clay may hold) within the reach's face steps of
+    // the seeds' box, at the frame that holds most; the index is then the dense array over the seeds'
+    // bounds grown by the reach + 2 (at most kDenseIndexMax entries) and a tree over the cells beyond
+    // it, counted as every voxel of those leaves.
     if (frame_policy::usesGlobalLayer(scene)) {
-        uint64_t cells = e.clayLeavesGrown * 512;
+        const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
+        uint64_t cells = std::min(clayVoxels, fullCells > UINT64_MAX / 7 ? UINT64_MAX : 7 * fullCells);
         LayerBound lb;
         lb.push = scene.push;
         lb.dims = dims;
-        lb.toolMost = toolMost;
+        lb.toolInside = toolInside;
         lb.toolExtent = toolExtent;
         lb.maxSteps = scene.settle.maxSteps;
+        // The try runs after a surface push on clay that is not saturated near it: clay whose shapes
+        // all start saturated (pushes move clay, they do not thin it) is taken to stay so.
+        lb.trySkipped = !frame_policy::tryAfterPush(scene) ||
+                        (fileLeaves == 0 && !clayMasses.empty() &&
+                         std::all_of(clayMasses.begin(), clayMasses.end(),
+                                     [&](int64_t m) { return frame_policy::trySaturated(scene, m, 1); }));
         lb.clayMoves =
             std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
         // Shapes that overlap add up: over Tc where two of them do.
@@ -860,18 +702,11 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 shapes[i] = i;
             lb.clayMoves = anyTouchingPair(
                 shapes, [&](size_t i) -> const Box& { return clayBoxes[i]; },
-                [&](size_t i, size_t j) {
-                    return clayMasses[i] + clayMasses[j] > int64_t(scene.rule.threshold);
-                });
+                [&](size_t i, size_t j) { return clayMasses[i] + clayMasses[j] > tc; });
         }
         for (const Box& t : toolBoxes) {
-            for (const Area& a : areas) {
-                if (!a.clay) continue;
-                int spans = 0;
-                for (int ax = 0; ax < 3; ++ax)
-                    spans += t.min[ax] <= a.box.min[ax] && t.max[ax] >= a.box.max[ax] ? 1 : 0;
-                lb.covers |= spans >= 2; // in 2D z spans trivially: one more axis
-            }
+            for (size_t a = 0; a < clayAreas; ++a)
+                lb.covers |= covers(t, areas[a].box);
             // A tool that enters the clay from its surface has a corner of its sweep outside every clay
             // shape (where it sticks out); one with none starts inside the clay.
             bool out = false;
@@ -893,7 +728,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             lb.buried |= !out;
         }
         const LayerReach reach = layerReach(lb);
-        uint64_t bytes = cells * kTransportBytesPerCell;
+        // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood
+        // densely when that holds at most kDenseIndexMax cells.
+        uint64_t bytes =
+            cells * kTransportBytesPerCell + (toolBoxes.empty() ? 0 : 4 * uint64_t(kDenseIndexMax));
         uint64_t counted = cells; // the domain's cells counted
         if (reach.bounded && !toolBoxes.empty()) {
             Box extent; // where the clay can be
@@ -911,7 +749,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 const Box b = intersect(g, extent);
                 const uint64_t leaves = b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
                 nearLeaves += leaves;
-                nearCells += std::min(leaves, layerCellsAlong(toolFrames[i], t, reach, extent, dims));
+                nearCells += std::min(leaves, layerCellsAlong(sweeps[i].frames, t, reach, extent, everywhere,
+                                                              coverBudget, dims));
                 denseBox = unite(denseBox, growBox(t, d + 2, dims));
             }
             if (!walled) {
@@ -924,22 +763,25 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         e.transportBytes = bytes;
         e.transportCells = counted;
     }
-    // Writing a .vdb: a float density grid on the clay's leaves, and the surface level set, built
-    // by levelSetRebuild through a mesh and meshToVolume (a float distance and an Int32 index grid
-    // over a band around the surface): counted as three float grids on the clay's leaves, plus
-    // the partial trees meshToVolume's worker threads build (each starts with its own upper nodes).
-    const uint64_t workers = std::max(1u, std::thread::hardware_concurrency());
-    e.outputBytes =
-        3 * treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
-        workers * 2 * upperNodeBytes<FloatTreeT>() *
-            std::min(std::max<uint64_t>(1, distinctNodes(grownBoxes, 12)), std::max<uint64_t>(1, upperCap));
+    // Writing a .vdb (io/ClayFile.cc, writeClayFile): the float density grid on the clay's leaves, and the
+    // surface level set swept over the density's leaves and those of its band around them
+    // (output/SurfaceSweep.cc), with its per-leaf scratch; both held until the file is written.
+    std::vector<Box> aroundBoxes;
+    for (const Box& b : grownBoxes)
+        aroundBoxes.push_back(neighbourhood(b, true, dims));
+    e.outputBytes = treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
+                    treeBytes<FloatTreeT>(e.anchorLeaves, aroundBoxes, lowerCap, upperCap) +
+                    e.anchorLeaves * kOutputScratchPerLeaf + e.clayLeavesGrown * 8;
     return e;
 }
 
 uint64_t clayMemoryInUse(const MassGrid& mass)
 {
+    // The automaton's anchors and the surface's band: two leaves a leaf (compact clay has ~1.3).
     const uint64_t leaves = mass.tree().leafCount();
-    return uint64_t(mass.tree().memUsage()) + leaves * (kAutomatonBytesPerLeaf + 3 * leafBytes<FloatTreeT>());
+    return uint64_t(mass.tree().memUsage()) +
+           leaves * (kAutomatonBytesPerLeaf + 2 * kAutomatonBytesPerAnchor + 3 * leafBytes<FloatTreeT>() +
+                     2 * kOutputScratchPerLeaf);
 }
 
 void checkMemoryBudget(const Scene& scene, const MemoryEstimate& e)

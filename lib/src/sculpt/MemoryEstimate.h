@@ -1,5 +1,6 @@
 // The memory estimate's parts used inside the library and by its tests (MemoryEstimate.cc): the budget
-// check with an estimate already computed, and the count of the global layer's domain bound.
+// check with an estimate already computed, the bytes the run's parts take per leaf, anchor, tool slot,
+// push source and layer cell, and the count of the global layer's domain bound.
 #pragma once
 
 #include "vdbclay/MemoryEstimate.h"
@@ -13,6 +14,54 @@ namespace vdbclay {
 void checkMemoryBudget(const Scene& scene, const MemoryEstimate& e);
 
 namespace memory_internal {
+
+// The bytes the run's parts take per leaf, anchor, slot, source or cell (estimateSceneMemory).
+
+/// The program, its libraries, its threads' stacks and the allocator's slack, besides the grids and
+/// arrays counted below: vdbclay run on a one-voxel scene peaks at 41 MB resident (x86-64, glibc,
+/// OpenVDB 10: /usr/bin/time -v), of which ~4 MB are the few nodes counted below; the 2D scenes of
+/// data/scenes, whose heap peaks at 6 MiB, at 48 MB.
+constexpr uint64_t kProcessBytes = uint64_t(48) << 20;
+/// Per clay leaf, the automaton's lists (automaton/Candidates.h, Automaton.cc): the leaf among the
+/// hot leaves (a Coord, 12 bytes), its changed-block masks of the last two steps (two Anchors of 24
+/// bytes), up to 10 candidate contributions (the leaf's own, 8 from dilating the other phase, an edited
+/// region) and the 8 dilation streams' entries (Anchors), the two merge buffers' entries, and its
+/// WorkItems (32 bytes) in the step's list and the last two steps'; half again for vector growth. A
+/// long settle of a 160-wide sphere at Tc (the table built) holds ~1.4 KB a leaf with the table.
+constexpr uint64_t kAutomatonBytesPerLeaf = 3 * (12 + 2 * 24 + 10 * 24 + 8 * 24 + 2 * 24 + 3 * 32) / 2;
+/// Per anchor (a leaf's origin, or one of its upper neighbours' origins: anchorLeaves bounds them),
+/// the kernel's leaf table (automaton/LeafTable.h: built over every leaf once the work
+/// without it reaches four times the leaves): an entry of 264 bytes, its key (12), its 16 neighbour
+/// indices (64) and up to 4 hash slots of 16 bytes; and the candidates' two 8-byte accumulators
+/// (Candidates.h, dense mode) with their bit sets.
+constexpr uint64_t kAutomatonBytesPerAnchor = 264 + 12 + 64 + 64 + 16 + 1;
+/// Per anchor and thread beyond the first: the thread's own lane of those accumulators and bit sets
+/// (Candidates::lanes).
+constexpr uint64_t kAutomatonLaneBytesPerAnchor = 16 + 1;
+/// Per leaf slot of a tool's bounds: its mask in Sculptor's toolCells (an origin and a 64-byte mask,
+/// 80 bytes, doubled for growth), its entries in the covered-slot and seen-leaf hash sets (~48 bytes
+/// each), the per-slot mask cover() fills (64) and the obstacle leaf it goes into (the mask tree's
+/// leaf is counted with the tree).
+constexpr uint64_t kToolBytesPerSlot = 2 * 80 + 2 * 48 + 64;
+/// Per clay voxel inside a tool at one push (push/Pusher.h): its Source (32 bytes) and the per-leaf
+/// copy it is gathered from (32), what its search found (56), its Move (28), its target in the
+/// planned clay (a hash node of ~48 bytes, a bucket of 8, an entry of 24 doubled for growth) and the
+/// two cell masses written (16 each).
+constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2 * 16;
+/// Per leaf of the surface level set writing a .vdb builds (output/SurfaceFog.cc, SurfaceSweep.cc),
+/// besides the leaf itself: the grown fog's origin, masks and source (12 + 2 x 64 + 8), its index (a
+/// hash node, ~32), the leaf made (8); the sweep's per-leaf record (184), input (8), key (12), face
+/// neighbours (48), reach masks (2 x 64) and order (16).
+constexpr uint64_t kOutputScratchPerLeaf = 12 + 2 * 64 + 8 + 32 + 8 + 184 + 8 + 12 + 48 + 2 * 64 + 16;
+/// Scene::transport global: per cell of the layer's domain (transport/Domain.h: the workspace's arrays): its
+/// coordinates (twice, 24 bytes), mass, distance and current mass (24), kinds and flags (10), six
+/// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, diagonal,
+/// right-hand side and inverse (40), six work vectors (48), the routing's lists and sort (~60) and
+/// MIC(0)'s rows (24): ~336 bytes at their size, held at the capacity the largest frame grew them to;
+/// the multigrid preconditioner of large solves (~88 bytes over every level); and its index (4 bytes).
+/// Measured beside the dense index: ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown
+/// (the 512-wide compress stroke's first frame).
+constexpr uint64_t kTransportBytesPerCell = 512;
 
 /// Rows (x, y) voxelsWithinFaceSteps counts before it gives up: ~10 ms.
 constexpr int64_t kFaceStepRowsMax = int64_t(1) << 23;

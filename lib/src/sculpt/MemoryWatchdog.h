@@ -18,7 +18,7 @@ public:
 
     /// @a budget in bytes (not kNoMemoryBudget: a run without a budget has no watchdog);
     /// @a fixedBytes: what the run needs beside the clay, which does not grow (the estimate's
-    /// obstacle and tool bytes).
+    /// program, obstacle and tool bytes).
     MemoryWatchdog(uint64_t budget, uint64_t fixedBytes) : mBudget(budget), mFixedBytes(fixedBytes) {}
 
     /// Called with each of the run's stop polls: every kPollsPerCheck-th call compares what

@@ -1,9 +1,26 @@
-// Running a scene frame by frame: move the tools, push clay out of them, settle.
+// The sculpt subsystem: a Sculptor runs a scene frame by frame on the automaton (Sculpt.h).
 //
-// While clay settles, the voxels a tool occupies are obstacles (otherwise clay would flow back into
-// the tool that just pushed it out). Only the tool voxels the automaton can read need to be
-// obstacles: those in a Margolus block with clay, and those the no-room flood reaches. So the tools
-// are marked where the clay is, ahead of it, not over their whole bounds (placeTools, cover):
+// Files. FramePolicy.{h,cc}: every per-frame decision (which transport runs, the sweep's sub-steps,
+// the automaton's bounded try before the global layer, the layer's reach and seeds, where the tools'
+// cells are marked), each one function called here and by the memory estimate. MemoryEstimate.cc (the
+// model) and EstimateGeometry.cc (its boxes and leaf counts): what a run will need, checked against
+// the scene's budget before any grid is built.
+//
+// The constructor checks the budget, builds the clay (or reads the start file), rasterises the
+// obstacles and places the tools. A frame (runFrame): the push (pushTools: sub-steps with
+// Scene::sweep), then with the global transport the automaton's try (settleBounded) and, if that did
+// not end the frame, the layer (transportGlobally, its arrays kept from frame to frame and freed after
+// the last one), then the automaton settles the rest within the scene's step budget
+// (settleOpenFrame). A stop request ends a frame only after a step from which a checkpoint resumes
+// exactly (checkpointMeta: the frame's steps so far; the push, the try and the layer are never
+// repeated). Every stage is deterministic and thread-count independent, so a run's clay and hashes
+// are the same on any number of threads and across a checkpoint.
+//
+// The tools' cells. While clay settles, the voxels a tool occupies are obstacles (otherwise clay
+// would flow back into the tool that just pushed it out). Only the tool voxels the automaton can read
+// need to be obstacles: those in a Margolus block with clay, and those the no-room flood reaches. So
+// the tools are marked where the clay is, ahead of it, not over their whole bounds (placeTools,
+// cover):
 // - at placement, in every leaf slot (8^3) of the tools' bounds within one slot of a mass leaf
 //   (clay lies in leaves; a block reaches one voxel beyond its cell), evaluated in parallel over
 //   slots and merged in slot order, tool by tool (the same cells as the whole bounds gave, where
@@ -14,7 +31,8 @@
 //   also the slots the flood can reach through empty cells (ceil(overload / Tc) + 1 voxels
 //   beyond the clay). These go through Automaton::extendObstacles: cells no step has read yet,
 //   so nothing is woken and the quiet-step count is kept;
-// - all of the bounds when that is fewer slots, or with the global transport (it moves clay far).
+// - all of the bounds when that is fewer slots, or with the global transport
+//   (frame_policy::toolCellsOverWholeBounds: it moves clay far).
 // The clay, the step counts and the hashes are those of marking the whole bounds every frame.
 #include "vdbclay/Sculpt.h"
 
@@ -522,7 +540,7 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
         checkMemoryBudget(scene, *im.estimate);
         im.watchdog = std::make_unique<sculpt_internal::MemoryWatchdog>(
             scene.memoryBudget ? scene.memoryBudget : defaultMemoryBudget(),
-            im.estimate->obstacleBytes + im.estimate->toolBytes);
+            im.estimate->processBytes + im.estimate->obstacleBytes + im.estimate->toolBytes);
     }
     im.scene = scene;
     AutomatonOptions opt;
