@@ -1,6 +1,8 @@
-// Clay from a shape (makeClay, Shapes.h): the voxels whose centre lies inside an analytic shape,
-// rasterised leaf by leaf on every core (Rasterize.h); for shapes that keep their volume (meshes,
-// level sets), each voxel by the part of it the shape covers (Voxels.h, Coverage.cc).
+// Clay from a shape (makeClay, Shapes.h; with a stop poll, MakeClay.h): the voxels whose centre lies inside
+// an analytic shape, rasterised leaf by leaf on every core (Rasterize.h); for shapes that keep their volume
+// (meshes, level sets), each voxel by the part of it the shape covers (Voxels.h, Coverage.cc). A stop poll
+// runs between the rasteriser's chunks, or every 4096 covered voxels.
+#include "vdbclay/MakeClay.h"
 #include "vdbclay/Shapes.h"
 
 #include "shapes/Rasterize.h"
@@ -10,6 +12,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <functional>
 #include <string>
 
 namespace vdbclay {
@@ -17,6 +21,17 @@ namespace vdbclay {
 using shapes_internal::forEachVoxelCovered;
 
 MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
+{
+    return makeClay(shape, massPerVoxel, dimensions, std::function<bool()>());
+}
+
+namespace {
+/// Thrown out of the coverage callback when the stop poll asks to stop.
+struct Stopped {};
+} // namespace
+
+MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions,
+                     const std::function<bool()>& stop)
 {
     openvdb::initialize();
     if (massPerVoxel <= 0) {
@@ -32,10 +47,17 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
         // Meshes and level sets: each voxel holds round(m0 x the fraction of it the shape covers)
         // (Voxels.h), so the clay's mass is the shape's volume x m0. A boundary voxel holding
         // less than Tc is under-full clay, which the automaton may fill like any other.
-        forEachVoxelCovered(shape, dimensions, [&](int32_t x, int32_t y, int32_t z, double fraction) {
-            const int64_t m = std::llround(double(massPerVoxel) * fraction);
-            if (m > 0) acc.setValueOn(openvdb::Coord(x, y, z), int32_t(std::min<int64_t>(m, massPerVoxel)));
-        });
+        uint64_t seen = 0;
+        try {
+            forEachVoxelCovered(shape, dimensions, [&](int32_t x, int32_t y, int32_t z, double fraction) {
+                const int64_t m = std::llround(double(massPerVoxel) * fraction);
+                if (m > 0)
+                    acc.setValueOn(openvdb::Coord(x, y, z), int32_t(std::min<int64_t>(m, massPerVoxel)));
+                if (stop && ++seen % 4096 == 0 && stop()) throw Stopped();
+            });
+        } catch (const Stopped&) {
+            return nullptr;
+        }
         if (grid->activeVoxelCount() == 0) {
             throw Error(shape.describe() + " covers no voxel" +
                         (dimensions == 2 ? " of the z = 0 layer" : "") + " enough to hold a unit of mass (" +
@@ -43,7 +65,10 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions)
         }
     } else {
         // The voxels forEachVoxelInside (Voxels.h) visits, leaf by leaf on every core (Rasterize.h).
-        raster_internal::rasterizeInside(grid->tree(), shape, dimensions, massPerVoxel, /*threads=*/0);
+        bool stopped = false;
+        raster_internal::rasterizeInside(grid->tree(), shape, dimensions, massPerVoxel, /*threads=*/0,
+                                         [&] { return stopped = stop && stop(); });
+        if (stopped) return nullptr;
     }
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +

@@ -22,6 +22,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -30,10 +31,12 @@ namespace raster_internal {
 
 /// Sets on, with @a value, every voxel of @a tree whose centre lies inside @a shape (only z = 0 when
 /// @a dims == 2): the voxels forEachVoxelInside(shape, dims, ...) visits. Runs on @a threads
-/// (ParallelFor.h: 1 serial, 0 every core). Returns the number of voxels set.
+/// (ParallelFor.h: 1 serial, 0 every core). Returns the number of voxels set. @a stop, when not
+/// empty, is called on the calling thread before each chunk of leaf slots; once it returns true the
+/// rasterising ends there, the tree holding the chunks done so far.
 template <typename TreeT>
 uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typename TreeT::ValueType& value,
-                         int threads)
+                         int threads, const std::function<bool()>& stop = {})
 {
     using LeafT = typename TreeT::LeafNodeType;
     Box b = shape.bounds();
@@ -55,6 +58,7 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
     std::vector<uint32_t> counts;
     uint64_t total = 0;
     for (uint64_t first = 0; first < slots; first += kChunk) {
+        if (stop && stop()) break;
         const size_t m = size_t(std::min(kChunk, slots - first));
         made.clear();
         made.resize(m);
