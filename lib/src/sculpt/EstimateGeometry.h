@@ -91,7 +91,8 @@ ToolSweep sweep(const ToolSpec& tool, uint64_t frames, int dims, bool countInsid
 Box neighbourhood(Box b, bool neighbours, int dims);
 
 /// Distance evaluations one estimate may spend counting clay leaves (ClayCover), and the members one
-/// count may try against nodes and leaves (many shapes, or boxes, near each leaf): ~0.1 s each.
+/// count may try against nodes and leaves (many shapes, or boxes, near each leaf; a leaf a member
+/// holds whole counts one): ~0.1 s each.
 constexpr uint64_t kCoverBudget = uint64_t(1) << 23;
 constexpr uint64_t kCoverTests = uint64_t(1) << 26;
 
@@ -175,8 +176,9 @@ struct ClayCover {
             for (int64_t ny = lo[1]; ny <= hi[1]; ++ny)
                 for (int64_t nz = lo[2]; nz <= hi[2]; ++nz) {
                     // Node origins by multiplication: a left shift of a negative value is undefined.
-                    const Box node{{{int32_t(nx * 128), int32_t(ny * 128), int32_t(nz * 128)}},
-                                   {{int32_t(nx * 128 + 127), int32_t(ny * 128 + 127), int32_t(nz * 128 + 127)}}};
+                    const Box node{
+                        {{int32_t(nx * 128), int32_t(ny * 128), int32_t(nz * 128)}},
+                        {{int32_t(nx * 128 + 127), int32_t(ny * 128 + 127), int32_t(nz * 128 + 127)}}};
                     const Box part = intersect(node, region);
                     if (part.empty()) continue;
                     // The members that may hold a leaf of this node, and one that holds all of them.
@@ -206,7 +208,8 @@ struct ClayCover {
                                 const Box leaf{{{int32_t(x), int32_t(y), int32_t(z)}},
                                                {{int32_t(x + 7), int32_t(y + 7), int32_t(z + 7)}}};
                                 bool holds = whole;
-                                if (!whole && (tests += near.size()) > kCoverTests) return false;
+                                // A leaf held whole counts one test: huge boxes give up too.
+                                if ((tests += whole ? 1 : near.size()) > kCoverTests) return false;
                                 for (size_t k = 0; k < near.size() && !holds; ++k) {
                                     const Member& mb = members[near[k]];
                                     if (!touches(leaf, grown[near[k]])) continue;

@@ -352,8 +352,10 @@ uint64_t voxelsWithinFaceSteps(const Box& b, int64_t r, Box within, int dims)
 
 uint64_t MemoryEstimate::total() const
 {
-    return processBytes + clayBytes + obstacleBytes + toolBytes + automatonBytes +
-           std::max(pushBytes + transportBytes, outputBytes);
+    // Saturating: parts of a huge scene reach exabytes, and a wrapped sum would fit any budget.
+    auto add = [](uint64_t a, uint64_t b) { return a > UINT64_MAX - b ? UINT64_MAX : a + b; };
+    return add(add(add(add(add(processBytes, clayBytes), obstacleBytes), toolBytes), automatonBytes),
+               std::max(add(pushBytes, transportBytes), outputBytes));
 }
 
 std::string MemoryEstimate::describe() const
