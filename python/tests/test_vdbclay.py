@@ -3,7 +3,9 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import tempfile
+import threading
 import unittest
 
 import numpy as np
@@ -134,6 +136,260 @@ class AutomatonTests(unittest.TestCase):
         self.assertEqual(r["voxels_pushed"], 8 * 3 * 8)
         self.assertEqual(auto.total_mass, 16 * 8 * 16 * 1000)
         self.assertEqual(int(clay.mass_array(min=(4, 5, 4), max=(11, 7, 11)).sum()), 0)
+
+
+def overloaded_lump(threads=2):
+    """A cube at Tc with an overfull block on top: many steps of work for the automaton."""
+    clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (15, 15, 15)), mass=1000)
+    auto = vdbclay.Automaton(clay, rule="prorata", threads=threads)
+    auto.add_mass(np.full((4, 4, 4), 30000, dtype=np.int32), origin=(6, 16, 6))
+    return clay, auto
+
+
+def endless_lump():
+    """One 2D voxel of 2^31 - 1 at Tc 1000: it spreads for millions of steps (no call ends it soon)."""
+    clay = vdbclay.from_array(np.full((1, 1, 1), 2**31 - 1), threshold=1000, dimensions=2)
+    return clay, vdbclay.Automaton(clay, threads=2)
+
+
+# A 48^3 cube at Tc pressed 3 voxels: thousands of steps over its 3 frames (about a second).
+PRESSED_CUBE_AT_TC = json.dumps({
+    "threshold": 1000,
+    "clay": [{"shape": "box", "min": [0, 0, 0], "max": [47, 47, 47], "mass": 1000}],
+    "tools": [{"shape": "box", "min": [-8, 48, -8], "max": [55, 56, 55],
+               "path": [{"translate": [0, -1, 0], "frames": 3}]}],
+    "obstacles": [{"shape": "box", "min": [-64, -4, -64], "max": [111, -1, 111]}],
+    "settle": {"max_steps": 100000}})
+
+
+def run_threads(*targets):
+    """Runs each target on a thread of its own; returns the exceptions they raised."""
+    errors = []
+
+    def guarded(target):
+        try:
+            target()
+        except BaseException as e:  # noqa: B902 - a thread's failure is the test's
+            errors.append(e)
+
+    threads = [threading.Thread(target=guarded, args=(t,)) for t in targets]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return errors
+
+
+def interrupted(call):
+    """Calls call() in the main thread while another thread sends this process SIGINT as soon as
+    call() releases the GIL: the switch interval is raised so that the main thread keeps the GIL
+    until the call itself lets it go, so the signal arrives inside the call, whatever the load.
+    Returns the KeyboardInterrupt, or None when call() returned."""
+    ready = threading.Event()
+
+    def fire():
+        ready.wait()
+        os.kill(os.getpid(), signal.SIGINT)
+
+    sender = threading.Thread(target=fire)
+    old = sys.getswitchinterval()
+    sender.start()
+    sys.setswitchinterval(1000.0)
+    try:
+        ready.set()
+        call()
+        sender.join()  # a signal that came after the call returned raises here
+        signal.getsignal(signal.SIGINT)
+    except KeyboardInterrupt as e:
+        return e
+    finally:
+        sys.setswitchinterval(old)
+        sender.join()
+    return None
+
+
+class ThreadsAndInterrupts(unittest.TestCase):
+    REPEATS = 3
+
+    def test_two_threads_running_one_automaton_take_turns(self):
+        steps = 150
+        ref_clay, ref = overloaded_lump()
+        ref.run(2 * steps)
+        for _ in range(self.REPEATS):
+            clay, auto = overloaded_lump()
+            mass = auto.total_mass
+            errors = run_threads(lambda: auto.run(steps), lambda: auto.run(steps))
+            self.assertEqual(errors, [])
+            self.assertEqual(auto.step_count, 2 * steps)
+            self.assertEqual(auto.total_mass, mass)
+            self.assertEqual(clay.total_mass(), mass)
+            self.assertEqual(clay.content_hash(), ref_clay.content_hash())
+
+    def test_reading_the_clay_while_another_thread_runs_sees_the_exact_mass(self):
+        for _ in range(self.REPEATS):
+            clay, auto = overloaded_lump()
+            mass = auto.total_mass
+            done = threading.Event()
+            sums = []
+
+            def run():
+                try:
+                    for _ in range(4):
+                        auto.run(60)
+                finally:
+                    done.set()
+
+            def read():
+                while not done.is_set():
+                    sums.append(int(clay.mass_array().sum(dtype=np.int64)))
+                    sums.append(clay.total_mass())
+                    sums.append(auto.clay.total_mass())
+                    sums.append(auto.total_mass)
+                sums.append(int(clay.mass_array().sum(dtype=np.int64)))
+
+            self.assertEqual(run_threads(run, read), [])
+            self.assertEqual(set(sums), {mass})
+            self.assertEqual(auto.step_count, 240)
+
+    def test_a_sculptor_read_from_another_thread_and_from_its_progress(self):
+        scene = vdbclay.Scene.default()
+        scene.frames = 2
+        unbroken = vdbclay.Sculptor(scene, threads=2)
+        unbroken.run()
+        for _ in range(self.REPEATS):
+            s = vdbclay.Sculptor(scene, threads=2)
+            mass = s.total_mass
+            done = threading.Event()
+            seen = []
+
+            def progress(report):
+                seen.append(s.clay.total_mass())  # reading from inside the run is fine
+                on_clay = vdbclay.Automaton(s.clay)
+                with self.assertRaises(vdbclay.Error) as e:  # changing it is refused
+                    on_clay.step()
+                self.assertIn("progress callback or a signal handler", str(e.exception))
+
+            def run():
+                try:
+                    s.run(progress=progress)
+                finally:
+                    done.set()
+
+            def read():
+                while not done.is_set():
+                    seen.append(s.clay.total_mass())
+                    seen.append(s.total_mass)
+                    self.assertLessEqual(s.frame, 2)
+
+            self.assertEqual(run_threads(run, read), [])
+            self.assertEqual(set(seen), {mass})
+            self.assertTrue(s.done)
+            self.assertEqual(s.clay.content_hash(), unbroken.clay.content_hash())
+
+    def test_two_automata_on_one_clay_stay_exact(self):
+        # Each rescans the grid the other changed: their totals and overloads are the clay's.
+        clay, first = overloaded_lump()
+        mass = clay.total_mass()
+        second = vdbclay.Automaton(clay, rule="prorata", threads=2)
+        for _ in range(self.REPEATS):
+            first.run(20)
+            second.run(20)
+            self.assertEqual(first.residual_overload, second.residual_overload)
+            self.assertEqual(run_threads(lambda: first.run(30), lambda: second.run(30)), [])
+            self.assertEqual(first.residual_overload, second.residual_overload)
+            self.assertEqual(first.total_mass, mass)
+            self.assertEqual(second.total_mass, mass)
+        self.assertEqual(clay.total_mass(), mass)
+
+    def test_ctrl_c_stops_settle_and_the_automaton_goes_on_exactly(self):
+        clay, auto = endless_lump()
+        e = interrupted(lambda: auto.settle(max_steps=10**9))
+        self.assertIsInstance(e, KeyboardInterrupt)
+        stopped_at = auto.step_count
+        self.assertGreater(stopped_at, 0)
+        self.assertEqual(auto.total_mass, 2**31 - 1)
+        self.assertEqual(clay.total_mass(), 2**31 - 1)
+        auto.run(10)
+        ref_clay, ref = endless_lump()
+        ref.run(stopped_at + 10)
+        self.assertEqual(clay.content_hash(), ref_clay.content_hash())
+
+    def test_ctrl_c_stops_run_between_two_steps(self):
+        clay, auto = endless_lump()
+        e = interrupted(lambda: auto.run(10**9))
+        self.assertIsInstance(e, KeyboardInterrupt)
+        stopped_at = auto.step_count
+        self.assertLess(stopped_at, 10**9)
+        self.assertEqual(clay.total_mass(), 2**31 - 1)
+        ref_clay, ref = endless_lump()
+        ref.run(stopped_at)
+        self.assertEqual(clay.content_hash(), ref_clay.content_hash())
+
+    def test_ctrl_c_stops_make_clay(self):
+        # A plate one voxel thick turned 45 degrees: billions of voxel centres to test in its bounds.
+        plate = vdbclay.box((0, 0, 0), (3000, 0, 3000)).moved(rotate=(45, 0, 0))
+        e = interrupted(lambda: vdbclay.make_clay(plate, mass=1000, memory_budget="none"))
+        self.assertIsInstance(e, KeyboardInterrupt)
+        self.assertEqual(vdbclay.make_clay(vdbclay.box((0, 0, 0), (1, 1, 1)), mass=5).total_mass(), 40)
+
+    def test_ctrl_c_stops_a_sculptor_which_then_finishes_as_an_unbroken_run(self):
+        scene = vdbclay.Scene.from_json(PRESSED_CUBE_AT_TC)
+        unbroken = vdbclay.Sculptor(scene, threads=2)
+        unbroken.run()
+        for _ in range(self.REPEATS):
+            s = vdbclay.Sculptor(scene, threads=2)
+            mass = s.total_mass
+            e = interrupted(lambda: s.run())
+            self.assertIsInstance(e, KeyboardInterrupt)
+            self.assertEqual(s.total_mass, mass)
+            self.assertEqual(s.clay.total_mass(), mass)
+            s.run()
+            self.assertTrue(s.done)
+            self.assertEqual(s.clay.content_hash(), unbroken.clay.content_hash())
+            self.assertEqual(s.clay.steps, unbroken.clay.steps)
+
+
+class MemoryBudget(unittest.TestCase):
+    def tearDown(self):
+        vdbclay.set_memory_budget(None)
+
+    def test_a_huge_shape_is_refused_before_any_voxel_is_made(self):
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 1e6), 1000)
+        self.assertIn("more than the memory budget", str(e.exception))
+
+    def test_the_module_budget_round_trips_and_holds_for_every_call(self):
+        default = vdbclay.memory_budget()
+        self.assertGreater(default, 0)
+        self.assertNotEqual(default, vdbclay.NO_MEMORY_BUDGET)
+        vdbclay.set_memory_budget("512M")
+        self.assertEqual(vdbclay.memory_budget(), 512 << 20)
+        vdbclay.set_memory_budget(3 << 30)
+        self.assertEqual(vdbclay.memory_budget(), 3 << 30)
+        vdbclay.set_memory_budget("none")
+        self.assertEqual(vdbclay.memory_budget(), vdbclay.NO_MEMORY_BUDGET)
+        for bad in ("lots", 0, -1, 1.5):
+            with self.assertRaises(vdbclay.Error):
+                vdbclay.set_memory_budget(bad)
+        self.assertEqual(vdbclay.memory_budget(), vdbclay.NO_MEMORY_BUDGET)
+        vdbclay.set_memory_budget(None)
+        self.assertEqual(vdbclay.memory_budget(), default)
+
+        vdbclay.set_memory_budget("1M")
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.Sculptor(vdbclay.Scene.default())
+        self.assertIn("more than the memory budget of 1.00 MiB", str(e.exception))
+        scene = vdbclay.Scene.default()
+        scene.memory_budget = "none"  # the module's budget replaces the scene's, as --memory-budget
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.Sculptor(scene)
+        self.assertIn("more than the memory budget of 1.00 MiB", str(e.exception))
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 3000), mass=800)
+        self.assertIn("more than the memory budget of 1.00 MiB", str(e.exception))
+        self.assertEqual(vdbclay.Sculptor(scene, memory_budget="none").memory_budget,
+                         vdbclay.NO_MEMORY_BUDGET)  # a call's own budget wins
+        self.assertEqual(vdbclay.Scene.from_json("{}").memory_budget, 1 << 20)
 
 
 class FilesAndScenes(unittest.TestCase):

@@ -3,7 +3,14 @@
 Clay is an exact integer mass per voxel; a cellular automaton moves the excess of cells over Tc to
 cells under it. Coordinates are voxel indices (y up); numpy arrays are dense boxes indexed
 [x, y, z]. Sculptor.run returns the run's report: the dict of `vdbclay run --stats` (the same keys,
-from the same JSON text). See docs/INTEROP.md and help(vdbclay.Automaton), help(vdbclay.Sculptor), ...
+from the same JSON text).
+
+Threads: calls on objects that share a grid (a Clay, its Automaton, a Sculptor and its clay) run one
+after the other, a call waiting with the GIL released for the one running on that grid; long calls
+release the GIL. Ctrl-C stops Sculptor.run and run_frame, Automaton.run and settle, and make_clay
+within a step and raises KeyboardInterrupt, the object still exact. Memory: set_memory_budget()
+and the calls' memory_budget argument, as `vdbclay run --memory-budget`. See docs/INTEROP.md and
+help(vdbclay._vdbclay), help(vdbclay.Automaton), help(vdbclay.Sculptor), ...
 """
 import ctypes
 import ctypes.util
