@@ -512,3 +512,24 @@ TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)
         "s.json", "");
     EXPECT_EQ(estimateSceneMemory(flat).toolVoxels, 256u * 4u);
 }
+
+TEST_F(MemoryTest, HugeClayCountedByItsBoundsIsEstimatedAtOnceAndDoesNotWrap)
+{
+    // Clay whose shape the estimate knows only by its bounds (a shape of no scene kind, as the
+    // Python module's transformed level sets): a box 2e6 voxels wide holds 1.6e16 leaves, which the
+    // count gives up on (a leaf held whole counts one test) for the boxes' count. The parts reach
+    // exabytes; the total saturates at UINT64_MAX instead of wrapping below a budget.
+    Scene s;
+    s.source = "huge";
+    ClaySpec c;
+    c.shape.kind = "shape";
+    c.shape.field = "clay[0]";
+    c.shape.shape = makeBox({{-1e6, -1e6, -1e6}}, {{1e6, 1e6, 1e6}});
+    c.mass = 1000;
+    s.clay.push_back(c);
+    const MemoryEstimate e = estimateSceneMemory(s);
+    EXPECT_GE(e.clayLeaves, 250000ull * 250000ull * 250000ull);
+    EXPECT_GE(e.total(), e.clayBytes);
+    EXPECT_GE(e.total(), e.automatonBytes);
+    EXPECT_THROW(checkMemoryBudget(s), Error);
+}
