@@ -175,8 +175,9 @@ struct ClayCover {
             for (int64_t ny = lo[1]; ny <= hi[1]; ++ny)
                 for (int64_t nz = lo[2]; nz <= hi[2]; ++nz) {
                     // Node origins by multiplication: a left shift of a negative value is undefined.
-                    const Box node{{{int32_t(nx * 128), int32_t(ny * 128), int32_t(nz * 128)}},
-                                   {{int32_t(nx * 128 + 127), int32_t(ny * 128 + 127), int32_t(nz * 128 + 127)}}};
+                    const Box node{
+                        {{int32_t(nx * 128), int32_t(ny * 128), int32_t(nz * 128)}},
+                        {{int32_t(nx * 128 + 127), int32_t(ny * 128 + 127), int32_t(nz * 128 + 127)}}};
                     const Box part = intersect(node, region);
                     if (part.empty()) continue;
                     // The members that may hold a leaf of this node, and one that holds all of them.
