@@ -44,10 +44,12 @@ void requireSeekableFile(const std::string& path, const std::string& what)
     if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not " + what);
     // A FIFO without a writer would block the open; a device or pipe cannot be seeked in, and
     // /dev/zero never ends.
-    if (!S_ISREG(st.st_mode)) throw Error(path + " is not a regular file (" + what + " is read by seeking in it)");
+    if (!S_ISREG(st.st_mode))
+        throw Error(path + " is not a regular file (" + what + " is read by seeking in it)");
 }
 
-std::string readStreamable(const std::string& path, const std::string& what, uint64_t maxBytes, bool allowStdin)
+std::string readStreamable(const std::string& path, const std::string& what, uint64_t maxBytes,
+                           bool allowStdin)
 {
     const bool fromStdin = allowStdin && path == "-";
     const std::string name = fromStdin ? std::string("standard input") : path;
@@ -70,8 +72,8 @@ std::string readStreamable(const std::string& path, const std::string& what, uin
         }
         if (S_ISDIR(st.st_mode)) throw Error(path + ": is a directory, expected a " + what);
         if (S_ISREG(st.st_mode) && uint64_t(st.st_size) > maxBytes) {
-            throw Error(path + ": " + std::to_string(st.st_size) + " bytes, more than a " + what + " may hold (" +
-                        formatBytes(maxBytes) + ")");
+            throw Error(path + ": " + std::to_string(st.st_size) + " bytes, more than a " + what +
+                        " may hold (" + formatBytes(maxBytes) + ")");
         }
         // Opened without blocking: a FIFO's open waits for a writer, which may never come.
         fifo = S_ISFIFO(st.st_mode);
@@ -103,8 +105,9 @@ std::string readStreamable(const std::string& path, const std::string& what, uin
         }
         if (n == 0) {
             if (waiting) {
-                throw Error(path + ": a FIFO with no writer, nothing to read; start the program that writes it "
-                                   "first, or give a file");
+                throw Error(path +
+                            ": a FIFO with no writer, nothing to read; start the program that writes it "
+                            "first, or give a file");
             }
             break;
         }
