@@ -61,16 +61,26 @@ CLI::Validator finiteIn(double lo, double hi, bool open)
         "", "finite");
 }
 
-CLI::Validator unsignedInteger()
+CLI::Validator integerIn(int64_t lo, uint64_t hi)
 {
+    const std::string range = "[" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
     return CLI::Validator(
-        [](std::string& v) -> std::string {
-            if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos) {
-                return "expected a non-negative integer, got " + v;
-            }
-            return "";
+        [=](std::string& v) -> std::string {
+            const std::string refused = "expected an integer in " + range + ", got " + v;
+            size_t i = 0;
+            const bool negative = !v.empty() && v[0] == '-';
+            if (!v.empty() && (v[0] == '-' || v[0] == '+')) i = 1;
+            if (i == v.size() || v.find_first_not_of("0123456789", i) != std::string::npos) return refused;
+            // Exact to 2^64 and beyond: digits past 20 are out of every range an option has.
+            const size_t first = std::min(v.find_first_not_of('0', i), v.size());
+            if (v.size() - first > 20) return refused;
+            __int128 value = 0;
+            for (size_t k = first; k < v.size(); ++k)
+                value = value * 10 + (v[k] - '0');
+            if (negative) value = -value;
+            return value >= __int128(lo) && value <= __int128(hi) ? "" : refused;
         },
-        "", "unsigned");
+        "INT in " + range, "integer");
 }
 
 vdbclay::UpAxis upOption(const std::string& up)
@@ -159,6 +169,45 @@ void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputAr
                                  "; refusing to write over an input");
         }
     }
+}
+
+void checkInsideWorkingDirectory(const FileArg& o, const char* flag)
+{
+    if (o.path.empty()) return;
+    const std::string& path = o.path;
+    const std::string refused = o.text() +
+                                ": outside the current directory; a scene writes only inside it "
+                                "(name the file on the command line, or pass " +
+                                std::string(flag) + ")";
+    if (path[0] == '/') throw vdbclay::Error(refused);
+    // By its words: a ".." past the directory's top leaves it.
+    int depth = 0;
+    for (size_t at = 0; at <= path.size();) {
+        const size_t end = std::min(path.find('/', at), path.size());
+        const std::string part = path.substr(at, end - at);
+        if (part == "..") {
+            if (--depth < 0) throw vdbclay::Error(refused);
+        } else if (!part.empty() && part != ".") {
+            ++depth;
+        }
+        at = end + 1;
+    }
+    // By where it lands: links followed (the file a link names is the one replaced).
+    char* here = ::realpath(".", nullptr);
+    if (!here)
+        throw vdbclay::Error("cannot resolve the current directory: " + std::string(std::strerror(errno)));
+    const std::string base = here;
+    std::free(here);
+    std::string target = path;
+    char* real = nullptr;
+    while (!(real = ::realpath(target.c_str(), nullptr))) { // the file, else the nearest existing directory
+        const auto slash = target.find_last_of('/');
+        target = slash == std::string::npos ? std::string(".") : target.substr(0, slash);
+    }
+    const std::string landed = real;
+    std::free(real);
+    if (landed != base && landed.compare(0, base.size() + 1, base + "/") != 0 && base != "/")
+        throw vdbclay::Error(refused + "; it resolves to " + landed);
 }
 
 void checkMeshName(const FileArg& o)

@@ -51,8 +51,10 @@ CLI::Validator fileName();
 /// A CLI11 check that a number is finite and within [@a lo, @a hi] (open at both ends when @a open):
 /// CLI11's own range checks accept nan and print the limits of double in full.
 CLI::Validator finiteIn(double lo, double hi, bool open = false);
-/// A CLI11 check for an unsigned integer option: "-3" is refused, not wrapped around.
-CLI::Validator unsignedInteger();
+/// A CLI11 check that an integer option's value is a decimal integer within [@a lo, @a hi], checked
+/// on its digits before CLI11 converts it: a value past the limits of its type is refused, never
+/// clamped, "-3" is not wrapped around, and "1e3", "0x10" or "12abc" are not integers.
+CLI::Validator integerIn(int64_t lo, uint64_t hi);
 
 /// @a parse(), its Error prefixed with @a option ("--rule: unknown rule ..."): for option values
 /// that the library parses.
@@ -92,6 +94,12 @@ struct InputArg {
 /// file, none of them one of @a inputs unless that input allows it.
 /// @throw Error naming the option and the file.
 void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputArg>& inputs);
+
+/// Refuses a file a scene names for writing that lies outside the current directory: an absolute
+/// path, a ".." that leaves it, or a symbolic link (of the file or a directory on its way) that
+/// points out of it. A scene received from someone else writes only where the user works; the
+/// command line's own options name files anywhere. @a flag names the option that lifts the rule.
+void checkInsideWorkingDirectory(const FileArg& o, const char* flag);
 
 /// Refuses a mesh output whose extension names no format vdbclay writes (.obj, .ply).
 void checkMeshName(const FileArg& o);

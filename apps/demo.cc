@@ -133,17 +133,17 @@ Subcommand addDemoCommand(CLI::App& app)
     auto a = std::make_shared<DemoArgs>();
     CLI::App* demo =
         app.add_subcommand("demo", "Settle a built-in overloaded lump of clay (the automaton alone)");
-    demo->add_option("--size", a->size, "cube edge in voxels")->check(CLI::Range(2, 4096));
+    demo->add_option("--size", a->size, "cube edge in voxels")->check(integerIn(2, 4096));
     demo->add_option("--overload", a->overload, "the core holds this many times Tc per voxel")
-        ->check(CLI::Range(1, 1000));
+        ->check(integerIn(1, 1000));
     demo->add_option("--rule", a->rule, "arata, bingham, sorted, prorata")->check(nonEmpty("a rule name"));
-    demo->add_option("--threshold", a->opts.rule.threshold, "Tc")->check(CLI::Range(1, INT32_MAX));
+    demo->add_option("--threshold", a->opts.rule.threshold, "Tc")->check(integerIn(1, INT32_MAX));
     demo->add_option("--alpha", a->opts.rule.alpha, "arata's rate in (0,1)")->check(finiteIn(0, 1, true));
-    demo->add_option("--dims", a->opts.dimensions, "2 or 3")->check(CLI::Range(2, 3));
+    demo->add_option("--dims", a->opts.dimensions, "2 or 3")->check(integerIn(2, 3));
     demo->add_option("--threads", a->opts.threads, "worker threads, 0 = all")
-        ->check(CLI::Range(0, kMaxThreads));
-    demo->add_option("--seed", a->opts.seed, "remainder hash seed")->check(unsignedInteger());
-    demo->add_option("--max-steps", a->maxSteps, "step budget")->check(unsignedInteger());
+        ->check(integerIn(0, kMaxThreads));
+    demo->add_option("--seed", a->opts.seed, "remainder hash seed")->check(integerIn(0, INT64_MAX));
+    demo->add_option("--max-steps", a->maxSteps, "step budget")->check(integerIn(0, UINT64_MAX));
     demo->add_option("-o,--output", a->out, "write the settled clay to this .vdb")->check(fileName());
     return {demo, [a] {
                 checkDemo(*a);

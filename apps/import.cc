@@ -148,7 +148,7 @@ Subcommand addImportCommand(CLI::App& app)
     imp->add_option("-o,--output", a->out, "CLAY.vdb")->required()->check(fileName());
     imp->add_option("--mass", a->mass, "clay per voxel inside the shape (a fog volume: per unit of density)")
         ->required()
-        ->check(CLI::Range(int64_t(1), int64_t(INT32_MAX)));
+        ->check(integerIn(1, INT32_MAX));
     imp->add_option("--voxel-size", a->voxelSize,
                     "world units per voxel (default: a level set's own voxel size; 1 for meshes)")
         ->check(finiteIn(vdbclay::kMinVoxelSize, vdbclay::kMaxVoxelSize));
@@ -156,7 +156,7 @@ Subcommand addImportCommand(CLI::App& app)
         "--grid", a->grid,
         ".vdb: the level set or fog volume to import (default: the first level set, else the first fog "
         "volume)");
-    imp->add_option("--dims", a->dims, "2 (keep the z = 0 layer) or 3")->check(CLI::Range(2, 3));
+    imp->add_option("--dims", a->dims, "2 (keep the z = 0 layer) or 3")->check(integerIn(2, 3));
     imp->add_option("--up", a->up, "y or z: the input's up axis, also written into the clay's transform");
     imp->add_option("--memory-budget", a->budget,
                     "refuse a shape estimated to need more (default: 3/4 of memory)")

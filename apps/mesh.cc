@@ -47,7 +47,7 @@ Subcommand addMeshCommand(CLI::App& app)
     mesh->add_option("--isovalue", a->iso, "surface where density (mass / Tc) equals this (default 0.5)")
         ->check(finiteIn(1e-9, 1e9));
     mesh->add_option("--threshold", a->threshold, "Tc, if the file does not record it")
-        ->check(CLI::Range(1, INT32_MAX));
+        ->check(integerIn(1, INT32_MAX));
     mesh->add_option("--up", a->up, "y or z: orient the mesh for this up axis (default: the file's)");
     mesh->add_flag("--keep-volume", a->keepVolume,
                    "move the surface along its normals (at most half a voxel) to enclose the clay's volume");

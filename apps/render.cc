@@ -49,14 +49,14 @@ Subcommand addRenderCommand(CLI::App& app)
         ->required()
         ->check(fileName());
     ren->add_option("-o,--output", a->out, "OUT.png")->required()->check(fileName());
-    ren->add_option("--width", ro.width, "image width")->check(CLI::Range(1, kMaxImageSide));
-    ren->add_option("--height", ro.height, "image height")->check(CLI::Range(1, kMaxImageSide));
+    ren->add_option("--width", ro.width, "image width")->check(integerIn(1, kMaxImageSide));
+    ren->add_option("--height", ro.height, "image height")->check(integerIn(1, kMaxImageSide));
     ren->add_option("--azimuth", ro.azimuthDeg, "3D camera azimuth, degrees")->check(finiteIn(-1e6, 1e6));
     ren->add_option("--elevation", ro.elevationDeg, "3D camera elevation, degrees")
         ->check(finiteIn(-89.9, 89.9));
-    ren->add_option("--dims", a->dims, "2 or 3, if the file does not record it")->check(CLI::Range(2, 3));
+    ren->add_option("--dims", a->dims, "2 or 3, if the file does not record it")->check(integerIn(2, 3));
     ren->add_option("--threshold", a->threshold, "Tc, if the file does not record it")
-        ->check(CLI::Range(1, INT32_MAX));
+        ->check(integerIn(1, INT32_MAX));
     return {ren, [a] { return render(*a); }};
 }
 

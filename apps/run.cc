@@ -39,7 +39,8 @@ struct RunArgs {
     int64_t seed = -1;
     int64_t frames = 0; ///< 0: all
     bool quiet = false;
-    std::string up; ///< --up: empty keeps the scene's
+    bool sceneOutputsAnywhere = false; ///< --scene-outputs-anywhere
+    std::string up;                    ///< --up: empty keeps the scene's
 };
 
 /// Where a run writes: the options' files, else the scene's outputs; the checkpoint's default
@@ -179,6 +180,7 @@ std::string continueCommand(const RunArgs& a, const std::string& checkpoint)
     opt("--checkpoint", a.checkpoint);
     if (a.threads) opt("--threads", std::to_string(a.threads));
     if (a.quiet) cmd += " --quiet";
+    if (a.sceneOutputsAnywhere) cmd += " --scene-outputs-anywhere";
     return cmd;
 }
 
@@ -290,7 +292,7 @@ void checkRunOutputs(const RunArgs& a, const vdbclay::Scene& scene, const RunOut
         {named("--mesh", "mesh", a.mesh), o.mesh},
         {a.checkpoint.empty() ? "the checkpoint" : "--checkpoint", o.checkpoint}};
     std::vector<InputArg> inputs;
-    if (!a.scene.empty()) inputs.push_back({{"the scene file", a.scene}, {}});
+    if (!a.scene.empty() && a.scene != "-") inputs.push_back({{"the scene file", a.scene}, {}});
     // The start file may be continued in place: -o and the checkpoint may replace it.
     if (!scene.start.empty()) {
         inputs.push_back({{a.resume.empty() ? "the scene's start file" : "--resume", scene.start},
@@ -305,6 +307,13 @@ void checkRunOutputs(const RunArgs& a, const vdbclay::Scene& scene, const RunOut
         shapeInputs(t.shape);
     for (const vdbclay::ShapeSpec& ob : scene.obstacles)
         shapeInputs(ob);
+    // A scene's own outputs (not the command line's) stay inside the current directory.
+    const bool fromScene[5] = {a.out.empty(), a.stats.empty(), a.png.empty(), a.mesh.empty(),
+                               a.checkpoint.empty() && a.out.empty()};
+    if (!a.sceneOutputsAnywhere) {
+        for (int i = 0; i < 5; ++i)
+            if (fromScene[i]) checkInsideWorkingDirectory(outputs[i], "--scene-outputs-anywhere");
+    }
     checkMeshName(outputs[3]);
     checkOutputs(outputs, inputs);
 }
@@ -474,23 +483,25 @@ int runScene(const RunArgs& a)
 
 void addRunOptions(CLI::App* run, RunArgs& ra)
 {
-    run->add_option("scene", ra.scene, "scene JSON file (see docs/SCENES.md); omitted: the built-in scene")
+    run->add_option("scene", ra.scene,
+                    "scene JSON file (see docs/SCENES.md), - for standard input; omitted: the built-in scene")
         ->check(fileName());
     run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")
         ->check(fileName());
     run->add_option("--threads", ra.threads, "worker threads for the whole command; 0 = all cores")
-        ->check(CLI::Range(0, kMaxThreads));
+        ->check(integerIn(0, kMaxThreads));
     run->add_option("--rule", ra.rule, "override the scene's rule: arata, bingham, sorted, prorata")
         ->check(nonEmpty("a rule name"));
-    run->add_option("--seed", ra.seed, "override the scene's seed")
-        ->check(CLI::Range(int64_t(0), int64_t(INT64_MAX)));
+    run->add_option("--seed", ra.seed, "override the scene's seed")->check(integerIn(0, INT64_MAX));
     run->add_option("--stats", ra.stats, "write run statistics as JSON to this file")->check(fileName());
     run->add_option("--png", ra.png, "also render the result to this PNG")->check(fileName());
     run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply")->check(fileName());
     run->add_option("--frames", ra.frames,
                     "stop after this many frames (the output can be continued with \"start\")")
-        ->check(CLI::Range(int64_t(1), int64_t(100000000)));
+        ->check(integerIn(1, 100000000));
     run->add_flag("-q,--quiet", ra.quiet, "no progress output");
+    run->add_flag("--scene-outputs-anywhere", ra.sceneOutputsAnywhere,
+                  "let the scene's outputs write outside the current directory (absolute paths, ..)");
     run->add_option("--up", ra.up,
                     "y or z: the up axis of the output .vdb's transform and mesh (Blender: z)");
     run->add_option("--checkpoint", ra.checkpoint,

@@ -11,7 +11,7 @@ source scripts/sanitizer-env.sh
 crashes="$PWD/$BUILD_DIR/fuzz-crashes"
 mkdir -p "$crashes"
 status=0
-for target in scene vdb; do
+for target in scene vdb mesh; do
   bin="$BUILD_DIR/tests/fuzz/fuzz_$target"
   [ -x "$bin" ] || { echo "test-fuzz: $bin is missing: run scripts/test-sanitizers.sh first" >&2; exit 2; }
   scratch="$BUILD_DIR/fuzz-corpus/$target"

@@ -58,16 +58,16 @@ fi
 "$bin" run <(printf '{"frames": 1}') --quiet > /dev/null 2> err.txt || { echo "FAIL scene from a pipe: $(cat err.txt)"; fails=$((fails+1)); }
 
 # Options: every number range-checked with the option named and a short message.
-expect_refused frames-zero "--frames: Value 0 not in range 1 to 100000000" run --frames 0 -o result.vdb
+expect_refused frames-zero "--frames: expected an integer in \[1, 100000000\], got 0" run --frames 0 -o result.vdb
 expect_refused frames-negative "--frames" run --frames -3 -o result.vdb
-expect_refused threads-negative "--threads: Value -1 not in range 0 to 256" run --threads -1 -o result.vdb
-expect_refused threads-huge "--threads: Value 10000 not in range" run --threads 10000 -o result.vdb
-expect_refused render-width-zero "--width: Value 0 not in range 1 to 16384" render notvdb.vdb -o result.png --width 0
+expect_refused threads-negative "--threads: expected an integer in \[0, 256\], got -1" run --threads -1 -o result.vdb
+expect_refused threads-huge "--threads: expected an integer in \[0, 256\], got 10000" run --threads 10000 -o result.vdb
+expect_refused render-width-zero "--width: expected an integer in \[1, 16384\], got 0" render notvdb.vdb -o result.png --width 0
 expect_refused render-azimuth-nan "--azimuth: expected a number in \[-1e+06, 1e+06\], got nan" render notvdb.vdb -o result.png --azimuth nan
 expect_refused render-elevation-pole "--elevation: expected a number in \[-89.9, 89.9\], got 90" render notvdb.vdb -o result.png --elevation 90
 expect_refused import-voxel-size "--voxel-size: expected a number in \[0.0001, 1e+06\], got 1e-300" import notvdb.vdb -o result.vdb --mass 1 --voxel-size 1e-300
-expect_refused demo-seed-negative "--seed: expected a non-negative integer, got -3" demo --seed -3
-expect_refused demo-max-steps-negative "--max-steps: expected a non-negative integer" demo --max-steps -1
+expect_refused demo-seed-negative "--seed: expected an integer in \[0, 9223372036854775807\], got -3" demo --seed -3
+expect_refused demo-max-steps-negative "--max-steps: expected an integer in \[0, 18446744073709551615\], got -1" demo --max-steps -1
 expect_refused mesh-isovalue-nan "--isovalue: expected a number" mesh notvdb.vdb -o result.obj --isovalue nan
 expect_refused unknown-subcommand "unknown subcommand \"bogus\" (expected one of: run, info" bogus
 expect_refused run-rule-bogus "--rule: unknown rule \"bogus\"" run --rule bogus -o result.vdb

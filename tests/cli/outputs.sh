@@ -140,4 +140,29 @@ EOF
 grep -q "hint ok" hint.txt && echo "PASS continue hint: $(cat hint.txt)"
 no_temp_files end
 
+# A scene writes only inside the current directory: absolute paths, a ".." that leaves it and a link
+# that points out of it are refused before any work (nothing written anywhere); the command line
+# names files anywhere, and --scene-outputs-anywhere lets the scene's own outputs out.
+top=$PWD
+mkdir -p inside/sub outside
+ln -sfn "$top/outside" inside/out-link
+escape() { # NAME FIELD PATH
+  printf '{"frames": 1, "outputs": {"%s": "%s"}}' "$2" "$3" > inside/escape.json
+  (cd inside && refused "$1" "the scene's outputs.$2 $3: outside the current directory" "$bin" run escape.json --quiet)
+  [ -z "$(ls outside)" ] || fail "$1: wrote $(ls outside)"
+}
+escape escape-absolute stats "$top/outside/stats.json"
+escape escape-dotdot vdb "../outside/clay.vdb"
+escape escape-deep-dotdot png "sub/../../outside/clay.png"
+escape escape-link mesh "out-link/clay.obj"
+printf '{"frames": 1, "outputs": {"stats": "sub/../stats.json"}}' > inside/within.json
+(cd inside && "$bin" run within.json --quiet > /dev/null 2> ../err.txt) || fail "an output inside by way of ..: $(cat err.txt)"
+[ -s inside/stats.json ] || fail "an output inside by way of ..: nothing written"
+printf '{"frames": 1, "outputs": {"stats": "%s/outside/stats.json"}}' "$top" > inside/away.json
+(cd inside && "$bin" run away.json --quiet --stats "$top/outside/cli-stats.json" > /dev/null 2> ../err.txt) ||
+  fail "the command line's output outside: $(cat err.txt)"
+(cd inside && "$bin" run away.json --quiet --scene-outputs-anywhere > /dev/null 2> ../err.txt) ||
+  fail "--scene-outputs-anywhere: $(cat err.txt)"
+[ -s outside/cli-stats.json ] && [ -s outside/stats.json ] || fail "outputs outside when allowed: $(ls outside)"
+
 [ $fails -eq 0 ] && echo "OUTPUTS HANDLED" || { echo "$fails failed"; exit 1; }

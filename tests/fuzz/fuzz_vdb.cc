@@ -1,8 +1,10 @@
-// libFuzzer target: bytes as a .vdb file through vdbclay::readClayFile and vdbclay::describeVdb.
-// Both take a path, so each input is written to one temporary file (in $TMPDIR, removed at exit).
+// libFuzzer target: bytes as a .vdb file through vdbclay::readClayFile, vdbclay::describeVdb and
+// vdbclay::loadLevelSet. Each takes a path, so each input is written to one temporary file (in $TMPDIR,
+// removed at exit).
 #include "FuzzCheck.h"
 
 #include "vdbclay/IO.h"
+#include "vdbclay/Shapes.h"
 
 #include <unistd.h>
 
@@ -52,5 +54,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     writeInput(data, size);
     vdbclay::fuzz::expectOnlyErrors([&] { (void)vdbclay::readClayFile(gPath); });
     vdbclay::fuzz::expectOnlyErrors([&] { (void)vdbclay::describeVdb(gPath); });
+    vdbclay::fuzz::expectOnlyErrors([&] { (void)vdbclay::loadLevelSet(gPath); });
     return 0;
 }

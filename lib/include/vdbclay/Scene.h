@@ -98,7 +98,10 @@ struct Scene {
 /// @throw Error "SOURCE: FIELD: what was wrong" on any malformed or inconsistent input.
 Scene parseScene(const std::string& json, const std::string& source, const std::string& baseDir,
                  uint64_t memoryBudget = 0);
-/// Reads and parses a scene file. @throw Error as parseScene, or if the file cannot be read.
+/// Reads and parses a scene file: a regular file, a pipe or FIFO with its writer (read whole), or
+/// "-" for standard input (relative names in it then resolve against the current directory).
+/// @throw Error as parseScene, or if the file cannot be read: missing, a directory, a FIFO that
+///        nobody writes to (refused at once, never waited on), more than 16 MiB.
 Scene loadScene(const std::string& path, uint64_t memoryBudget = 0);
 /// The built-in default scene (the smallest complete example: a cube pressed by a plate).
 Scene defaultScene();

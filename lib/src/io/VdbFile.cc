@@ -1,6 +1,8 @@
 // What the readers of .vdb files share (VdbFile.h).
 #include "io/VdbFile.h"
 
+#include "core/InputFile.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -53,14 +55,7 @@ std::string valueTypeOf(const std::string& treeType)
 
 std::vector<VdbGridLayout> openChecked(openvdb::io::File& file, const std::string& path)
 {
-    struct stat st;
-    if (::stat(path.c_str(), &st) != 0) {
-        const int err = errno;
-        throw Error(path + ": " + (err == ENOENT ? std::string("no such file") : std::strerror(err)));
-    }
-    if (S_ISDIR(st.st_mode)) throw Error(path + " is a directory, not a .vdb file");
-    // A .vdb is read by seeking (grid offsets): a device or pipe cannot be, and /dev/zero never ends.
-    if (!S_ISREG(st.st_mode)) throw Error(path + " is not a regular file (a .vdb is read by seeking in it)");
+    requireSeekableFile(path, "a .vdb file");
     {
         const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
         if (fd < 0) {

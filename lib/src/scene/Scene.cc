@@ -3,18 +3,16 @@
 
 #include "vdbclay/MemoryBudget.h"
 
-#include <nlohmann/json.hpp>
+#include "core/InputFile.h"
 
-#include <sys/stat.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <climits>
-#include <fstream>
 #include <optional>
 #include <sstream>
 
@@ -593,36 +591,12 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
 
 Scene loadScene(const std::string& path, uint64_t memoryBudget)
 {
-    // Any path: a FIFO or process substitution (<(...)) is a fine scene; a directory, a device that
-    // never ends (/dev/zero) or a huge file is not, and is refused before it fills memory.
-    struct stat st;
-    if (::stat(path.c_str(), &st) != 0) {
-        const int err = errno;
-        throw Error(path + ": cannot open scene file: " + std::strerror(err));
-    }
-    if (S_ISDIR(st.st_mode)) throw Error(path + ": is a directory, expected a scene file (JSON)");
-    if (S_ISREG(st.st_mode) && uint64_t(st.st_size) > kMaxSceneBytes) {
-        throw Error(path + ": " + std::to_string(st.st_size) + " bytes, more than a scene file may hold (" +
-                    formatBytes(kMaxSceneBytes) + ")");
-    }
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        const int err = errno;
-        throw Error(path + ": cannot open scene file: " + std::strerror(err));
-    }
-    std::string text;
-    char buf[65536];
-    while (in.read(buf, sizeof buf) || in.gcount() > 0) {
-        text.append(buf, size_t(in.gcount()));
-        if (text.size() > kMaxSceneBytes) {
-            throw Error(path + ": more than " + formatBytes(kMaxSceneBytes) +
-                        " of data, more than a scene file may hold (is it a scene file?)");
-        }
-    }
-    if (in.bad()) {
-        const int err = errno;
-        throw Error(path + ": cannot read scene file: " + std::strerror(err));
-    }
+    // Any stream: "-" (standard input), a FIFO with its writer or process substitution (<(...)) is a
+    // fine scene; a directory, a FIFO nobody writes, a device that never ends (/dev/zero) or a huge
+    // file is not, and is refused at once or before it fills memory.
+    const std::string text =
+        io_internal::readStreamable(path, "scene file", kMaxSceneBytes, /*allowStdin=*/true);
+    if (path == "-") return parseScene(text, "standard input", "", memoryBudget); // names relative to here
     const auto slash = path.find_last_of('/');
     const std::string base = slash == std::string::npos ? std::string() : path.substr(0, slash);
     return parseScene(text, path, base, memoryBudget);

@@ -82,6 +82,7 @@
 #include "io/ClayFileMeta.h"
 #include "push/ClayLeaves.h"
 #include "core/Format.h"
+#include "core/InputFile.h"
 #include "sculpt/EstimateGeometry.h"
 #include "sculpt/MemoryEstimate.h"
 #include "sculpt/FramePolicy.h"
@@ -182,6 +183,7 @@ FileGrid fileGridStats(const std::string& path, const std::string& gridName)
 FileGrid fileGridMetadata(const std::string& path, const std::string& gridName)
 {
     FileGrid out;
+    io_internal::requireSeekableFile(path, "a .vdb file"); // before OpenVDB opens it: a FIFO would block
     openvdb::GridBase::Ptr g;
     try {
         openvdb::io::File file(path);

@@ -7,8 +7,6 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
 
-#include <filesystem>
-
 namespace vdbclay {
 namespace shapes_internal {
 
@@ -73,13 +71,6 @@ inline void requireVoxelSize(double voxelSize, const std::string& what)
     if (!std::isfinite(voxelSize) || !(voxelSize > 0.0)) {
         throw Error(what + ": voxelSize must be finite and > 0, got " + num(voxelSize));
     }
-}
-
-inline void requireFile(const std::string& path)
-{
-    std::error_code ec;
-    if (!std::filesystem::exists(path, ec)) throw Error("cannot open " + path + ": no such file");
-    if (std::filesystem::is_directory(path, ec)) throw Error("cannot open " + path + ": it is a directory");
 }
 
 inline bool isFloatLevelSet(const openvdb::GridBase& g)

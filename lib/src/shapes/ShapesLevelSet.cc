@@ -4,6 +4,7 @@
 #include "vdbclay/Shapes.h"
 
 #include "shapes/LevelSetShape.h"
+#include "core/InputFile.h"
 #include "core/VdbCheck.h"
 
 #include <openvdb/io/File.h>
@@ -18,7 +19,7 @@ using namespace shapes_internal;
 ShapePtr loadLevelSet(const std::string& path, double voxelSize, const std::string& gridName, UpAxis up)
 {
     requireVoxelSize(voxelSize, "loadLevelSet(" + path + ")");
-    requireFile(path);
+    io_internal::requireSeekableFile(path, "a level set .vdb");
     openvdb::initialize();
     // OpenVDB trusts the sizes a file records: check them first (VdbCheck.h).
     std::vector<io_internal::VdbGridLayout> layout;

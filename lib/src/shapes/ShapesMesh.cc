@@ -5,6 +5,7 @@
 
 #include "shapes/Coverage.h"
 #include "shapes/LevelSetShape.h"
+#include "core/InputFile.h"
 #include "core/TreeBytes.h"
 
 #include <openvdb/openvdb.h>
@@ -18,7 +19,6 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <sstream>
 #include <tuple>
@@ -416,6 +416,29 @@ std::string lowerExtension(const std::string& path)
     return e;
 }
 
+/// OBJ text by its content, for a name without the extension (a pipe: /dev/fd/63): its first
+/// statement (past comments and blank lines) is one OBJ defines, and it has a vertex and a face.
+bool looksLikeObj(const std::string& data)
+{
+    if (data.find('\0') != std::string::npos) return false;
+    size_t at = 0;
+    while (at < data.size()) {
+        const size_t end = std::min(data.find('\n', at), data.size());
+        const std::string line = data.substr(at, end - at);
+        at = end + 1;
+        const size_t first = line.find_first_not_of(" \t\r");
+        if (first == std::string::npos || line[first] == '#') continue;
+        const std::string word = line.substr(first, line.find_first_of(" \t\r", first) - first);
+        static const char* const kStatements[] = {"v", "vt", "vn",     "vp",     "f", "o",
+                                                  "g", "s",  "mtllib", "usemtl", "l"};
+        if (std::find(std::begin(kStatements), std::end(kStatements), word) == std::end(kStatements))
+            return false;
+        break;
+    }
+    return (data.compare(0, 2, "v ") == 0 || data.find("\nv ") != std::string::npos) &&
+           (data.compare(0, 2, "f ") == 0 || data.find("\nf ") != std::string::npos);
+}
+
 /// The mesh's undirected edges by how many triangles they bound.
 struct EdgeCounts {
     size_t open = 0;        ///< edges of an odd number of triangles (rims of holes)
@@ -589,11 +612,9 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
                   uint64_t memoryBudget)
 {
     requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
-    requireFile(path);
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error("cannot open " + path + ": " + std::strerror(errno));
-    std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) throw Error("cannot read " + path);
+    // Read whole (a pipe or process substitution is fine); the mesh's bytes count against the budget.
+    const uint64_t budget = memoryBudget ? memoryBudget : defaultMemoryBudget();
+    const std::string data = io_internal::readStreamable(path, "mesh", budget);
 
     Mesh mesh;
     const std::string ext = lowerExtension(path);
@@ -605,7 +626,7 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
     }
     const bool asciiStl = data.compare(0, 5, "solid") == 0 && data.find("facet") != std::string::npos;
     std::istringstream text(data);
-    if (ext == ".obj") {
+    if (ext == ".obj" || (ext != ".stl" && ext != ".ply" && looksLikeObj(data))) {
         readObj(path, text, mesh);
     } else if (ext == ".ply" || data.compare(0, 4, "ply\n") == 0 || data.compare(0, 5, "ply\r\n") == 0) {
         readPly(path, data, mesh);
@@ -643,7 +664,7 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         indexPoints.push_back(q);
         p = openvdb::Vec3s(float(q[0]), float(q[1]), float(q[2]));
     }
-    checkMeshFits(path, indexPoints, voxelSize, memoryBudget ? memoryBudget : defaultMemoryBudget());
+    checkMeshFits(path, indexPoints, voxelSize, budget);
     openvdb::initialize();
     openvdb::FloatGrid::Ptr grid;
     try {
