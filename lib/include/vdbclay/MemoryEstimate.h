@@ -36,7 +36,8 @@ struct MemoryEstimate {
     uint64_t transportCells = 0; ///< Scene::transport global: the cells of its domain counted (a bound)
     uint64_t outputBytes = 0;    ///< writing the result: the density and surface grids and their scratch
     /// processBytes + clayBytes + obstacleBytes + toolBytes + automatonBytes + the larger of
-    /// (pushBytes + transportBytes) and outputBytes.
+    /// (pushBytes + transportBytes) and outputBytes, saturating at UINT64_MAX (never wrapping
+    /// below its parts).
     uint64_t total() const;
     /// One line: "about 1.2 GiB (program 40 MiB; clay 800 MiB for up to 370000 leaves ..., ...)".
     std::string describe() const;
