@@ -45,15 +45,17 @@ printf '{"start": "start.vdb", "frames": 1}' | t run - --quiet -o continued.vdb 
 printf '{"frames": 1}' | t run - > out.txt 2> err.txt || fail "run - without outputs: $(cat err.txt)"
 grep -q "^vdbclay: standard input: 3D" out.txt || fail "run -: the scene is not named standard input: $(head -1 out.txt)"
 
-# A FIFO whose writer is there: the writer (this shell, fd 3, not inherited by vdbclay) holds it open
-# until vdbclay has opened it, then closes it, so vdbclay reads the whole scene and its end.
+# A FIFO whose writer is there: the writer (this shell, fd 9, not inherited by vdbclay) holds it open
+# until vdbclay has opened it (on another fd: until the fork has run the redirection and exec'd,
+# fd 9 is still the shell's), then closes it, so vdbclay reads the whole scene and its end.
 mkfifo written.fifo
-exec 3<> written.fifo
-printf '{"frames": 1}' >&3
-"$bin" run written.fifo --quiet -o from-fifo.vdb > out.txt 2> err.txt 3>&- &
+exec 9<> written.fifo
+printf '{"frames": 1}' >&9
+"$bin" run written.fifo --quiet -o from-fifo.vdb > out.txt 2> err.txt 9>&- &
 reader=$!
-until ls -l "/proc/$reader/fd" 2> /dev/null | grep -q written.fifo || ! kill -0 "$reader" 2> /dev/null; do :; done
-exec 3>&-
+until ls -l "/proc/$reader/fd" 2> /dev/null | grep -v ' 9 -> ' | grep -q written.fifo ||
+  ! kill -0 "$reader" 2> /dev/null; do :; done
+exec 9>&-
 wait "$reader" || fail "scene from a FIFO with its writer: $(cat err.txt)"
 [ "$(hash from-fifo.vdb)" = "$(hash from-file.vdb)" ] || fail "scene from a FIFO: other clay than from a file"
 
