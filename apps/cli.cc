@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 
 namespace vdbclay_cli {
 
@@ -174,40 +175,20 @@ void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputAr
 void checkInsideWorkingDirectory(const FileArg& o, const char* flag)
 {
     if (o.path.empty()) return;
-    const std::string& path = o.path;
-    const std::string refused = o.text() +
-                                ": outside the current directory; a scene writes only inside it "
-                                "(name the file on the command line, or pass " +
-                                std::string(flag) + ")";
-    if (path[0] == '/') throw vdbclay::Error(refused);
-    // By its words: a ".." past the directory's top leaves it.
-    int depth = 0;
-    for (size_t at = 0; at <= path.size();) {
-        const size_t end = std::min(path.find('/', at), path.size());
-        const std::string part = path.substr(at, end - at);
-        if (part == "..") {
-            if (--depth < 0) throw vdbclay::Error(refused);
-        } else if (!part.empty() && part != ".") {
-            ++depth;
-        }
-        at = end + 1;
+    // Where it lands: the existing part resolved (links followed: the file a link names is the one
+    // replaced), the rest (a file or directories still to be made) normalised, ".." included.
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    const fs::path base = fs::canonical(fs::current_path(ec), ec);
+    if (ec) throw vdbclay::Error("cannot resolve the current directory: " + ec.message());
+    const fs::path landed = fs::weakly_canonical(base / o.path, ec);
+    if (ec) throw vdbclay::Error("cannot write " + o.path + ": " + ec.message());
+    if (std::mismatch(base.begin(), base.end(), landed.begin(), landed.end()).first != base.end()) {
+        throw vdbclay::Error(o.text() +
+                             ": outside the current directory; a scene writes only inside it (name the "
+                             "file on the command line, or pass " +
+                             flag + "); it resolves to " + landed.string());
     }
-    // By where it lands: links followed (the file a link names is the one replaced).
-    char* here = ::realpath(".", nullptr);
-    if (!here)
-        throw vdbclay::Error("cannot resolve the current directory: " + std::string(std::strerror(errno)));
-    const std::string base = here;
-    std::free(here);
-    std::string target = path;
-    char* real = nullptr;
-    while (!(real = ::realpath(target.c_str(), nullptr))) { // the file, else the nearest existing directory
-        const auto slash = target.find_last_of('/');
-        target = slash == std::string::npos ? std::string(".") : target.substr(0, slash);
-    }
-    const std::string landed = real;
-    std::free(real);
-    if (landed != base && landed.compare(0, base.size() + 1, base + "/") != 0 && base != "/")
-        throw vdbclay::Error(refused + "; it resolves to " + landed);
 }
 
 void checkMeshName(const FileArg& o)

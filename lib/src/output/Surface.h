@@ -15,7 +15,7 @@ namespace vdbclay {
 namespace io_internal {
 
 /// The density m / Tc of every voxel or tile holding nonzero mass, active or not (all of it is clay),
-/// active there on background 0: a GRID_FOG_VOLUME named "density" with a linear transform of
+/// active there over a zero background: a GRID_FOG_VOLUME named "density" with a linear transform of
 /// @a voxelSize. Built leaf by leaf in parallel on the mass tree's topology.
 /// @throw Error if threshold <= 0 or voxelSize is not positive and finite.
 openvdb::FloatGrid::Ptr densityGrid(const MassGrid& mass, int32_t threshold, double voxelSize);

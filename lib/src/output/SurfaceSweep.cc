@@ -403,7 +403,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         });
         tileValue = tileValue < 0 ? -band : band;
     }
-    // Tiles (only the fog's background 0 here) are outside: +FLT_MAX after InitSdf, then the largest
+    // Tiles (only the fog's zero background here) are outside: +FLT_MAX after InitSdf, then the largest
     // finite value if the sweeps ran (the root's background too; the band's outside when clipped).
     auto it = tree.beginValueAll();
     it.setMaxDepth(it.getLeafDepth() - 1);
