@@ -355,12 +355,12 @@ std::function<void(const vdbclay::FrameReport&)> frameProgress(bool quiet, bool 
             if (r.frame == total && r.finished) std::fprintf(stderr, "\n");
         } else {
             std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
-                        "residual overload %lld\n",
+                        "residual overload %lld, %.3f s\n",
                         (unsigned long long)r.frame, (unsigned long long)total,
                         (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
                         (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
-                        (long long)r.settle.residualOverload);
+                        (long long)r.settle.residualOverload, r.seconds);
             std::fflush(stdout); // a log file follows the run frame by frame
         }
     };

@@ -811,7 +811,6 @@ PYBIND11_MODULE(_vdbclay, m)
         "read",
         [](const std::string& path, const std::string& grid) {
             ClayFile f = readClayFile(path, grid);
-            f.mass->tree().voxelizeActiveTiles();
             return Clay{f.mass, f.meta};
         },
         py::arg("path"), py::arg("grid") = "mass", "Reads a clay .vdb (the Int32 grid, with its metadata).");
@@ -834,7 +833,7 @@ PYBIND11_MODULE(_vdbclay, m)
                  o.threads = threads;
                  a->clay.meta.rule = o.rule;
                  a->clay.meta.seed = seed;
-                 // Reads the grid (and voxelizes its active tiles, which an automaton already on it did).
+                 // Reads the grid (and voxelizes its tiles over Tc, which an automaton already on it did).
                  GridGuard g(clay.lock, false);
                  {
                      py::gil_scoped_release nogil;

@@ -938,7 +938,7 @@ void writePlainVdb(const std::string& path, openvdb::Int32Grid::Ptr grid)
 TEST_F(IOTest, ClayInAFileIsEveryNonZeroValueForEveryCommand)
 {
     // An inactive 8^3 tile at 700 beside active voxels, and one inactive voxel holding mass: clay
-    // for every command alike, read as active voxels.
+    // for every command alike, read as active (the tile stays a tile: uniform clay).
     auto g = openvdb::Int32Grid::create(0);
     g->tree().addTile(1, Coord(64, 0, 0), 700, false);
     g->tree().setValueOn(Coord(0, 0, 0), 900);
@@ -950,7 +950,8 @@ TEST_F(IOTest, ClayInAFileIsEveryNonZeroValueForEveryCommand)
     EXPECT_EQ(totalMass(*f.mass), expected);
     EXPECT_EQ(f.mass->activeVoxelCount(), 514u);
     EXPECT_EQ(clayVoxelCount(*f.mass), 514u);
-    EXPECT_EQ(f.mass->tree().activeTileCount(), 0u);
+    EXPECT_EQ(f.mass->tree().activeTileCount(), 1u);
+    EXPECT_EQ(contentHash(*f.mass), contentHash(*g));
     EXPECT_TRUE(contains(describeVdb(file("tile.vdb")), "total mass: " + std::to_string(expected)));
 }
 

@@ -60,6 +60,7 @@ TEST_F(RunReportTest, JsonHasTheStatsKeysAndTheRunsValues)
                                          "compaction",
                                          "content_hash",
                                          "frames",
+                                         "frame_seconds",
                                          "frames_no_room",
                                          "frames_transport_no_room",
                                          "frames_unsettled",
@@ -100,6 +101,7 @@ TEST_F(RunReportTest, JsonHasTheStatsKeysAndTheRunsValues)
     EXPECT_EQ(j["threshold"], scene.rule.threshold);
     EXPECT_EQ(j["threads"], 2);
     EXPECT_EQ(j["frames"], 2u);
+    EXPECT_EQ(j["frame_seconds"].size(), 2u);
     EXPECT_EQ(j["steps"], s.steps);
     EXPECT_EQ(j["mass_initial"], s.massInitial);
     EXPECT_EQ(j["mass_final"], s.massFinal);

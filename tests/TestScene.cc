@@ -530,17 +530,19 @@ TEST_F(SceneTest, ByteSizesParseExactlyAndNonsenseIsRefused)
 
 TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
 {
-    // A 32^3 cube is 4^3 = 64 leaves. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
+    // A 32^3 cube is 4^3 = 64 slots, all of them tiles; the estimate counts the 56 whose centre lies
+    // within a leaf's half-diagonal of its surface. The floor -64..96 x -4..-1: 21 x 1 x 21 leaves.
     const Scene still =
         parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}],
         "obstacles": [{"shape": "box", "min": [-64,-4,-64], "max": [96,-1,96]}]})",
                    "s.json", "");
     const MemoryEstimate a = estimateSceneMemory(still);
-    EXPECT_EQ(a.clayLeaves, 64u);
-    EXPECT_EQ(a.clayLeavesGrown, 64u); // at 800 < Tc with no tool it never moves
+    EXPECT_EQ(a.clayLeaves, 56u);
+    EXPECT_EQ(a.clayLeavesGrown, 56u); // at 800 < Tc with no tool it never moves
+    EXPECT_EQ(a.clayVoxels, 56u * 512 + 32u * 32 * 32);
     EXPECT_EQ(a.obstacleLeaves, 21u * 21u);
     EXPECT_EQ(a.toolVoxels, 0u);
-    EXPECT_GE(a.clayBytes, 64u * (512u * 4u));
+    EXPECT_GE(a.clayBytes, 56u * (512u * 4u));
     EXPECT_EQ(a.total(), a.processBytes + a.clayBytes + a.obstacleBytes + a.toolBytes + a.automatonBytes +
                              std::max(a.pushBytes + a.transportBytes, a.outputBytes));
 
@@ -550,7 +552,7 @@ TEST_F(SceneTest, MemoryEstimateCountsLeavesOfTheShapesAndTheirGrowth)
     // -1..4 (108): 428 leaves.
     const Scene def = defaultScene();
     const MemoryEstimate d = estimateSceneMemory(def);
-    EXPECT_EQ(d.clayLeaves, 64u);
+    EXPECT_EQ(d.clayLeaves, 56u);
     EXPECT_EQ(d.toolVoxels, 48u * 9u * 48u);
     EXPECT_EQ(d.clayLeavesGrown, 428u);
     // Honest: the run stays inside the estimate, leaves and bytes.
@@ -748,10 +750,11 @@ TEST_F(SceneTest, MemoryEstimateCountsSharedNodesAndLeavesNotBoxes)
     EXPECT_EQ(d.clayLeaves, 20000u);
     EXPECT_LT(d.total(), uint64_t(1) << 30) << d.describe();
 
-    // Clay at most Tc per voxel that no tool reaches never moves: its leaves are all it needs.
+    // Clay at most Tc per voxel that no tool reaches never moves: its leaves are all it needs (the
+    // 56 of its 64 slots near its surface: the inside is tiles).
     const Scene still = parseScene(
         R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800}]})", "s.json", "");
-    EXPECT_EQ(estimateSceneMemory(still).clayLeavesGrown, 64u);
+    EXPECT_EQ(estimateSceneMemory(still).clayLeavesGrown, 56u);
     // ... unless shapes overlap and add up over Tc.
     const Scene stacked =
         parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [31,31,31], "mass": 800},

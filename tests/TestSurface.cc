@@ -144,14 +144,86 @@ TEST_F(SurfaceTest, NarrowBandSweepsOnlyNearTheSurfaceAndMatchesTheWholeSweep)
         sparse->tree().setValue(Coord(rng.range(-14, 14), rng.range(-10, 20), rng.range(-14, 14)),
                                 rng.range(1, 1000));
     expectBandLikeOpenVdb(*sparse, 1.0, all);
+}
 
-    // Clay holding a tile (a file may): the density holds a tile too, so the fog is grown and swept
-    // by OpenVDB itself, and the band is still clipped alike.
-    auto tiled = openvdb::Int32Grid::create(0);
-    tiled->tree().addTile(1, Coord(0, 0, 0), 1000, true);
-    tiled->tree().setValue(Coord(8, 3, 3), 700);
-    tiled->tree().setValue(Coord(-1, 4, 2), 400);
-    EXPECT_EQ(expectBandLikeOpenVdb(*tiled, 1.0, all), 0u); // no sweep of ours ran
+namespace {
+
+/// The narrow bands @a got (from a density with tiles) and @a expected (from the same clay in
+/// leaves) agree: the same active voxels with the same bits, and every other value (voxels and
+/// tiles, each side's) of the same sign and magnitude (+-band: outside or inside).
+void expectSameBand(const openvdb::FloatGrid& expected, const openvdb::FloatGrid& got)
+{
+    EXPECT_EQ(got.tree().activeVoxelCount(), expected.tree().activeVoxelCount());
+    EXPECT_EQ(bitsOf(got.tree().background()), bitsOf(expected.tree().background()));
+    uint64_t mismatches = 0;
+    auto check = [&](const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {
+        auto bacc = b.getConstAccessor();
+        for (auto it = a.tree().cbeginValueAll(); it; ++it) {
+            openvdb::CoordBBox bb;
+            it.getBoundingBox(bb);
+            for (const Coord& c : std::vector<Coord>{bb.min(), bb.max(),
+                                                     Coord((bb.min().x() + bb.max().x()) / 2,
+                                                           (bb.min().y() + bb.max().y()) / 2,
+                                                           (bb.min().z() + bb.max().z()) / 2)}) {
+                const bool same = it.isValueOn()
+                                      ? (bacc.isValueOn(c) && bitsOf(*it) == bitsOf(bacc.getValue(c)))
+                                      : (!bacc.isValueOn(c) && *it == bacc.getValue(c));
+                if (!same && ++mismatches <= 5) {
+                    ADD_FAILURE() << "at " << c << ": " << *it << (it.isValueOn() ? " on" : " off") << " vs "
+                                  << bacc.getValue(c) << (bacc.isValueOn(c) ? " on" : " off");
+                }
+            }
+        }
+    };
+    check(expected, got);
+    check(got, expected);
+    EXPECT_EQ(mismatches, 0u);
+}
+
+/// surfaceLevelSet of @a mass (holding tiles) against that of the same clay in leaves, on 1, 2, 3
+/// and 8 threads; returns the voxels the tiled band's sweep updated.
+uint64_t expectTiledBandLikeLeaves(const openvdb::Int32Grid& mass)
+{
+    auto leaves = mass.deepCopy();
+    leaves->tree().voxelizeActiveTiles();
+    auto expected = io_internal::surfaceLevelSet(*io_internal::densityGrid(*leaves, 1000, 1.0), 0.5);
+    auto density = io_internal::densityGrid(mass, 1000, 1.0);
+    EXPECT_TRUE(io_internal::holdsTiles(density->tree()));
+    uint64_t swept = 0;
+    for (int threads : {1, 2, 3, 8}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        expectSameBand(*expected, *io_internal::surfaceLevelSet(*density, 0.5));
+        io_internal::narrowBandSdfFromDensity(*density, 4, 0.5f, 3.f, &swept);
+    }
+    return swept;
+}
+
+} // namespace
+
+TEST_F(SurfaceTest, TheBandOfClayHeldAsTilesIsThatOfItsVoxels)
+{
+    // A tile beside voxels (a file may hold one).
+    auto small = openvdb::Int32Grid::create(0);
+    small->tree().addTile(1, Coord(0, 0, 0), 1000, true);
+    small->tree().setValue(Coord(8, 3, 3), 700);
+    small->tree().setValue(Coord(-1, 4, 2), 400);
+    EXPECT_GT(expectTiledBandLikeLeaves(*small), 0u);
+
+    // A large block of full clay (a 128^3 tile and 8^3 tiles, faces on slot boundaries: the surface
+    // runs between tiles and empty space), a block of thin clay below the isovalue beside it, a block
+    // at the isovalue, a graded shell of leaves on part of it and a cavity.
+    auto block = openvdb::Int32Grid::create(0);
+    block->tree().fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(135, 127, 143)), 1000, true);
+    block->tree().fill(openvdb::CoordBBox(Coord(136, 0, 0), Coord(167, 31, 31)), 300, true);
+    block->tree().fill(openvdb::CoordBBox(Coord(-32, 0, 0), Coord(-1, 15, 15)), 500, true);
+    for (int x = 20; x < 60; ++x)
+        for (int z = 30; z < 70; ++z)
+            for (int y = 128; y < 131; ++y)
+                block->tree().setValue(Coord(x, y, z), 1000 - 300 * (y - 128));
+    block->tree().fill(openvdb::CoordBBox(Coord(60, 60, 60), Coord(70, 66, 75)), 0, false);
+    const uint64_t swept = expectTiledBandLikeLeaves(*block);
+    EXPECT_GT(swept, 0u);
+    EXPECT_LT(swept, 8 * 136ull * 128 * 144 / 10); // 8 sweeps, each of under a tenth of the block
 }
 
 TEST_F(SurfaceTest, SurfaceFogIsOpenVdbsDilationBitForBit)

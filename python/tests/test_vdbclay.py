@@ -480,12 +480,14 @@ class FilesAndScenes(unittest.TestCase):
             cli = json.load(f)
         report = vdbclay.Sculptor(vdbclay.Scene.default(), threads=2).run(frames=2)
         self.assertEqual(sorted(report), sorted(cli))
-        timed = {"seconds", "push_seconds", "setup_seconds", "output_seconds", "transport_seconds",
-                 "stage_seconds", "pass_busy_seconds", "pass_idle_seconds", "heap"}
+        timed = {"seconds", "frame_seconds", "push_seconds", "setup_seconds", "output_seconds",
+                 "transport_seconds", "stage_seconds", "pass_busy_seconds", "pass_idle_seconds", "heap"}
         for key in cli:
             if key not in timed:
                 self.assertEqual(report[key], cli[key], key)
         self.assertEqual(sorted(report["stage_seconds"]), sorted(cli["stage_seconds"]))
+        self.assertEqual(len(report["frame_seconds"]), 2)
+        self.assertEqual(len(cli["frame_seconds"]), 2)
         self.assertEqual(report["output_seconds"], 0)
         self.assertGreater(report["setup_seconds"], 0)
 

@@ -129,10 +129,13 @@ struct StepReport {
 
 class Automaton {
 public:
-    /// Validates the state and prepares the automaton. Active tiles of @a mass are voxelized.
-    /// @throw Error if @a mass is null, its background is not 0, a voxel holds negative mass, a
-    ///        tile holds nonzero mass (after voxelizing active tiles), 2D clay lies outside z = 0,
-    ///        or the options are invalid. Nothing is modified when it throws, except voxelization.
+    /// Validates the state and prepares the automaton. Active tiles of @a mass holding at most Tc
+    /// stay tiles (uniform clay: the automaton reads them as their voxels, turning a tile's slot into
+    /// a leaf only where a block that can change reads it); tiles over Tc are voxelized.
+    /// @throw Error if @a mass is null, its background is not 0, a voxel or tile holds negative mass,
+    ///        an inactive tile holds nonzero mass, 2D clay lies outside z = 0 (a tile holding clay
+    ///        does), or the options are invalid. Nothing is modified when it throws, except
+    ///        voxelization.
     explicit Automaton(MassGridPtr mass, const AutomatonOptions& options = AutomatonOptions(),
                        ObstacleGridPtr obstacles = nullptr);
     ~Automaton();
@@ -191,6 +194,14 @@ public:
     /// @throw Error (and change nothing) if a mass is negative, a cell lies outside @a region or,
     ///        in 2D, outside z = 0.
     void setMasses(const Box& region, const std::vector<CellMass>& cells);
+    /// Turns the tiles of the mass grid that meet @a region (inclusive) into leaves, each voxel
+    /// holding its tile's value: the clay is unchanged and nothing is woken. For code that walks the
+    /// leaves of a box (the push's sources).
+    void densify(const Box& region);
+    /// Collapses every leaf whose voxels all hold one value of at most Tc (all holding clay, or all
+    /// empty) into a tile, and nodes of equal tiles into larger tiles: the clay is unchanged, the
+    /// memory follows its surface. A Sculptor calls it after each frame. Returns the leaves removed.
+    uint64_t collapseUniformLeaves();
     /// Lets @a fn change obstacles inside @a region (inclusive), e.g. to make a tool's voxels
     /// obstacles while clay settles around it. Creates an empty obstacle grid if there was none.
     /// The region is rescanned as by edit(). Clay left in a cell that becomes an obstacle stays

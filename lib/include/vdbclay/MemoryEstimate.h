@@ -21,6 +21,9 @@ namespace vdbclay {
 struct MemoryEstimate {
     uint64_t clayLeaves = 0;      ///< 8^3 leaves of the initial clay (an upper bound)
     uint64_t clayLeavesGrown = 0; ///< leaves the clay may reach as it spreads (>= clayLeaves)
+    /// Voxels the clay may hold as it spreads, in leaves and in tiles (uniform clay inside a shape
+    /// is tiles, not leaves): the global layer's domain over the whole body is at most these.
+    uint64_t clayVoxels = 0;
     uint64_t anchorLeaves =
         0; ///< leaves within one leaf of those (the automaton's anchors, the surface band)
     uint64_t obstacleLeaves = 0; ///< leaves of the obstacle masks (static obstacles)

@@ -35,7 +35,9 @@ int64_t residualOverload(const MassGrid& mass, int32_t threshold, const Obstacle
 uint64_t clayVoxelCount(const MassGrid& mass);
 
 /// A 64-bit hash of the grid's content: every nonzero voxel's coordinate and value. Two grids with
-/// the same nonzero voxels hash alike whatever their tree layout or active states.
+/// the same nonzero voxels hash alike whatever their tree layout or active states (a tile hashes as
+/// its voxels).
+/// @throw Error if the grid's tiles hold more than 2^35 voxels of clay (a damaged or foreign file).
 uint64_t contentHash(const MassGrid& mass);
 
 /// The accuracy metrics of one clay state (see the definitions at the top of this file).

@@ -11,6 +11,7 @@
 #include "vdbclay/Transport.h"
 
 #include <cstdint>
+#include <vector>
 #include <functional>
 #include <memory>
 #include <string>
@@ -32,6 +33,8 @@ struct FrameReport {
     /// frame is still open, and the next runFrame() (or a Sculptor resumed from checkpointMeta())
     /// finishes it exactly as an unbroken run would have.
     bool finished = true;
+    /// The frame's wall time: its push, global layer and settling, and collapsing its uniform leaves.
+    double seconds = 0;
 };
 
 /// Totals of a run, as the CLI prints them and writes to --stats.
@@ -39,6 +42,7 @@ struct RunSummary {
     uint64_t frames = 0;
     uint64_t steps = 0;
     double seconds = 0;
+    std::vector<double> frameSeconds; ///< each frame's wall time (FrameReport::seconds), in order
     int64_t massInitial = 0;
     int64_t massFinal = 0;
     int64_t massDrift = 0; ///< massFinal - massInitial: exactly 0 unless mass was lost or made

@@ -54,6 +54,10 @@ public:
     /// the clay keeps their volume. False (the analytic shapes, in voxel indices): a voxel is in or
     /// out by its centre.
     virtual bool keepsVolume() const { return false; }
+    /// True when the points where distance() < 0 form a convex set (the analytic shapes and their
+    /// poses): a box of voxel centres whose eight corners lie inside lies inside whole, so clay fills
+    /// such an 8^3 slot as one tile without testing its other voxels.
+    virtual bool convex() const { return false; }
     /// For shapes that know the part of each voxel they cover better than makeClay's estimate from
     /// distance() (closed meshes: exactly): calls @a covered(x, y, z, fraction) for every voxel (only
     /// the z = 0 layer when @a dimensions == 2) of which the shape covers a fraction in (0, 1], each

@@ -88,6 +88,7 @@
 #include "automaton/LeafTable.h"
 #include "automaton/NoRoom.h"
 #include "automaton/PassEngine.h"
+#include "automaton/Tiles.h"
 #include "core/Format.h"
 
 #include <openvdb/openvdb.h>
@@ -118,45 +119,6 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0)
 {
     return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-/// Voxelizes the active tiles of the internal nodes that meet @a region (an edit's: the automaton
-/// holds no active tile outside a region being edited, resync() voxelizes the whole tree), so an
-/// edit costs its region, not the model (Tree::voxelizeActiveTiles walks every internal node: ~0.4 ms
-/// an edit on a 512-wide sphere). Whole nodes are voxelized, a superset of the tiles that meet it.
-void voxelizeActiveTilesIn(MassTree& tree, const Box& region)
-{
-    using Upper = MassTree::RootNodeType::ChildNodeType;
-    using Lower = Upper::ChildNodeType;
-    const int64_t u = Upper::DIM, l = Lower::DIM;
-    auto slots = [&](int64_t dim) {
-        int64_t n = 1;
-        for (int a = 0; a < 3; ++a)
-            n *= (int64_t(region.max[a]) / dim - int64_t(region.min[a]) / dim + 2);
-        return n;
-    };
-    const openvdb::CoordBBox rb(Coord(region.min[0], region.min[1], region.min[2]),
-                                Coord(region.max[0], region.max[1], region.max[2]));
-    bool rootTile = false;
-    for (auto it = tree.root().cbeginValueOn(); it && !rootTile; ++it) // a root tile spans an upper node
-        rootTile = openvdb::CoordBBox::createCube(it.getCoord(), int32_t(u)).hasOverlap(rb);
-    if (rootTile || slots(l) > 4096) {
-        tree.voxelizeActiveTiles();
-        return;
-    }
-    auto floorTo = [](int64_t v, int64_t dim) {
-        return v >= 0 ? v / dim * dim : -((-v + dim - 1) / dim) * dim;
-    };
-    for (int64_t x = floorTo(region.min[0], u); x <= region.max[0]; x += u)
-        for (int64_t y = floorTo(region.min[1], u); y <= region.max[1]; y += u)
-            for (int64_t z = floorTo(region.min[2], u); z <= region.max[2]; z += u)
-                if (Upper* n = tree.probeNode<Upper>(Coord(int32_t(x), int32_t(y), int32_t(z))))
-                    if (!n->getValueMask().isOff()) n->voxelizeActiveTiles(false);
-    for (int64_t x = floorTo(region.min[0], l); x <= region.max[0]; x += l)
-        for (int64_t y = floorTo(region.min[1], l); y <= region.max[1]; y += l)
-            for (int64_t z = floorTo(region.min[2], l); z <= region.max[2]; z += l)
-                if (Lower* n = tree.probeNode<Lower>(Coord(int32_t(x), int32_t(y), int32_t(z))))
-                    if (!n->getValueMask().isOff()) n->voxelizeActiveTiles(false);
 }
 
 } // namespace
@@ -327,23 +289,15 @@ struct Automaton::Impl {
             throw Error("mass grid \"" + massGrid->getName() + "\": background must be 0, got " +
                         std::to_string(t.background()));
         }
-        t.voxelizeActiveTiles();
-        auto it = t.cbeginValueOff();
-        it.setMaxDepth(MassTree::ValueOffCIter::LEAF_DEPTH - 1); // tiles only
-        for (; it; ++it) {
-            if (*it != 0) {
-                openvdb::CoordBBox bb;
-                it.getBoundingBox(bb);
-                throw Error("mass grid \"" + massGrid->getName() + "\": inactive tile " + coordStr(bb.min()) +
-                            "-" + coordStr(bb.max()) + " holds mass " + std::to_string(*it) +
-                            "; voxelize it or make it active");
-            }
-        }
+        const TileScan tiles = scanTiles(t, rule.threshold, is3D(), massGrid->getName());
         std::vector<Origin> hot;
         const Scan s = scanLeaves(nullptr, "mass grid", &hot);
-        totalMass = s.mass;
-        overload = s.overload;
-        maxBound = s.maxValue;
+        if (__builtin_add_overflow(s.mass, tiles.mass, &totalMass)) {
+            throw Error("mass grid \"" + massGrid->getName() + "\": the total mass exceeds " +
+                        std::to_string(INT64_MAX));
+        }
+        overload = s.overload; // tiles hold no cell over Tc
+        maxBound = std::max(s.maxValue, tiles.maxValue);
         quietSteps = 0;
         clearLeafTable();
         candidates.reset(std::move(hot));
@@ -425,6 +379,12 @@ struct Automaton::Impl {
             return rep;
         }
 
+        if (maxBound > INT32_MAX / 8 && tree().activeTileCount() > 0) {
+            // The read-only overflow check cannot see the blocks that read tiles (the pass defers
+            // them): with cells this large the clay is held in leaves alone.
+            tree().voxelizeActiveTiles();
+            clearLeafTable();
+        }
         auto t0 = Clock::now();
         double buildSeconds = 0; // counted in the repartition, as the accessor fetches it replaces
         if (!leafTable.valid() && workWithoutTable >= 4 * tree().leafCount()) {
@@ -461,10 +421,11 @@ struct Automaton::Impl {
                       [](const PassTotals::Deferred& a, const PassTotals::Deferred& b) {
                           return a.item != b.item ? a.item < b.item : a.bit < b.bit;
                       });
+            uint64_t grown = 0;
             for (const PassTotals::Deferred& d : tot.deferred) {
-                rep.leavesCreated += growAndUpdate(d, phase, tot);
+                rep.leavesCreated += growAndUpdate(d, phase, tot, grown);
             }
-            rep.blocksGrown = tot.deferred.size();
+            rep.blocksGrown = grown;
         }
         rep.seconds.grow = secondsSince(t0);
 
@@ -492,28 +453,53 @@ struct Automaton::Impl {
 
     /// A block whose update flows into missing leaves: create the leaves of the cells it changes
     /// (each receives clay, so no leaf is left empty), then update it. Serial. Returns leaves made.
-    uint64_t growAndUpdate(const PassTotals::Deferred& d, int phase, PassTotals& tot)
+    /// A block that reads a tile (cells 0) is first read through the tree: with no cell over Tc it
+    /// cannot change; otherwise the leaves of its tile slots are created (the tile's value in each
+    /// voxel), and it is updated as any other (its update may then flow into missing leaves).
+    /// @a grown counts the blocks whose update flowed into a missing leaf (as in a grid without tiles).
+    uint64_t growAndUpdate(const PassTotals::Deferred& d, int phase, PassTotals& tot, uint64_t& grown)
     {
         WorkItem& w = work[d.item];
         const BlockTables& tab = blockTables();
         const int n = cells();
         const uint8_t* lf = tab.leaf[is3D()][phase][d.bit];
         uint64_t created = 0;
-        for (int c = 0; c < n; ++c) {
-            if (!((d.cells >> c) & 1u)) continue;
-            const Origin lo = leafOrigin(w.anchor, lf[c]);
-            const Coord o(lo.x(), lo.y(), lo.z());
-            if (!tree().probeLeaf(o)) {
+        auto touch = [&](uint32_t cellMask, bool tilesOnly) {
+            for (int c = 0; c < n; ++c) {
+                if (!((cellMask >> c) & 1u)) continue;
+                const Origin lo = leafOrigin(w.anchor, lf[c]);
+                const Coord o(lo.x(), lo.y(), lo.z());
+                if (tree().probeLeaf(o) || (tilesOnly && tree().getValue(o) == 0)) continue;
                 tree().touchLeaf(o);
                 clearLeafTable(); // the pass below must see the new leaf
                 ++created;
             }
+        };
+        if (d.cells == 0) {
+            const Origin bo = blockOrigin(w.anchor, d.bit, phase, is3D());
+            bool over = false;
+            for (int c = 0; c < n && !over; ++c)
+                over = tree().getValue(Coord(bo.x() + (c & 1), bo.y() + ((c >> 1) & 1), bo.z() + (c >> 2))) >
+                       rule.threshold;
+            if (!over) return 0;
+            touch((1u << n) - 1, /*tilesOnly=*/true);
+        } else {
+            touch(d.cells, /*tilesOnly=*/false);
         }
-        // Re-run the block through the same kernel, restricted to this one block.
+        // Re-run the block through the same kernel, restricted to this one block; once more if its
+        // update flows from a tile's new leaf into a missing one.
         const uint64_t savedMask = w.mask, savedChanged = w.changed;
         w.mask = uint64_t(1) << d.bit;
         PassTotals one;
-        processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
+        for (int round = 0;; ++round) {
+            one = PassTotals();
+            processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
+            if (one.overflow || round == 1 || one.deferred.empty() || one.deferred[0].cells == 0) break;
+            touch(one.deferred[0].cells, /*tilesOnly=*/false);
+            if (d.cells == 0) ++grown;
+        }
+        if (d.cells != 0) ++grown;
+        if (d.cells == 0) tot.overTc += one.overTc; // the pass could not read it
         w.mask = savedMask;
         w.changed = savedChanged | w.changed;
         if (!one.deferred.empty() || one.overflow) {
@@ -677,14 +663,28 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     if (region.empty()) return;
     Impl& im = *mImpl;
     im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
+    // The region's clay in leaves, before and after (fn may have made tiles): the scans see it all.
+    densifyTiles(im.tree(), region);
     const Impl::Scan before = im.scanLeaves(&region, "edit");
     fn(*im.massGrid);
-    voxelizeActiveTilesIn(im.tree(), region);
+    densifyTiles(im.tree(), region);
     const Impl::Scan after = im.scanLeaves(&region, "edit");
     im.totalMass += after.mass - before.mass;
     im.overload += after.overload - before.overload;
     im.maxBound = std::max(im.maxBound, after.maxValue);
     im.pruneAndWake(region);
+}
+
+void Automaton::densify(const Box& region)
+{
+    if (densifyTiles(mImpl->tree(), region) > 0) mImpl->clearLeafTable();
+}
+
+uint64_t Automaton::collapseUniformLeaves()
+{
+    const uint64_t removed = automaton_internal::collapseUniformLeaves(mImpl->tree(), mImpl->rule.threshold);
+    mImpl->clearLeafTable();
+    return removed;
 }
 
 void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)

@@ -119,7 +119,7 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
     constexpr int kCount = (P == 1) ? (D3 ? 8 : 4) : 1;
     LeafSet& ls = f.set;
     const LeafSet& ps = prev.set;
-    ls.missing = ls.obsAny = ls.obsTile = 0;
+    ls.missing = ls.tile = ls.obsAny = ls.obsTile = 0;
     // A merged-mode list runs along x (layer order): when the previous anchor is this one's -x
     // neighbour, this anchor's -x leaves (odd slots) are its leaves (even slots), fetched already.
     uint32_t reused = 0;
@@ -132,6 +132,7 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
             ls.obs[w] = ps.obs[w - 1];
             const uint8_t from = uint8_t(1u << (w - 1)), to = uint8_t(1u << w);
             if (ps.missing & from) ls.missing |= to;
+            if (ps.tile & from) ls.tile |= to;
             if (ps.obsAny & from) ls.obsAny |= to;
             if (ps.obsTile & from) ls.obsTile |= to;
             reused |= 1u << w;
@@ -156,6 +157,7 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
             ls.read[w] = ls.data[w] = ls.leaf[w]->buffer().data();
         } else {
             ls.missing |= bit;
+            if (acc.getValue(o) != 0) ls.tile |= bit;
         }
         if (oacc) {
             ls.obs[w] = oacc->probeConstLeaf(o);
@@ -171,9 +173,26 @@ __attribute__((noinline)) const LeafSet* fetchLeaves(FetchedLeaves& f, const Fet
 /// An item made ready one ahead of its block loop.
 struct Prepared {
     const LeafSet* set;
-    uint32_t need; // the leaf slots its candidate blocks touch
-    uint64_t bits; // the candidates left by the filter; 0: nothing to do
+    uint32_t need;     // the leaf slots its candidate blocks touch
+    uint64_t bits;     // the candidates left by the filter; 0: nothing to do
+    uint64_t tileBits; // the candidates that read a slot inside a tile: deferred, not run
 };
+
+/// The odd-phase blocks of an anchor that read a cell of leaf slot @a w (leafOrigin(anchor, w)):
+/// those at local -1 along each axis whose bit @a w sets (BlockMasks.h).
+constexpr uint64_t blocksReadingSlot(int w)
+{
+    return ((w & 1) ? kX0 : ~uint64_t(0)) & ((w & 2) ? kY0 : ~uint64_t(0)) & ((w & 4) ? kZ0 : ~uint64_t(0));
+}
+
+/// The odd-phase blocks reading any slot of @a slots.
+inline uint64_t blocksReadingSlots(uint32_t slots)
+{
+    uint64_t m = 0;
+    for (; slots; slots &= slots - 1)
+        m |= blocksReadingSlot(__builtin_ctz(slots));
+    return m;
+}
 
 /// The leaves of item @a w (the table's entry, or fetched into @a buf; @a prevBuf holds the previous
 /// item's) and its candidates that hold a cell over Tc (@a filter, 3D). It reads only that item's own
@@ -194,7 +213,14 @@ VDBCLAY_INLINE Prepared prepareItem(const WorkItem& w, const LeafTable* table, F
         p.set = fetchLeaves<D3, P>(buf, prevBuf, w.anchor, p.need, acc, oacc, !portable);
     }
     p.bits = w.mask;
-    if (P == 0 && !p.set->data[0]) p.bits = 0; // even blocks of a missing leaf: all 0
+    p.tileBits = 0;
+    // Even blocks of a missing leaf: all 0, or all one tile's value (never over Tc: Automaton.cc), so
+    // none can change.
+    if (P == 0 && !p.set->data[0]) p.bits = 0;
+    if (P == 1 && (p.set->tile & p.need)) {
+        p.tileBits = p.bits & blocksReadingSlots(p.set->tile & p.need);
+        p.bits &= ~p.tileBits;
+    }
     if (D3 && filter != OverFilter::None && p.bits)
         p.bits = filterBlocks<P>(filter, p.set->read, p.bits, tc32);
     return p;
@@ -628,6 +654,10 @@ VDBCLAY_INLINE void processRangeBody(const PassInput& in, const kernel_testing::
         else
             t.examined += popcount64(w.mask);
         if (cur.bits) runItem<R, D3, P>(k, w, wi, cur, sink, t, tot);
+        if (P == 1 && cur.tileBits && !k.dryRun) {
+            for (uint64_t bits = cur.tileBits; bits; bits &= bits - 1)
+                tot.deferred.push_back(PassTotals::Deferred{uint32_t(wi), uint8_t(__builtin_ctzll(bits)), 0});
+        }
     }
     tot.examined += t.examined;
     tot.overTc += t.overTc;

@@ -59,9 +59,11 @@ struct PassTotals {
     struct Deferred {
         uint32_t item;
         uint8_t bit;
-        uint8_t cells; // cells the update changes (bit c = corner c)
+        uint8_t cells; // cells the update changes (bit c = corner c); 0: the block reads a tile
     };
-    std::vector<Deferred> deferred; // blocks whose update writes into a missing leaf
+    /// Blocks whose update writes into a missing leaf, and (cells 0) blocks that read a leaf slot
+    /// inside a tile (LeafSet::tile), whose cells the pass cannot read.
+    std::vector<Deferred> deferred;
 
     void join(const PassTotals& o);
 };

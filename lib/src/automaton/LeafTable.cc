@@ -97,14 +97,17 @@ void LeafTable::build(MassTree& tree, const ObsTree* obstacles, bool is3D)
     if (obstacles) oacc.emplace(*obstacles);
     for (size_t k = 0; k < mKeys.size(); ++k) {
         LeafSet& e = mEntries[k];
-        e.missing = e.obsAny = e.obsTile = 0;
+        e.missing = e.tile = e.obsAny = e.obsTile = 0;
         for (int w = 0; w < 8; ++w) {
             const Origin lo = leafOrigin(mKeys[k], w);
             const Coord c(lo.x(), lo.y(), lo.z());
             e.leaf[w] = acc.probeLeaf(c);
             e.data[w] = e.leaf[w] ? e.leaf[w]->buffer().data() : nullptr;
             e.read[w] = e.leaf[w] ? e.data[w] : kZeroLeaf;
-            if (!e.leaf[w]) e.missing |= uint8_t(1u << w);
+            if (!e.leaf[w]) {
+                e.missing |= uint8_t(1u << w);
+                if (acc.getValue(c) != 0) e.tile |= uint8_t(1u << w);
+            }
             e.obs[w] = oacc ? oacc->probeConstLeaf(c) : nullptr;
             const bool tile = oacc && !e.obs[w] && oacc->isValueOn(c);
             if (tile) e.obsTile |= uint8_t(1u << w);

@@ -44,6 +44,8 @@ struct LeafSet {
     MassLeaf* leaf[8];
     const ObsLeaf* obs[8];
     uint8_t missing; // slots whose mass leaf is missing
+    uint8_t tile;    // missing slots inside a tile holding clay: read as 0 they would be wrong, so a
+                     // pass defers every block touching one to the serial grow stage
     uint8_t obsAny;  // slots holding obstacles: an obstacle leaf, or an active obstacle tile
     uint8_t obsTile; // slots inside an active obstacle tile (no obstacle leaf)
 };

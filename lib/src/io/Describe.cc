@@ -138,7 +138,7 @@ std::string describeVdb(const std::string& path)
                     std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
                     s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
                 } catch (const Error&) {
-                    s << "  content hash: none (the grid holds tiles of clay, not voxels)\n";
+                    s << "  content hash: none (the grid holds tiles of more than 2^35 voxels of clay)\n";
                 }
                 describeClayMetrics(s, *ig, path);
             }

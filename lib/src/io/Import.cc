@@ -103,7 +103,6 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
     out.mass = openvdb::Int32Grid::create(0);
     out.mass->setName("mass");
     auto acc = out.mass->getAccessor();
-    uint64_t tileVoxels = 0;
     for (auto it = fog->tree().cbeginValueOn(); it; ++it) {
         const double d = *it;
         if (!std::isfinite(d) || d < 0) {
@@ -116,15 +115,12 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
                         std::to_string(fullMass) + " does not fit a cell (int32)");
         }
         if (m <= 0) continue;
+        if (!it.isVoxelValue() && dimensions == 3) { // uniform clay stays a tile
+            acc.addTile(it.getLevel(), it.getCoord(), int32_t(m), true);
+            continue;
+        }
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
-        if (!it.isVoxelValue()) {
-            tileVoxels += it.getVoxelCount();
-            if (tileVoxels > kMaxTileVoxels) {
-                throw Error(what + " holds tiles of more than " + std::to_string(kMaxTileVoxels) +
-                            " voxels in all; vdbclay expands tiles into voxels");
-            }
-        }
         if (dimensions == 2) {
             if (box.min().z() > 0 || box.max().z() < 0) continue;
             box.min().setZ(0);

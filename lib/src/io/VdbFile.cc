@@ -102,26 +102,18 @@ void normalizeClay(openvdb::Int32Grid& grid, const std::string& path, const std:
         throw Error(what + " has background value " + std::to_string(grid.background()) +
                     ", expected 0 (a non-zero background puts clay in every voxel of space)");
     }
-    uint64_t tileVoxels = 0;
     bool inactive = false;
     for (auto it = grid.tree().cbeginValueAll(); it; ++it) {
-        if (*it == 0) continue;
-        if (!it.isVoxelValue()) {
-            tileVoxels += it.getVoxelCount();
-            if (tileVoxels > kMaxTileVoxels) {
-                throw Error(what + " holds tiles of clay of more than " + std::to_string(kMaxTileVoxels) +
-                            " voxels in all (a tile at " + coordText(it.getCoord()) + " of " +
-                            std::to_string(it.getVoxelCount()) + "); vdbclay expands tiles into voxels");
-            }
+        if (*it != 0 && !it.isValueOn()) {
+            inactive = true;
+            break;
         }
-        if (!it.isValueOn()) inactive = true;
     }
     if (inactive) {
         for (auto it = grid.tree().beginValueAll(); it; ++it) {
             if (*it != 0 && !it.isValueOn()) it.setActiveState(true);
         }
     }
-    if (tileVoxels > 0) grid.tree().voxelizeActiveTiles();
     const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
     if (!box.empty()) {
         for (int a = 0; a < 3; ++a) {

@@ -60,14 +60,10 @@ bool readMeta(const openvdb::GridBase& grid, const char* name, T& out, const std
 /// "(x, y, z)".
 std::string coordText(const openvdb::Coord& c);
 
-/// Tiles of clay are expanded into voxels on reading, up to this many voxels in all.
-constexpr uint64_t kMaxTileVoxels = uint64_t(1) << 26;
-
 /// One definition of "the clay in a file", used by every command: every voxel holding a non-zero
 /// value, active or not, is clay, as totalMass() and clayVoxelCount() count it. So inactive voxels
-/// holding mass become active, tiles become voxels (a file may hold at most kMaxTileVoxels
-/// voxels of them), and a non-zero background (clay in all of space) is refused, as is clay
-/// outside +-2^30.
+/// and tiles holding mass become active (tiles stay tiles: uniform clay, automaton/Tiles.h), and a
+/// non-zero background (clay in all of space) is refused, as is clay outside +-2^30.
 /// @throw Error naming @a path and @a gridName when the grid is refused.
 void normalizeClay(openvdb::Int32Grid& grid, const std::string& path, const std::string& gridName);
 

@@ -2,9 +2,12 @@
 //
 // totalMass, residualOverload and clayVoxelCount walk every value once, tiles included, in 64-bit
 // integers; contentHash adds a hash of each voxel's coordinate and value (the automaton's block
-// hash, rules_internal::hashKey), so the order of the walk does not matter. measureClay takes each
-// leaf's integer sums and interior mask in parallel, then adds them up: exact, so the same numbers on
-// any thread count. compareShapes compares occupied sets as masks and measures the distances between
+// hash, rules_internal::hashKey), so the order of the walk does not matter and a tile gives the hash
+// of its voxels (it hashes them in parallel: a tile of clay is hashed as the same voxels in leaves
+// would be). measureClay takes each leaf's and each tile's integer sums in parallel (a tile's interior
+// is its voxels off its faces, and those of its faces whose neighbours hold clay), then adds them up;
+// the spread about the mean comes from exact integer sums of m and m^2: the same numbers on any thread
+// count and any tree layout. compareShapes compares occupied sets as masks and measures the distances between
 // their surface voxels with a static 3D tree of voxel centres (exact integer squared distances).
 // metrics/ stands on core/, automaton/ (the hash) and shapes/ (rasterised reference shapes).
 #include "vdbclay/Metrics.h"
@@ -29,6 +32,8 @@
 #include <vector>
 
 namespace vdbclay {
+
+using openvdb::Coord;
 
 int64_t totalMass(const MassGrid& mass)
 {
@@ -57,8 +62,12 @@ int64_t residualOverload(const MassGrid& mass, int32_t threshold, const Obstacle
     }
     for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
         if (*it <= threshold) continue;
-        if (!it.isVoxelValue()) {
-            throw Error("residualOverload: the grid holds an over-threshold tile; voxelize it first");
+        if (!it.isVoxelValue()) { // a tile over Tc: its voxels that are not obstacles
+            openvdb::CoordBBox bb;
+            it.getBoundingBox(bb);
+            for (auto c = bb.begin(); c; ++c)
+                if (!(oacc && oacc->isValueOn(*c))) sum += int64_t(*it) - threshold;
+            continue;
         }
         if (oacc && oacc->isValueOn(it.getCoord())) continue;
         sum += int64_t(*it) - threshold;
@@ -75,23 +84,98 @@ uint64_t clayVoxelCount(const MassGrid& mass)
     return n;
 }
 
+namespace {
+
+/// The tiles of @a mass holding clay (nonzero), by bounds and value.
+struct ClayTile {
+    openvdb::CoordBBox box;
+    int32_t value;
+};
+std::vector<ClayTile> clayTiles(const MassGrid& mass)
+{
+    std::vector<ClayTile> tiles;
+    auto it = mass.tree().cbeginValueAll();
+    it.setMaxDepth(it.getLeafDepth() - 1); // tiles only
+    for (; it; ++it) {
+        if (*it == 0) continue;
+        ClayTile t;
+        it.getBoundingBox(t.box);
+        t.value = *it;
+        tiles.push_back(t);
+    }
+    return tiles;
+}
+
+/// contentHash hashes a tile's voxels one by one (a few seconds for 2^32 on one core): at most this many.
+constexpr uint64_t kHashTileVoxelsMax = uint64_t(1) << 35;
+
+/// The hash of one voxel of clay (contentHash's term).
+inline uint64_t voxelHash(uint64_t valuePrefix, int32_t x, int32_t y, int32_t z)
+{
+    return rules_internal::finishHash(valuePrefix, x, y, z);
+}
+
+} // namespace
+
 uint64_t contentHash(const MassGrid& mass)
 {
-    // Order-independent: a sum of per-voxel hashes, so the tree's layout does not matter.
-    uint64_t h = 0, count = 0;
-    for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
-        if (*it == 0) continue;
-        if (!it.isVoxelValue()) {
-            throw Error("contentHash: the grid holds a nonzero tile; voxelize it first");
+    // Order-independent: a sum of per-voxel hashes (mod 2^64), so the tree's layout and the order of
+    // the parallel parts do not matter.
+    using Leaf = MassGrid::TreeType::LeafNodeType;
+    std::vector<const Leaf*> leaves;
+    leaves.reserve(mass.tree().leafCount());
+    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
+        leaves.push_back(&*it);
+    const std::vector<ClayTile> tiles = clayTiles(mass);
+    // Tiles cut into x slabs of at most 2^15 voxels each, so one large tile spreads over the threads.
+    struct Part {
+        size_t tile;
+        int32_t x0, x1;
+    };
+    std::vector<Part> parts;
+    uint64_t tileVoxels = 0;
+    for (const ClayTile& t : tiles) {
+        tileVoxels += t.box.volume();
+        if (tileVoxels > kHashTileVoxelsMax) {
+            throw Error("contentHash: the grid holds tiles of more than 2^35 voxels of clay");
         }
-        const openvdb::Coord c = it.getCoord();
-        BlockKey k;
-        k.x = c.x();
-        k.y = c.y();
-        k.z = c.z();
-        k.step = uint64_t(uint32_t(*it));
-        h += rules_internal::hashKey(k);
-        ++count;
+    }
+    for (size_t t = 0; t < tiles.size(); ++t) {
+        const openvdb::CoordBBox& b = tiles[t].box;
+        const int64_t plane = int64_t(b.dim().y()) * b.dim().z();
+        const int32_t step = int32_t(std::max<int64_t>(1, (int64_t(1) << 15) / plane));
+        for (int64_t x = b.min().x(); x <= b.max().x(); x += step)
+            parts.push_back({t, int32_t(x), int32_t(std::min<int64_t>(b.max().x(), x + step - 1))});
+    }
+    std::vector<uint64_t> sums(leaves.size() + parts.size(), 0), counts(sums.size(), 0);
+    parallel_internal::forEachIndex(sums.size(), 0, [&](size_t i) {
+        uint64_t h = 0, n = 0;
+        if (i < leaves.size()) {
+            const Leaf& leaf = *leaves[i];
+            const int32_t* d = leaf.buffer().data();
+            for (openvdb::Index k = 0; k < Leaf::SIZE; ++k) {
+                if (d[k] == 0) continue;
+                const Coord c = leaf.offsetToGlobalCoord(k);
+                h += voxelHash(rules_internal::stepPrefix(uint64_t(uint32_t(d[k])), 0), c.x(), c.y(), c.z());
+                ++n;
+            }
+        } else {
+            const Part& p = parts[i - leaves.size()];
+            const ClayTile& t = tiles[p.tile];
+            const uint64_t prefix = rules_internal::stepPrefix(uint64_t(uint32_t(t.value)), 0);
+            for (int32_t x = p.x0; x <= p.x1; ++x)
+                for (int32_t y = t.box.min().y(); y <= t.box.max().y(); ++y)
+                    for (int32_t z = t.box.min().z(); z <= t.box.max().z(); ++z)
+                        h += voxelHash(prefix, x, y, z);
+            n = uint64_t(p.x1 - p.x0 + 1) * uint64_t(t.box.dim().y()) * uint64_t(t.box.dim().z());
+        }
+        sums[i] = h;
+        counts[i] = n;
+    });
+    uint64_t h = 0, count = 0;
+    for (size_t i = 0; i < sums.size(); ++i) {
+        h += sums[i];
+        count += counts[i];
     }
     return rules_internal::mix64(h ^ rules_internal::mix64(count));
 }
@@ -99,8 +183,6 @@ uint64_t contentHash(const MassGrid& mass)
 // ---- Accuracy metrics ---------------------------------------------------------------------------
 
 namespace {
-
-using openvdb::Coord;
 
 void checkArgs(const char* what, int32_t threshold, int dims)
 {
@@ -126,15 +208,36 @@ inline bool occupied(int32_t m, int32_t threshold)
     return 2 * int64_t(m) >= int64_t(threshold);
 }
 
-/// Calls @a fn(coord, mass) for every voxel holding clay; refuses nonzero tiles.
-template <typename Fn> void forEachClayVoxel(const MassGrid& mass, const char* what, Fn&& fn)
+/// Calls @a fn(coord, mass) for every voxel holding clay, a tile's voxels one by one.
+template <typename Fn> void forEachClayVoxel(const MassGrid& mass, Fn&& fn)
 {
     for (auto it = mass.tree().cbeginValueAll(); it; ++it) {
         if (*it == 0) continue;
-        if (!it.isVoxelValue())
-            throw Error(std::string(what) + ": the grid holds a nonzero tile; voxelize it first");
+        if (!it.isVoxelValue()) {
+            openvdb::CoordBBox bb;
+            it.getBoundingBox(bb);
+            for (auto c = bb.begin(); c; ++c)
+                fn(*c, *it);
+            continue;
+        }
         fn(it.getCoord(), *it);
     }
+}
+
+} // namespace
+
+namespace {
+
+/// The spread of @a n values about their mean from their exact sums (@a s1 = sum m, @a s2 = sum m^2):
+/// sqrt(n s2 - s1^2) / n, in 128-bit integers where they hold it.
+double spread(uint64_t n, int64_t s1, unsigned __int128 s2)
+{
+    unsigned __int128 ns2 = 0;
+    const unsigned __int128 s1sq = (unsigned __int128)(uint64_t(s1)) * uint64_t(s1);
+    if (!__builtin_mul_overflow((unsigned __int128)n, s2, &ns2) && ns2 >= s1sq)
+        return std::sqrt(double(ns2 - s1sq)) / double(n);
+    const long double mean = (long double)s1 / n;
+    return double(std::sqrt(std::max<long double>(0, (long double)s2 / n - mean * mean)));
 }
 
 } // namespace
@@ -143,33 +246,71 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                         int threads)
 {
     checkArgs("measureClay", threshold, dims);
-    // Tiles first (only the levels above the leaves): a nonzero one is refused before any sum.
-    {
-        auto it = mass.tree().cbeginValueAll();
-        it.setMaxDepth(it.getLeafDepth() - 1);
-        for (; it; ++it) {
-            if (*it != 0) throw Error("measureClay: the grid holds a nonzero tile; voxelize it first");
-        }
-    }
-    // First pass, leaf by leaf in parallel: each leaf's integer sums (exact, so their total does not
-    // depend on the order) and the mask of its interior cells.
     using MassLeaf = MassGrid::TreeType::LeafNodeType;
     std::vector<const MassLeaf*> leaves;
     leaves.reserve(mass.tree().leafCount());
     for (auto it = mass.tree().cbeginLeaf(); it; ++it)
         leaves.push_back(&*it);
-    struct LeafSums {
+    const std::vector<ClayTile> tiles = clayTiles(mass);
+    openvdb::CoordBBox obstacleBounds; // empty without obstacles
+    if (obstacles) obstacleBounds = obstacles->evalActiveVoxelBoundingBox();
+    struct Sums {
         int64_t mass = 0, residualOverload = 0, interiorSum = 0;
         uint64_t clayVoxels = 0, occupiedVoxels = 0, interiorCells = 0;
+        unsigned __int128 interiorSquares = 0;
         int32_t maxCell = 0;
-        MassLeaf::NodeMaskType interior;
+        /// One voxel of clay @a m at @a c: @a obstacle, @a interior (not an obstacle, all its face
+        /// neighbours hold clay, z = 0 in 2D).
+        void add(int32_t m, int32_t tc, bool obstacle, bool interior, uint64_t count = 1)
+        {
+            mass += int64_t(m) * int64_t(count);
+            maxCell = std::max(maxCell, m);
+            clayVoxels += count;
+            if (occupied(m, tc)) occupiedVoxels += count;
+            if (!obstacle && m > tc) residualOverload += (int64_t(m) - tc) * int64_t(count);
+            if (interior) {
+                interiorCells += count;
+                interiorSum += int64_t(m) * int64_t(count);
+                interiorSquares += (unsigned __int128)(uint64_t(int64_t(m) * m)) * count;
+            }
+        }
     };
-    std::vector<LeafSums> sums(leaves.size());
+    std::vector<Sums> sums(leaves.size() + tiles.size());
     const int faces = faceCount(dims);
-    parallel_internal::forEachIndex(leaves.size(), threads, [&](size_t li) {
-        const MassLeaf& leaf = *leaves[li];
-        LeafSums& out = sums[li];
+    parallel_internal::forEachIndex(sums.size(), threads, [&](size_t i) {
+        Sums& out = sums[i];
         auto acc = mass.getConstAccessor();
+        std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
+        if (obstacles)
+            oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+        auto interiorAt = [&](const Coord& c) {
+            for (int f = 0; f < faces; ++f)
+                if (acc.getValue(c + kFaces[f]) == 0) return false;
+            return true;
+        };
+        if (i >= leaves.size()) {
+            // A tile (3D: the automaton and makeClay make none in 2D): its voxels off its faces are
+            // interior unless obstacles; those on its faces by their neighbours.
+            const ClayTile& t = tiles[i - leaves.size()];
+            const openvdb::CoordBBox& b = t.box;
+            const bool anyObstacle = obstacles && obstacleBounds.hasOverlap(b);
+            if (anyObstacle || dims == 2 || b.dim().x() < 3) {
+                for (auto c = b.begin(); c; ++c) {
+                    const bool obstacle = oacc && oacc->isValueOn(*c);
+                    out.add(t.value, threshold, obstacle,
+                            !obstacle && !(dims == 2 && (*c).z() != 0) && interiorAt(*c));
+                }
+                return;
+            }
+            const openvdb::CoordBBox inner(b.min().offsetBy(1), b.max().offsetBy(-1));
+            out.add(t.value, threshold, false, true, inner.volume());
+            for (auto c = b.begin(); c; ++c) {
+                if (inner.isInside(*c)) continue;
+                out.add(t.value, threshold, false, interiorAt(*c));
+            }
+            return;
+        }
+        const MassLeaf& leaf = *leaves[i];
         // The leaf's obstacles once (a leaf, an active tile or none), and face neighbours inside the
         // leaf read from its buffer: only the voxels on the leaf's faces read through the accessor.
         const openvdb::MaskTree::LeafNodeType* ol = nullptr;
@@ -182,36 +323,28 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
         constexpr int kDim = int(MassLeaf::DIM);
         // offset steps of the faces in kFaces' order: +-x (DIM^2), +-y (DIM), +-z (1)
         const int step[6] = {kDim * kDim, -kDim * kDim, kDim, -kDim, 1, -1};
-        for (openvdb::Index i = 0; i < MassLeaf::SIZE; ++i) {
-            const int32_t m = d[i];
+        for (openvdb::Index k = 0; k < MassLeaf::SIZE; ++k) {
+            const int32_t m = d[k];
             if (m == 0) continue;
-            const Coord c = leaf.offsetToGlobalCoord(i);
-            out.mass += m;
-            out.maxCell = std::max(out.maxCell, m);
-            ++out.clayVoxels;
-            if (occupied(m, threshold)) ++out.occupiedVoxels;
-            const bool obstacle = ol ? ol->isValueOn(i) : obstacleTile;
-            if (!obstacle && m > threshold) out.residualOverload += int64_t(m) - threshold;
+            const Coord c = leaf.offsetToGlobalCoord(k);
+            const bool obstacle = ol ? ol->isValueOn(k) : obstacleTile;
             bool interior = !obstacle && !(dims == 2 && c.z() != 0);
-            const int local[3] = {int(i >> (2 * MassLeaf::LOG2DIM)), int(i >> MassLeaf::LOG2DIM) & (kDim - 1),
-                                  int(i) & (kDim - 1)};
+            const int local[3] = {int(k >> (2 * MassLeaf::LOG2DIM)), int(k >> MassLeaf::LOG2DIM) & (kDim - 1),
+                                  int(k) & (kDim - 1)};
             for (int f = 0; f < faces && interior; ++f) {
                 const int axis = f >> 1, to = local[axis] + ((f & 1) ? -1 : 1);
                 if (to >= 0 && to < kDim)
-                    interior = d[int(i) + step[f]] != 0;
+                    interior = d[int(k) + step[f]] != 0;
                 else
                     interior = acc.getValue(c + kFaces[f]) != 0;
             }
-            if (interior) {
-                out.interior.setOn(i);
-                ++out.interiorCells;
-                out.interiorSum += m;
-            }
+            out.add(m, threshold, obstacle, interior);
         }
     });
     ClayMetrics r;
     int64_t interiorSum = 0;
-    for (const LeafSums& l : sums) {
+    unsigned __int128 interiorSquares = 0;
+    for (const Sums& l : sums) {
         r.mass += l.mass;
         r.maxCell = std::max(r.maxCell, l.maxCell);
         r.clayVoxels += l.clayVoxels;
@@ -219,26 +352,16 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
         r.residualOverload += l.residualOverload;
         r.interiorCells += l.interiorCells;
         interiorSum += l.interiorSum;
+        interiorSquares += l.interiorSquares;
     }
     if (r.mass > 0) {
         const int64_t cellsAtRest = (r.mass + threshold - 1) / threshold;
         r.compaction = double(r.clayVoxels) / double(cellsAtRest);
     }
     if (r.interiorCells == 0) return r;
-
-    // Second pass: the spread about the mean (two passes: no cancellation in a sum of squares), one
-    // sum in the tree's voxel order (leaves in order, voxels in offset order): the same bits on any
-    // thread count.
     const double mean = double(interiorSum) / double(r.interiorCells);
-    double squares = 0;
-    for (size_t li = 0; li < leaves.size(); ++li) {
-        for (auto it = sums[li].interior.beginOn(); it; ++it) {
-            const double d = double(leaves[li]->getValue(it.pos())) - mean;
-            squares += d * d;
-        }
-    }
     r.interiorMeanDensity = mean / double(threshold);
-    r.heterogeneityCV = std::sqrt(squares / double(r.interiorCells)) / mean;
+    r.heterogeneityCV = spread(r.interiorCells, interiorSum, interiorSquares) / mean;
     return r;
 }
 
@@ -342,7 +465,8 @@ openvdb::MaskGrid::Ptr occupiedSet(const MassGrid& mass, int32_t threshold, int 
 {
     auto set = openvdb::MaskGrid::create(false);
     auto acc = set->getAccessor();
-    forEachClayVoxel(mass, what, [&](const Coord& c, int32_t m) {
+    (void)what;
+    forEachClayVoxel(mass, [&](const Coord& c, int32_t m) {
         if (dims == 2 && c.z() != 0) return;
         if (occupied(m, threshold)) acc.setValueOn(c);
     });

@@ -77,6 +77,30 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
                                                  float isoValue, float band, uint64_t* swept = nullptr);
 
+/// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
+/// values become the distances; the fog's values are read from @a source (the fog itself, or the
+/// density it was grown from: a leaf of @a tree where @a source has none reads the tile or the
+/// background there). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
+/// the voxels within reach of the band (SurfaceSweep.cc), or everything where that cannot be told
+/// apart (after sweeping all when the band's sweep left no value of band or more), and the result
+/// clipped to the band as clipToNarrowBand does (not pruned). Returns the number of voxels the
+/// sweeps updated (each once per sweep), 0 if no sweep ran.
+uint64_t sweepFogTree(openvdb::FloatTree& tree, const openvdb::FloatTree& source, float isoValue, float h,
+                      float band, bool reachOnly = true);
+
+/// The leaf keys (origin / 8) of @a density's tile slots that lie within one slot of a slot where its
+/// isovalue @a isoValue may be crossed: a leaf, or a tile slot next to one on the other side of it
+/// (SurfaceTiles.cc). The band's values depend on these slots' voxels and on none deeper.
+std::vector<openvdb::Coord> tileSlotsNearIsosurface(const openvdb::FloatGrid& density, float isoValue);
+
+/// narrowBandSdfFromDensity for a density holding tiles (uniform clay, 0 < radius < 8, band > 0): the
+/// leaves grown by the box and the tile slots near the isosurface (tileSlotsNearIsosurface, every voxel
+/// active) are swept, reading the tiles' values; the tiles deeper inside become inactive tiles of
+/// -band. The band's active values are those of the density with its tiles voxelized, bit for bit, and
+/// every other value has the same sign (SurfaceTiles.cc).
+openvdb::FloatGrid::Ptr narrowBandSdfFromTiledDensity(const openvdb::FloatGrid& density, int radius,
+                                                      float isoValue, float band, uint64_t* swept = nullptr);
+
 /// The narrow band of @a sdf, in place: values at or beyond +-@a background become inactive and
 /// exactly +-background, the background +background, inactive values +-background by their sign,
 /// then pruned (what surfaceLevelSet returns, less name and class). The reference for

@@ -21,8 +21,9 @@
 //   OpenVDB's pass leaves them (checked bit for bit by tests/TestSurface.cc).
 //
 // Results do not depend on the thread count (each voxel's update reads only values fixed by the
-// order above). A fog with tiles (not what densityGrid builds: it voxelizes the automaton's clay,
-// but a file may carry tiles) goes to OpenVDB's own fogToSdf.
+// order above). A fog with tiles goes to OpenVDB's own fogToSdf; the narrow band of a density with
+// tiles (uniform clay) is swept over the leaves near its isosurface alone (SurfaceTiles.cc), reading
+// the tiles' values where a leaf of the sweep lies over one.
 //
 // The narrow band (narrowBandSdfFromDensity, what surfaceLevelSet keeps: |value| < band). A voxel's
 // update that yields u < band reads only neighbours holding less than u, and compares u with the
@@ -216,16 +217,10 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
     }
 }
 
-/// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
-/// values become the distances; the fog's values are read from @a source (a tree without tiles
-/// holding them: the fog itself, or the density it was grown from, whose missing leaves read as its
-/// background). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
-/// the voxels within reach of the band (top of the file), or everything where that cannot be told
-/// apart (returns after sweeping all when the band's sweep left no value of band or more), and the
-/// result clipped to the band as clipToNarrowBand does (not pruned).
-/// Returns the number of voxels the sweeps updated (each once per sweep), 0 if no sweep ran.
+} // namespace
+
 uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, float h, float band,
-                      bool reachOnly = true)
+                      bool reachOnly)
 {
     openvdb::tree::LeafManager<FloatTree> manager(tree);
     const size_t n = manager.leafCount();
@@ -240,6 +235,22 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             input[i] = in ? in->buffer().data() : background.data();
         }
     });
+    // A leaf over a tile of the source reads the tile's value in every voxel (one buffer per value).
+    std::map<float, std::array<float, LeafT::SIZE>> tileInputs;
+    {
+        openvdb::tree::ValueAccessor<const FloatTree> acc(source);
+        for (size_t i = 0; i < n; ++i) {
+            if (input[i] != background.data()) continue;
+            const float t = acc.getValue(manager.leaf(i).origin());
+            if (t == source.background()) continue;
+            auto at = tileInputs.find(t);
+            if (at == tileInputs.end()) {
+                at = tileInputs.emplace(t, std::array<float, LeafT::SIZE>()).first;
+                at->second.fill(t);
+            }
+            input[i] = at->second.data();
+        }
+    }
 
     // Leaf keys (origin / 8) and the face-neighbour table.
     std::vector<Coord> keys(n);
@@ -413,8 +424,6 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     return swept;
 }
 
-} // namespace
-
 bool holdsTiles(const FloatTree& tree)
 {
     auto it = tree.cbeginValueAll();
@@ -436,6 +445,8 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
                                                  float isoValue, float band, uint64_t* swept)
 {
+    if (band > 0 && radius > 0 && radius < kDim && holdsTiles(density.tree()))
+        return narrowBandSdfFromTiledDensity(density, radius, isoValue, band, swept);
     if (!boxGrowable(density, radius)) {
         openvdb::FloatGrid::Ptr fog = surfaceFog(density, radius);
         if (holdsTiles(fog->tree())) {

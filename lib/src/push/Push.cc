@@ -94,6 +94,14 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     PushReport report;
     if (tools.empty()) return report;
 
+    // The sources are the clay voxels of the leaves in the tools' bounds: clay held there as tiles
+    // becomes leaves first (the clay is unchanged).
+    {
+        Box bounds;
+        for (const ShapePtr& t : tools)
+            bounds = unite(bounds, t->bounds());
+        automaton.densify(bounds);
+    }
     Pusher pusher(automaton, tools, maxSearch);
     const Box u = pusher.toolBounds();
     if (u.empty()) return report;

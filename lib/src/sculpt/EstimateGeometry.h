@@ -11,6 +11,7 @@
 #include "vdbclay/Types.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -106,18 +107,26 @@ struct ClayCover {
     struct Member {
         const Shape* shape = nullptr; ///< an analytic shape, or null: the box alone
         Box box;                      ///< the shape's tightened bounds, or the box
+        bool tiled = false;           ///< the shape's clay is tiles inside (automaton/Tiles.h)
     };
     std::vector<Member> members;
     int64_t margin = 0;
     int dims = 3;
+    /// Whether a tiled member's leaves are those near its surface alone (|distance| instead of the
+    /// distance: its inside is tiles), as the clay's leaves are; false where the cells inside count
+    /// too (the global layer's domain runs through full clay).
+    bool tilesAsTiles = false;
 
     /// Voxel centres of a leaf (of a 128^3 node) lie within this of its centre.
     static constexpr double kLeafHalfDiagonal = 6.0622; // 3.5 sqrt 3
     static constexpr double kNodeLeafSpread = 103.9231; // 60 sqrt 3: leaf centres from the node's
     static constexpr double kAnchorSpread = 6.9283; // 4 sqrt 3: a leaf centre + (4, 4, 4) to its 8 corners
 
-    void addShape(const Shape* analytic, const Box& bounds) { members.push_back({analytic, bounds}); }
-    void addBox(const Box& b) { members.push_back({nullptr, b}); }
+    void addShape(const Shape* analytic, const Box& bounds, bool tiled = false)
+    {
+        members.push_back({analytic, bounds, tiled});
+    }
+    void addBox(const Box& b) { members.push_back({nullptr, b, false}); }
 
     /// The leaves (8^3, leaf-aligned) of @a region that may hold clay (with @a neighbours: those
     /// and their 26 neighbours); false (and @a out untouched) when @a budget ran out.
@@ -150,9 +159,14 @@ struct ClayCover {
         for (size_t i = 0; i < members.size(); ++i)
             grown[i] = clip2D(
                 neighbourhood(frame_policy::growBox(members[i].box, margin, dims), neighbours, dims), dims);
+        // A tiled member's clay lies in leaves only near its surface: outside, as for any shape, within
+        // the margin (where it may spread); inside, within a leaf's half-diagonal of the surface, the
+        // rest being tiles. So inside the distance counts as margin - distance (the magnitude is a
+        // lower bound of the distance to the surface, as the distance is outside).
         auto distanceAt = [&](const Member& mb, double x, double y, double z) {
             if (budget > 0) --budget;
-            return mb.shape->distance(Vec3{{x, y, z}});
+            const double d = mb.shape->distance(Vec3{{x, y, z}});
+            return mb.tiled && tilesAsTiles && d < 0 ? m - d : d;
         };
         // Whether leaf (x, y, z) holds clay of shape member @a mb (or, with neighbours, is a neighbour).
         auto shapeHolds = [&](const Member& mb, int64_t x, int64_t y, int64_t z) {
@@ -198,7 +212,8 @@ struct ClayCover {
                         const double d = distanceAt(members[i], double(node.min[0]) + 63.5,
                                                     double(node.min[1]) + 63.5, double(node.min[2]) + 63.5);
                         if (d >= kNodeLeafSpread + leafWithin) continue; // no leaf of it
-                        whole = all && d < holdsWithin - kNodeLeafSpread;
+                        whole =
+                            all && d < holdsWithin - kNodeLeafSpread && !(members[i].tiled && tilesAsTiles);
                         near.push_back(i);
                     }
                     if (near.empty()) continue;

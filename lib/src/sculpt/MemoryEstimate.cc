@@ -19,8 +19,9 @@
 //
 // The clay's leaves. At the start: those of the shapes (an analytic shape, whose distance is exact
 // or a lower bound: the leaves within its tightened bounds whose centre lies less than a leaf's
-// half-diagonal from it, decided a 128^3 node at a time where a node's centre settles it; other
-// shapes: their bounds), and of files (their walked topology, VdbCheck.h). Growth, group by group of
+// half-diagonal from it, decided a 128^3 node at a time where a node's centre settles it; a convex
+// one in 3D at most Tc is tiles inside, so only the leaves that close to its surface, on either side;
+// other shapes: their bounds), and of files (their walked topology, VdbCheck.h). Growth, group by group of
 // touching clay boxes and tool sweeps (each grown by a leaf): clay no tool reaches, at most Tc, keeps
 // its leaves; clay a tool pokes spreads within a leaf of itself and of the tools' sweeps (what a push
 // moves lands beside the tool, the global layer writes only the cells its domain touches, next to the
@@ -388,6 +389,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         bool file = false;            ///< clay from a file
         const Shape* shape = nullptr; ///< clay of an analytic shape: its distance is exact
         bool overTc = false;          ///< clay that starts over Tc, or a file that may hold some
+        bool tiled = false;           ///< clay of a convex analytic shape in 3D at most Tc: tiles inside
     };
     std::vector<Box> fileBoxes; // of clay from files: where a tool's corner may lie inside clay
     std::vector<Area> areas;
@@ -398,6 +400,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     std::vector<int64_t> clayMasses;       // their masses per voxel
     uint64_t fileLeaves = 0;               // of clay from files
     uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
+    uint64_t tiledVoxels = 0;              // voxels inside shapes held as tiles (not in clayLeavesGrown)
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
         const FileGrid g = fileGridStats(path, grid);
         const Box b = clip2D(g.bounds, dims);
@@ -441,10 +444,14 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             if (!c.shape.shape->keepsVolume() && (c.shape.kind == "sphere" || c.shape.kind == "box" ||
                                                   c.shape.kind == "cylinder" || c.shape.kind == "capsule"))
                 a.shape = c.shape.shape.get();
+            // Its inside is tiles from the start (makeClay, automaton/Tiles.h): only the leaves near its
+            // surface hold voxels, until a tool reaches them (the tools' sweeps are counted apart).
+            a.tiled = a.shape && dims == 3 && !a.overTc && a.shape->convex();
             areas.push_back(a);
             // Its mass: the voxels of an analytic shape counted (while the budget lasts), else its box's.
-            const double m =
-                double(c.mass) * double(a.shape ? voxelsInsideShape(*a.shape, b, voxelBudget) : voxelsIn(b));
+            const uint64_t voxels = a.shape ? voxelsInsideShape(*a.shape, b, voxelBudget) : voxelsIn(b);
+            const double m = double(c.mass) * double(voxels);
+            if (a.tiled) tiledVoxels = voxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : tiledVoxels + voxels;
             if (massBound != UINT64_MAX)
                 massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
@@ -512,15 +519,17 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // Area @a i as a member of a cover: an analytic shape by its distance, anything else by its box.
     auto add = [&](ClayCover& c, size_t i) {
         if (areas[i].shape)
-            c.addShape(areas[i].shape, areas[i].box);
+            c.addShape(areas[i].shape, areas[i].box, areas[i].tiled);
         else
             c.addBox(areas[i].box);
     };
-    // The cover of group @a g's clay (files too when @a files) and, when @a sweeps, its tools' sweeps.
+    // The cover of group @a g's leaves (files too when @a files) and, when @a sweeps, its tools' sweeps:
+    // tiled clay by the leaves near its surface.
     auto coverOf = [&](const std::vector<size_t>& g, int64_t margin, bool files, bool sweeps) {
         ClayCover c;
         c.margin = margin;
         c.dims = dims;
+        c.tilesAsTiles = true;
         for (size_t i : g)
             if (areas[i].clay ? files || !areas[i].file : sweeps) add(c, i);
         return c;
@@ -682,9 +691,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // the seeds' box, at the frame that holds most; the index is then the dense array over the seeds'
     // bounds grown by the reach + 2 (at most kDenseIndexMax entries) and a tree over the cells beyond
     // it, counted as every voxel of those leaves.
+    e.clayVoxels = clayVoxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : clayVoxels + tiledVoxels;
     if (frame_policy::usesGlobalLayer(scene)) {
         const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
-        uint64_t cells = std::min(clayVoxels, fullCells > UINT64_MAX / 7 ? UINT64_MAX : 7 * fullCells);
+        uint64_t cells = std::min(e.clayVoxels, fullCells > UINT64_MAX / 7 ? UINT64_MAX : 7 * fullCells);
         LayerBound lb;
         lb.push = scene.push;
         lb.dims = dims;
@@ -773,8 +783,12 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     std::vector<Box> aroundBoxes;
     for (const Box& b : grownBoxes)
         aroundBoxes.push_back(neighbourhood(b, true, dims));
+    // Clay held as tiles is swept over its tile slots next to the leaves too (output/SurfaceTiles.cc):
+    // a layer of slots inside the surface's leaves, about one a leaf.
+    const uint64_t tileSlotsSwept = tiledVoxels > 0 ? e.clayLeavesGrown : 0;
     e.outputBytes = treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
                     treeBytes<FloatTreeT>(e.anchorLeaves, aroundBoxes, lowerCap, upperCap) +
+                    tileSlotsSwept * (leafBytes<FloatTreeT>() + kOutputScratchPerLeaf) +
                     e.anchorLeaves * kOutputScratchPerLeaf + e.clayLeavesGrown * 8;
     return e;
 }

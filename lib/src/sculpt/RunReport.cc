@@ -38,6 +38,7 @@ std::string runReportJson(const RunReport& r, int indent)
     j["frames"] = s.frames;
     j["steps"] = s.steps;
     j["seconds"] = s.seconds;
+    j["frame_seconds"] = s.frameSeconds;
     j["push_seconds"] = s.pushSeconds;
     j["setup_seconds"] = r.setupSeconds;
     j["output_seconds"] = r.outputSeconds;

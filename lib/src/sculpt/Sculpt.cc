@@ -40,6 +40,7 @@
 #include "vdbclay/Metrics.h"
 
 #include "automaton/AutomatonInternal.h"
+#include "automaton/Tiles.h"
 #include "push/ClayLeaves.h"
 #include "core/CoordHash.h"
 #include "shapes/InsideBox.h"
@@ -59,6 +60,7 @@
 #include <cmath>
 #include <cstring>
 #include <iterator>
+#include <optional>
 #include <sstream>
 #include <thread>
 #include <unordered_set>
@@ -69,13 +71,40 @@ namespace {
 
 /// Adds every active voxel of @a src into @a dst, refusing sums that overflow a cell. Leaf by leaf
 /// (no accessor per voxel): a leaf slot that @a dst lacks gets a new leaf holding @a src's active
-/// values; one it has gets them added, the first overflow in tree order refused as before.
+/// values; one it has gets them added, the first overflow in tree order refused as before. A tile of
+/// @a src goes in slot by slot: a tile where @a dst holds nothing, added voxel by voxel where it does.
 void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::string& field)
 {
+    using Leaf = openvdb::Int32Tree::LeafNodeType;
+    auto addTo = [&](Leaf* out, openvdb::Index pos, int32_t v) {
+        const int64_t sum = int64_t(out->getValue(pos)) + int64_t(v);
+        if (sum > INT32_MAX) {
+            throw Error(field + ": overlapping clay at voxel " + coordStr(out->offsetToGlobalCoord(pos)) +
+                        " adds up to " + std::to_string(sum) + ", more than a voxel holds (" +
+                        std::to_string(INT32_MAX) + ")");
+        }
+        out->setValueOn(pos, int32_t(sum));
+    };
     auto tile = src.tree().cbeginValueOn();
     tile.setMaxDepth(tile.getLeafDepth() - 1);
-    if (tile) throw Error(field + ": clay tiles are not supported; voxelize the grid");
-    using Leaf = openvdb::Int32Tree::LeafNodeType;
+    for (; tile; ++tile) {
+        if (*tile == 0) continue;
+        openvdb::CoordBBox bb;
+        tile.getBoundingBox(bb);
+        for (int64_t x = bb.min().x(); x <= bb.max().x(); x += 8)
+            for (int64_t y = bb.min().y(); y <= bb.max().y(); y += 8)
+                for (int64_t z = bb.min().z(); z <= bb.max().z(); z += 8) {
+                    const openvdb::Coord o{int32_t(x), int32_t(y), int32_t(z)};
+                    Leaf* out = dst.tree().probeLeaf(o);
+                    if (!out && dst.tree().getValue(o) == 0) {
+                        dst.tree().addTile(1, o, *tile, true);
+                        continue;
+                    }
+                    if (!out) out = dst.tree().touchLeaf(o);
+                    for (openvdb::Index i = 0; i < Leaf::SIZE; ++i)
+                        addTo(out, i, *tile);
+                }
+    }
     for (auto it = src.tree().cbeginLeaf(); it; ++it) {
         const Leaf& in = *it;
         if (in.isEmpty()) continue;
@@ -92,15 +121,8 @@ void addClay(openvdb::Int32Grid& dst, const openvdb::Int32Grid& src, const std::
                 continue;
             }
         }
-        for (auto v = in.cbeginValueOn(); v; ++v) {
-            const int64_t sum = int64_t(out->getValue(v.pos())) + int64_t(*v);
-            if (sum > INT32_MAX) {
-                throw Error(field + ": overlapping clay at voxel " + coordStr(v.getCoord()) + " adds up to " +
-                            std::to_string(sum) + ", more than a voxel holds (" + std::to_string(INT32_MAX) +
-                            ")");
-            }
-            out->setValueOn(v.pos(), int32_t(sum));
-        }
+        for (auto v = in.cbeginValueOn(); v; ++v)
+            addTo(out, v.pos(), *v);
     }
 }
 
@@ -111,29 +133,21 @@ void rasterize(openvdb::MaskGrid& mask, const Shape& shape, int dims, int thread
     raster_internal::rasterizeInside(mask.tree(), shape, dims, true, threads);
 }
 
-/// Whether any voxel of @a mass holding clay (active and nonzero) is on in @a obstacles: leaf masks
-/// ANDed (a tile of either tree falls back on its voxels). Only says whether; the caller finds the
-/// first such voxel (in value-iterator order) for its message.
-bool clayMeetsObstacles(const openvdb::Int32Tree& mass, const openvdb::MaskTree& obstacles)
+/// The first voxel (in tree order) of @a mass holding clay that is on in @a obstacles, if any: the
+/// two trees' topologies intersected (tiles stay tiles), then that intersection's voxels read.
+std::optional<openvdb::Coord> clayInObstacles(const openvdb::Int32Tree& mass,
+                                              const openvdb::MaskTree& obstacles)
 {
-    auto tile = mass.cbeginValueOn();
-    tile.setMaxDepth(tile.getLeafDepth() - 1);
-    for (; tile; ++tile)
-        if (*tile != 0) return true; // rare (a start file's tiles): the caller's voxel walk decides
-    openvdb::tree::ValueAccessor<const openvdb::MaskTree> oacc(obstacles);
-    for (auto it = mass.cbeginLeaf(); it; ++it) {
-        const openvdb::Coord o = it->origin();
-        if (const auto* ol = oacc.probeConstLeaf(o)) {
-            auto both = it->getValueMask();
-            both &= ol->getValueMask();
-            for (auto on = both.beginOn(); on; ++on)
-                if (it->getValue(on.pos()) != 0) return true;
-        } else if (oacc.isValueOn(o)) {
-            for (auto on = it->cbeginValueOn(); on; ++on)
-                if (*on != 0) return true;
-        }
+    openvdb::MaskTree both(mass, false, openvdb::TopologyCopy());
+    both.topologyIntersection(obstacles);
+    openvdb::tree::ValueAccessor<const openvdb::Int32Tree> macc(mass);
+    for (auto it = both.cbeginValueOn(); it; ++it) {
+        openvdb::CoordBBox bb;
+        it.getBoundingBox(bb);
+        for (auto c = bb.begin(); c; ++c)
+            if (macc.getValue(*c) != 0) return *c;
     }
-    return false;
+    return std::nullopt;
 }
 
 /// A start file written in the middle of a frame continues that frame: only the scene that wrote it
@@ -218,6 +232,8 @@ struct Sculptor::Impl {
         open = false;
         openSteps = 0;
         ++frame;
+        // Uniform leaves back to tiles, so memory and the walks of later frames follow the surface.
+        automaton->collapseUniformLeaves();
         if (frame >= scene.frames) transportWorkspace.release();
     }
 
@@ -281,9 +297,9 @@ struct Sculptor::Impl {
     /// The global transport's first try: the automaton alone, in chunks, on the clay near the
     /// overload, under the frame policy's rules (FramePolicy.h: after a surface push only, not on
     /// saturated clay, within a work and a step cap). The clay near the overload: the clay leaves
-    /// meeting @a near (frame_policy::tryNear: the push's region grown by the layer's reach), the
-    /// whole body when @a near is empty (no tool touched clay): a frame costs the tool's zone, not the
-    /// model, and a saturated lump beside a loose one is judged by itself. @a finished: the frame
+    /// meeting @a near, in leaves or tiles (frame_policy::tryNear: the push's region grown by the layer's
+    /// reach), the whole body when @a near is empty (no tool touched clay): a frame costs the tool's zone,
+    /// not the model, and a saturated lump beside a loose one is judged by itself. @a finished: the frame
     /// ended here (settled, tolerance, no room, the scene's step budget); otherwise the global layer
     /// runs on what is left. No stop request is honoured here (the try is bounded, as the layer is):
     /// a frame saved open is always past its global layer, so a resumed frame never repeats or skips
@@ -300,14 +316,7 @@ struct Sculptor::Impl {
             voxels = mass->activeVoxelCount();
             clay = automaton->totalMass();
         } else { // exact integers (a voxel is active exactly when it holds clay: Automaton::edit)
-            for (const clay_internal::MassLeafT* leaf : clay_internal::leavesNear(mass->constTree(), near)) {
-                voxels += leaf->onVoxelCount();
-                const int32_t* d = leaf->buffer().data();
-                int64_t sum = 0;
-                for (openvdb::Index i = 0; i < clay_internal::MassLeafT::SIZE; ++i)
-                    sum += d[i];
-                clay += sum;
-            }
+            clay_internal::clayInSlotsNear(mass->constTree(), near, voxels, clay);
         }
         if (frame_policy::trySaturated(scene, clay, voxels)) return total;
         const double work = frame_policy::tryWork(scene, voxels);
@@ -376,10 +385,10 @@ struct Sculptor::Impl {
         const Coord hi(box.max[0] >> 3, box.max[1] >> 3, box.max[2] >> 3);
         const int64_t boxSlots = clay_internal::slotCount(box);
         bool all = frame_policy::toolCellsOverWholeBounds(scene) || reach > 64;
-        std::vector<const clay_internal::MassLeafT*> leaves;
+        std::vector<Coord> leaves; // the slots holding clay, in leaves or tiles
         if (!all) {
-            leaves =
-                clay_internal::leavesNear(mass->constTree(), clay_internal::grownBy(box, int32_t(8 * reach)));
+            leaves = clay_internal::claySlotsNear(mass->constTree(),
+                                                  clay_internal::grownBy(box, int32_t(8 * reach)));
             const int64_t side = 2 * reach + 1;
             const int64_t around = side * side * (is2D ? 1 : side);
             all = int64_t(leaves.size()) > boxSlots / around;
@@ -393,8 +402,8 @@ struct Sculptor::Impl {
             coveredAll = true;
         } else {
             const int r = int(reach), rz = is2D ? 0 : r;
-            for (const auto* leaf : leaves) {
-                const Coord o(leaf->origin().x() >> 3, leaf->origin().y() >> 3, leaf->origin().z() >> 3);
+            for (const Coord& origin : leaves) {
+                const Coord o(origin.x() >> 3, origin.y() >> 3, origin.z() >> 3);
                 if (reach == 1 && !seenLeaves.insert(o).second) continue;
                 for (int dx = -r; dx <= r; ++dx)
                     for (int dy = -r; dy <= r; ++dy)
@@ -603,26 +612,25 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     }
     im.mass->setName("mass");
     setClayTransform(*im.mass, scene.voxelSize, scene.up);
+    // Uniform clay as tiles, whatever made it (files, several shapes added up).
+    automaton_internal::collapseUniformLeaves(im.mass->tree(), scene.rule.threshold);
 
     im.obstacles = openvdb::MaskGrid::create(false);
     im.obstacles->setName("obstacles");
     for (const ShapeSpec& o : scene.obstacles)
         rasterize(*im.obstacles, *o.shape, scene.dimensions, threads);
-    if (!scene.obstacles.empty() && clayMeetsObstacles(im.mass->tree(), im.obstacles->tree())) {
-        auto oacc = im.obstacles->getConstAccessor();
-        for (auto it = im.mass->tree().cbeginValueOn(); it; ++it) {
-            if (*it != 0 && oacc.isValueOn(it.getCoord())) {
-                std::string which;
-                const openvdb::Coord c = it.getCoord();
-                for (const ShapeSpec& o : scene.obstacles) {
-                    if (o.shape->distance(Vec3{{double(c.x()), double(c.y()), double(c.z())}}) < 0) {
-                        which = o.field;
-                        break;
-                    }
+    if (!scene.obstacles.empty()) {
+        if (const std::optional<openvdb::Coord> at = clayInObstacles(im.mass->tree(), im.obstacles->tree())) {
+            const openvdb::Coord c = *at;
+            std::string which;
+            for (const ShapeSpec& o : scene.obstacles) {
+                if (o.shape->distance(Vec3{{double(c.x()), double(c.y()), double(c.z())}}) < 0) {
+                    which = o.field;
+                    break;
                 }
-                throw Error(scene.source + ": clay at voxel " + coordStr(c) + " lies inside " + which +
-                            "; obstacles are cells clay never enters");
             }
+            throw Error(scene.source + ": clay at voxel " + coordStr(c) + " lies inside " + which +
+                        "; obstacles are cells clay never enters");
         }
     }
     // The automaton's obstacles: the static ones, plus the tools' voxels (placeTools).
@@ -716,8 +724,15 @@ FrameReport Sculptor::runFrame()
     if (done())
         throw Error("the scene has no frame left to run (" + std::to_string(im.scene.frames) + " run)");
     im.stopped = false;
+    const auto t0 = std::chrono::steady_clock::now();
     FrameReport rep;
     rep.frame = im.frame + 1;
+    // The frame's wall time, on every way out.
+    struct Timed {
+        FrameReport& r;
+        std::chrono::steady_clock::time_point t0;
+        ~Timed() { r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
+    } timed{rep, t0};
     if (!im.open) {
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
@@ -770,6 +785,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         const auto tf = Clock::now();
         const FrameReport r = runFrame();
         const double frameSecs = std::chrono::duration<double>(Clock::now() - tf).count();
+        s.frameSeconds.push_back(r.seconds);
         s.pushSeconds += frameSecs - r.settle.seconds.total() - r.transport.seconds;
         ++s.frames;
         s.steps += r.settle.steps;
@@ -791,8 +807,8 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         if (!r.finished) break; // stopped() is set
     }
     s.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    // The final mass is measureClay's sum (leaf by leaf, in parallel): the automaton keeps no tiles
-    // (it voxelizes them), so it is totalMass()'s walk over every value, without a second walk.
+    // The final mass is measureClay's sum (leaves and tiles, in parallel): totalMass()'s walk over
+    // every value, without a second walk.
     s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(),
                             im.scene.dimensions, im.automaton->options().threads);
     s.massFinal = s.metrics.mass;

@@ -1,10 +1,13 @@
 // Clay from a shape (makeClay, Shapes.h; with a stop poll, MakeClay.h): the voxels whose centre lies inside
 // an analytic shape, rasterised leaf by leaf on every core (Rasterize.h); for shapes that keep their volume
-// (meshes, level sets), each voxel by the part of it the shape covers (Voxels.h, Coverage.cc). A stop poll
+// (meshes, level sets), each voxel by the part of it the shape covers (Voxels.h, Coverage.cc). Uniform
+// clay is held as tiles: interior slots of convex shapes are tiles from the start, and leaves whose
+// voxels all hold one value collapse into tiles at the end (automaton/Tiles.h). A stop poll
 // runs between the rasteriser's chunks, or every 4096 covered voxels.
 #include "vdbclay/MakeClay.h"
 #include "vdbclay/Shapes.h"
 
+#include "automaton/Tiles.h"
 #include "shapes/Rasterize.h"
 #include "shapes/Voxels.h"
 
@@ -66,10 +69,14 @@ MassGridPtr makeClay(const Shape& shape, int32_t massPerVoxel, int dimensions,
     } else {
         // The voxels forEachVoxelInside (Voxels.h) visits, leaf by leaf on every core (Rasterize.h).
         bool stopped = false;
-        raster_internal::rasterizeInside(grid->tree(), shape, dimensions, massPerVoxel, /*threads=*/0,
-                                         [&] { return stopped = stop && stop(); });
+        raster_internal::rasterizeInside(
+            grid->tree(), shape, dimensions, massPerVoxel, /*threads=*/0,
+            [&] { return stopped = stop && stop(); }, /*tiles=*/true);
         if (stopped) return nullptr;
     }
+    // Uniform clay as tiles: the interior's leaves (meshes, level sets) and slots collapse into
+    // tiles, and whole nodes of them into larger tiles (automaton/Tiles.h).
+    automaton_internal::collapseUniformLeaves(grid->tree(), massPerVoxel);
     if (grid->activeVoxelCount() == 0) {
         throw Error("no voxel centre lies inside " + shape.describe() +
                     (dimensions == 2 ? " in the z = 0 layer" : ""));

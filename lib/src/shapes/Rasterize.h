@@ -9,7 +9,11 @@
 // topology are those of the voxel loop, whatever the thread count: a slot with no voxel inside makes
 // no leaf, a slot whose leaf the tree lacks gets the new leaf (its other voxels inactive background,
 // as an accessor write leaves them), and a slot the tree already holds (a leaf, or a tile) is written
-// voxel by voxel through the accessor.
+// voxel by voxel through the accessor. With @a tiles (clay in 3D), a slot lying inside the shape
+// whole is one active tile of the value, not a leaf: the bounds' slots are then tested at their eight
+// corner voxels alone where the shape is convex (Shape::convex) or an unrotated box, and a slot whose
+// centre lies farther outside than its half-diagonal holds none, so the interior and the outside cost
+// a few distances a slot, and memory follows the surface.
 #pragma once
 
 #include "shapes/InsideBox.h"
@@ -33,10 +37,11 @@ namespace raster_internal {
 /// @a dims == 2): the voxels forEachVoxelInside(shape, dims, ...) visits. Runs on @a threads
 /// (ParallelFor.h: 1 serial, 0 every core). Returns the number of voxels set. @a stop, when not
 /// empty, is called on the calling thread before each chunk of leaf slots; once it returns true the
-/// rasterising ends there, the tree holding the chunks done so far.
+/// rasterising ends there, the tree holding the chunks done so far. With @a tiles (3D only), each slot
+/// inside the shape whole becomes an active tile (file comment).
 template <typename TreeT>
 uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typename TreeT::ValueType& value,
-                         int threads, const std::function<bool()>& stop = {})
+                         int threads, const std::function<bool()>& stop = {}, bool tiles = false)
 {
     using LeafT = typename TreeT::LeafNodeType;
     Box b = shape.bounds();
@@ -56,6 +61,29 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
     constexpr uint64_t kChunk = uint64_t(1) << 14; // slots per chunk: bounds the leaves held at once
     std::vector<std::unique_ptr<LeafT>> made;
     std::vector<uint32_t> counts;
+    std::vector<char> whole; // slots inside the shape whole (with tiles): one tile each
+    const bool tileSlots = tiles && dims == 3 && (boxed || shape.convex());
+    // A slot holds no voxel centre inside an analytic shape when the distance at its centre (exact, or
+    // scaled a lower bound of it) exceeds the half-diagonal of its voxel centres (3.5 sqrt 3).
+    auto outsideWhole = [&](const openvdb::Coord& o) {
+        if (!tileSlots || boxed) return false;
+        const Vec3 c{{double(o.x()) + 3.5, double(o.y()) + 3.5, double(o.z()) + 3.5}};
+        return shape.distance(c) > 6.0622 + 1e-6;
+    };
+    // A slot of voxel centres is inside a convex shape when its eight corner voxels are, each by a
+    // margin far beyond the distance's rounding (a slot closer than that is tested voxel by voxel).
+    auto insideWhole = [&](const openvdb::Coord& o) {
+        if (!tileSlots) return false;
+        for (int a = 0; a < 3; ++a)
+            if (o[a] < b.min[size_t(a)] || o[a] + 7 > b.max[size_t(a)]) return false;
+        if (boxed) return true;
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p{{double(o.x() + 7 * (c & 1)), double(o.y() + 7 * ((c >> 1) & 1)),
+                          double(o.z() + 7 * (c >> 2))}};
+            if (!(shape.distance(p) < -1e-6)) return false;
+        }
+        return true;
+    };
     uint64_t total = 0;
     for (uint64_t first = 0; first < slots; first += kChunk) {
         if (stop && stop()) break;
@@ -63,6 +91,7 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
         made.clear();
         made.resize(m);
         counts.assign(m, 0);
+        whole.assign(m, 0);
         parallel_internal::forEachIndex(m, threads, [&](size_t i) {
             // slot order: x, then y, then z (as the voxel loop's order of leaves)
             const uint64_t s = first + i;
@@ -73,6 +102,12 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
             const int32_t x0 = std::max(b.min[0], origin.x()), x1 = std::min(b.max[0], origin.x() + 7);
             const int32_t y0 = std::max(b.min[1], origin.y()), y1 = std::min(b.max[1], origin.y() + 7);
             const int32_t z0 = std::max(b.min[2], origin.z()), z1 = std::min(b.max[2], origin.z() + 7);
+            if (outsideWhole(origin)) return;
+            if (insideWhole(origin)) {
+                whole[i] = 1;
+                counts[i] = uint32_t(LeafT::SIZE);
+                return;
+            }
             std::unique_ptr<LeafT> leaf;
             uint32_t count = 0;
             for (int32_t x = x0; x <= x1; ++x)
@@ -89,6 +124,23 @@ uint64_t rasterizeInside(TreeT& tree, const Shape& shape, int dims, const typena
         });
         openvdb::tree::ValueAccessor<TreeT> acc(tree);
         for (size_t i = 0; i < m; ++i) {
+            if (whole[i]) {
+                total += counts[i];
+                const uint64_t sidx = first + i;
+                const int64_t sz = int64_t(sidx % uint64_t(n[2])),
+                              sy = int64_t(sidx / uint64_t(n[2]) % uint64_t(n[1])),
+                              sx = int64_t(sidx / uint64_t(n[2]) / uint64_t(n[1]));
+                const openvdb::Coord o(int32_t((lo[0] + sx) * 8), int32_t((lo[1] + sy) * 8),
+                                       int32_t((lo[2] + sz) * 8));
+                if (!acc.probeConstLeaf(o) && !acc.isValueOn(o) && acc.getValue(o) == tree.background()) {
+                    acc.addTile(1, o, value, true);
+                } else { // the tree holds this slot already: voxel by voxel
+                    const openvdb::CoordBBox sb = openvdb::CoordBBox::createCube(o, 8);
+                    for (auto c = sb.begin(); c; ++c)
+                        acc.setValueOn(*c, value);
+                }
+                continue;
+            }
             if (!made[i]) continue;
             total += counts[i];
             LeafT* leaf = made[i].release();

@@ -40,6 +40,7 @@ public:
     }
     double distance(const Vec3& p) const override { return length(sub(p, mC)) - mR; }
     Box bounds() const override { return mBounds; }
+    bool convex() const override { return true; }
     std::string describe() const override
     {
         return "sphere (center " + vecStr(mC) + ", radius " + num(mR) + ")";
@@ -75,6 +76,7 @@ public:
         return std::sqrt(outside2) + std::min(inside, 0.0);
     }
     Box bounds() const override { return mBounds; }
+    bool convex() const override { return true; }
     std::string describe() const override { return "box (min " + vecStr(mLo) + ", max " + vecStr(mHi) + ")"; }
     /// Whether coordinate @a v lies inside on axis @a i: distance() < 0 exactly when it does on all
     /// three (its q's, compared as distance() compares them: all below 0 gives max q < 0, any above 0
@@ -109,6 +111,7 @@ public:
         return std::min(std::max(dr, da), 0.0) + std::sqrt(a * a + b * b);
     }
     Box bounds() const override { return mBounds; }
+    bool convex() const override { return true; }
     std::string describe() const override
     {
         return "cylinder (center " + vecStr(mC) + ", radius " + num(mR) + ", height " + num(mH) + ", axis " +
@@ -142,6 +145,7 @@ public:
         return length(d) - mR;
     }
     Box bounds() const override { return mBounds; }
+    bool convex() const override { return true; }
     std::string describe() const override
     {
         return "capsule (a " + vecStr(mA) + ", b " + vecStr(mB) + ", radius " + num(mR) + ")";
@@ -199,6 +203,7 @@ public:
     {
         return (v - mPose.translation[i] - mPose.pivot[i]) + mPose.pivot[i];
     }
+    bool convex() const override { return mInner->convex(); } // an affine map keeps it
     Box bounds() const override { return mBounds; }
     std::string describe() const override
     {
@@ -260,6 +265,7 @@ public:
         if (!(l > 0) || !std::isfinite(l)) return n;
         return {{m[0] / l, m[1] / l, m[2] / l}};
     }
+    bool convex() const override { return mInner->convex(); } // an affine map keeps it
     Box bounds() const override { return mBounds; }
     std::string describe() const override
     {

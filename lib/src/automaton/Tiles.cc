@@ -1,0 +1,157 @@
+// Uniform clay as tiles (see Tiles.h).
+#include "automaton/Tiles.h"
+
+#include "core/Format.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/ValueAccessor.h>
+
+#include <algorithm>
+#include <limits>
+#include <vector>
+
+namespace vdbclay {
+namespace automaton_internal {
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+std::string bboxStr(const CoordBBox& b)
+{
+    return coordStr(b.min()) + "-" + coordStr(b.max());
+}
+
+/// The tiles holding clay (active, nonzero) that meet @a rb, by their bounds.
+std::vector<CoordBBox> clayTilesMeeting(const MassTree& tree, const CoordBBox& rb)
+{
+    std::vector<CoordBBox> out;
+    auto it = tree.cbeginValueOn();
+    it.setMaxDepth(it.getLeafDepth() - 1); // tiles only
+    for (; it; ++it) {
+        if (*it == 0) continue;
+        CoordBBox bb;
+        it.getBoundingBox(bb);
+        if (bb.hasOverlap(rb)) out.push_back(bb);
+    }
+    return out;
+}
+
+} // namespace
+
+TileScan scanTiles(MassTree& tree, int64_t tc, bool is3D, const std::string& grid)
+{
+    TileScan s;
+    bool overTc = false;
+    auto it = tree.beginValueAll();
+    it.setMaxDepth(it.getLeafDepth() - 1); // tiles only
+    for (; it; ++it) {
+        const int32_t v = *it;
+        if (v == 0) {
+            if (it.isValueOn()) it.setValueOff();
+            continue;
+        }
+        CoordBBox bb;
+        it.getBoundingBox(bb);
+        if (!it.isValueOn()) {
+            throw Error("mass grid \"" + grid + "\": inactive tile " + bboxStr(bb) + " holds mass " +
+                        std::to_string(v) + "; voxelize it or make it active");
+        }
+        if (v < 0) {
+            throw Error("mass grid \"" + grid + "\": tile " + bboxStr(bb) + " holds negative mass " +
+                        std::to_string(v));
+        }
+        if (!is3D) {
+            throw Error("mass grid \"" + grid + "\": 2D clay must lie in the z = 0 layer, but tile " +
+                        bboxStr(bb) + " holds mass " + std::to_string(v));
+        }
+        if (int64_t(v) > tc) {
+            overTc = true;
+            continue;
+        }
+        int64_t part = 0;
+        if (__builtin_mul_overflow(int64_t(v), int64_t(it.getVoxelCount()), &part) ||
+            __builtin_add_overflow(s.mass, part, &s.mass)) {
+            throw Error("mass grid \"" + grid + "\": the total mass exceeds " +
+                        std::to_string(std::numeric_limits<int64_t>::max()));
+        }
+        s.maxValue = std::max<int64_t>(s.maxValue, v);
+    }
+    // Tiles over Tc hold cells that can move: leaves, as everywhere else clay is over Tc.
+    if (overTc) {
+        tree.voxelizeActiveTiles();
+        return scanTiles(tree, tc, is3D, grid);
+    }
+    return s;
+}
+
+uint64_t densifyTiles(MassTree& tree, const Box& region)
+{
+    if (region.empty()) return 0;
+    const CoordBBox rb(Coord(region.min[0], region.min[1], region.min[2]),
+                       Coord(region.max[0], region.max[1], region.max[2]));
+    uint64_t made = 0;
+    for (const CoordBBox& tile : clayTilesMeeting(tree, rb)) {
+        CoordBBox part = tile;
+        part.intersect(rb);
+        const Coord lo(part.min().x() & ~7, part.min().y() & ~7, part.min().z() & ~7);
+        for (int64_t x = lo.x(); x <= part.max().x(); x += 8)
+            for (int64_t y = lo.y(); y <= part.max().y(); y += 8)
+                for (int64_t z = lo.z(); z <= part.max().z(); z += 8) {
+                    tree.touchLeaf(Coord(int32_t(x), int32_t(y), int32_t(z)));
+                    ++made;
+                }
+    }
+    return made;
+}
+
+uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc)
+{
+    using Root = MassTree::RootNodeType;
+    using Upper = Root::ChildNodeType;
+    using Lower = Upper::ChildNodeType;
+    // A value and state a tile may hold: at most Tc, active exactly when nonzero.
+    auto fits = [tc](int32_t v, bool on) { return int64_t(v) <= tc && on == (v != 0) && v >= 0; };
+    struct Collapse {
+        Coord origin;
+        int32_t value;
+        bool on;
+    };
+    std::vector<Collapse> todo;
+    for (auto it = tree.cbeginLeaf(); it; ++it) {
+        int32_t v = 0;
+        bool on = false;
+        if (it->isConstant(v, on, 0) && fits(v, on)) todo.push_back({it->origin(), v, on});
+    }
+    for (const Collapse& c : todo)
+        tree.addTile(1, c.origin, c.value, c.on);
+    const uint64_t removed = todo.size();
+    // Nodes of equal tiles, lowest first (a collapsed lower node can make its upper node constant).
+    todo.clear();
+    std::vector<Lower*> lowers;
+    tree.getNodes(lowers);
+    for (Lower* n : lowers) {
+        int32_t v = 0;
+        bool on = false;
+        if (n->isConstant(v, on, 0) && fits(v, on)) todo.push_back({n->origin(), v, on});
+    }
+    for (const Collapse& c : todo)
+        tree.addTile(2, c.origin, c.value, c.on);
+    todo.clear();
+    std::vector<Upper*> uppers;
+    tree.getNodes(uppers);
+    for (Upper* n : uppers) {
+        int32_t v = 0;
+        bool on = false;
+        if (n->isConstant(v, on, 0) && fits(v, on)) todo.push_back({n->origin(), v, on});
+    }
+    for (const Collapse& c : todo)
+        tree.addTile(3, c.origin, c.value, c.on);
+    // Root tiles of the background, inactive: gone, as Tree::prune leaves them.
+    tree.root().eraseBackgroundTiles();
+    return removed;
+}
+
+} // namespace automaton_internal
+} // namespace vdbclay
