@@ -32,7 +32,7 @@ wall_s = sum(float(x) * 60 ** i for i, x in enumerate(reversed(wall)))
 peak = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", t).group(1)) / 1024
 secs = s["frame_seconds"]
 log = open(os.path.join(work, "log.txt")).read()
-est = re.search(r"memory: ([0-9.]+) (MiB|GiB|KiB)", log)
+est = re.search(r"memory: about ([0-9.]+) (MiB|GiB|KiB)", log)
 est_mib = float(est.group(1)) * {"KiB": 1 / 1024, "MiB": 1, "GiB": 1024}[est.group(2)] if est else float("nan")
 size = os.path.getsize(os.path.join(work, "out.vdb")) / 2**20
 print(f"{d:<6} {wall_s:8.2f} {s['setup_seconds']:8.2f} {1000 * sum(secs) / len(secs):10.1f} "
