@@ -379,6 +379,9 @@ void checkRunOutputs(const RunArgs& a, const vdbclay::Scene& scene, const RunOut
                              "--mesh, e.g. clay.####.vdb)");
     }
     checkOutputs(outputs, inputs);
+    checkFormatName(outputs[0], ".vdb", "a clay .vdb (OpenVDB)");
+    checkFormatName(outputs[2], ".png", "a PNG picture");
+    checkFormatName(outputs[4], ".vdb", "a clay .vdb (OpenVDB)");
 }
 
 /// The lines a run begins with: the scene, the push and transport when not the paper's, the memory
@@ -655,7 +658,7 @@ void addRunOptions(CLI::App* run, RunArgs& ra)
     run->add_option("--png", ra.png, "also render the result to this PNG (# in the name: every frame)")
         ->check(fileName());
     run->add_option("--mesh", ra.mesh,
-                    "also write the clay surface to this .obj or .ply (# in the name: every frame)")
+                    "also write the clay surface to this .obj, .ply or .stl (# in the name: every frame)")
         ->check(fileName());
     run->add_option("--every", ra.every,
                     "sequences (outputs named with #) write every K-th frame and the last (default 1)")
