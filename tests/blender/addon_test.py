@@ -93,4 +93,14 @@ assert os.path.basename(vol.data.filepath) == "clay.0001.vdb", vol.data.filepath
 # The saved scene reruns from the CLI to the same clay.
 subprocess.run([args.cli, "run", "scene.json", "--quiet", "-o", "rerun.vdb"], cwd=args.out, check=True)
 assert first(r"content hash: ([0-9a-f]+)", info(os.path.join(args.out, "rerun.vdb"))) == first(r"content hash: ([0-9a-f]+)", last)
+# A tool whose scale is animated is refused, naming it; nothing is run.
+tool.scale = (1.0, 1.0, 1.0)
+tool.keyframe_insert("scale", frame=1)
+tool.scale = (2.0, 2.0, 2.0)
+tool.keyframe_insert("scale", frame=5)
+try:
+    bpy.ops.vdbclay.run()
+    raise AssertionError("a tool with an animated scale was run")
+except RuntimeError as e:
+    assert "tool 'Tool' changes its scale at frame 2" in str(e), str(e)
 print("vdbclay-addon: ok")

@@ -154,6 +154,9 @@ def export_scene(context, out_dir):
             for *_, o in tools:
                 m0 = starts[o.name]
                 delta = o.matrix_world @ m0.inverted()
+                if any(abs(k - 1.0) > 1e-4 for k in delta.to_scale()):
+                    raise RuntimeError("tool %r changes its scale at frame %d; vdbclay moves a tool without "
+                                       "scaling it (its scale is the first frame's)" % (o.name, f))
                 rot = delta.to_3x3().normalized()
                 origin = m0.translation
                 moved = delta @ origin
