@@ -191,17 +191,36 @@ void checkInsideWorkingDirectory(const FileArg& o, const char* flag)
     }
 }
 
+namespace {
+
+/// The extension of @a path's file name, lower case, with its dot; "" when it has none.
+std::string extensionOf(const std::string& path)
+{
+    const auto slash = path.find_last_of('/');
+    const auto dot = path.find_last_of('.');
+    std::string ext =
+        dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : path.substr(dot);
+    for (char& c : ext)
+        c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
+} // namespace
+
+void checkFormatName(const FileArg& o, const char* ext, const char* format)
+{
+    const std::string e = extensionOf(o.path);
+    if (o.path.empty() || e.empty() || e == ext) return;
+    throw vdbclay::Error(o.text() + ": this output is " + format + "; name it " + ext + " (\"" + e +
+                         "\" names another format)");
+}
+
 void checkMeshName(const FileArg& o)
 {
     if (o.path.empty()) return;
-    const auto slash = o.path.find_last_of('/');
-    const auto dot = o.path.find_last_of('.');
-    std::string ext =
-        dot == std::string::npos || (slash != std::string::npos && dot < slash) ? "" : o.path.substr(dot);
-    for (char& c : ext)
-        c = char(std::tolower(static_cast<unsigned char>(c)));
-    if (ext != ".obj" && ext != ".ply") {
-        throw vdbclay::Error(o.text() + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
+    const std::string ext = extensionOf(o.path);
+    if (ext != ".obj" && ext != ".ply" && ext != ".stl") {
+        throw vdbclay::Error(o.text() + ": unknown mesh format \"" + ext + "\" (use .obj, .ply or .stl)");
     }
 }
 

@@ -101,8 +101,13 @@ void checkOutputs(const std::vector<FileArg>& outputs, const std::vector<InputAr
 /// command line's own options name files anywhere. @a flag names the option that lifts the rule.
 void checkInsideWorkingDirectory(const FileArg& o, const char* flag);
 
-/// Refuses a mesh output whose extension names no format vdbclay writes (.obj, .ply).
+/// Refuses a mesh output whose extension names no format vdbclay writes (.obj, .ply, .stl).
 void checkMeshName(const FileArg& o);
+
+/// Refuses an output whose name ends in an extension other than @a ext (".vdb", ".png"): the file
+/// would hold @a format under another format's name. A name with no extension (a device, a FIFO)
+/// is written as it is.
+void checkFormatName(const FileArg& o, const char* ext, const char* format);
 
 // ---- signals -------------------------------------------------------------------------------------
 // While a scene runs, SIGINT and SIGTERM only set a flag (a lock-free atomic store is

@@ -63,6 +63,7 @@ void checkDemo(DemoArgs& a)
         throw vdbclay::Error("--overload x --threshold exceeds the int32 range of a cell");
     }
     checkOutputs({{"-o", a.out}}, {});
+    checkFormatName({"-o", a.out}, ".vdb", "a clay .vdb (OpenVDB)");
     checkDemoMemory(a);
 }
 

@@ -38,12 +38,14 @@ int writeMesh(const MeshArgs& a)
 Subcommand addMeshCommand(CLI::App& app)
 {
     auto a = std::make_shared<MeshArgs>();
-    CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ or PLY");
+    CLI::App* mesh = app.add_subcommand("mesh", "Write the clay surface of a clay .vdb as OBJ, PLY or STL");
     mesh->add_option("file", a->in,
                      "a clay .vdb (grid \"mass\"), else its first fog volume, else its first level set")
         ->required()
         ->check(fileName());
-    mesh->add_option("-o,--output", a->out, "OUT.obj or OUT.ply")->required()->check(fileName());
+    mesh->add_option("-o,--output", a->out, "OUT.obj, OUT.ply or OUT.stl (binary)")
+        ->required()
+        ->check(fileName());
     mesh->add_option("--isovalue", a->iso, "surface where density (mass / Tc) equals this (default 0.5)")
         ->check(finiteIn(1e-9, 1e9));
     mesh->add_option("--threshold", a->threshold, "Tc, if the file does not record it")

@@ -26,6 +26,7 @@ struct RenderArgs {
 int render(const RenderArgs& a)
 {
     checkOutputs({{"-o", a.out}}, {{{"the input file", a.in}, {}}});
+    checkFormatName({"-o", a.out}, ".png", "a PNG picture");
     std::string note;
     const vdbclay::ClayFile f = vdbclay::readAsClay(a.in, note);
     if (!note.empty()) std::printf("note: %s\n", note.c_str());

@@ -38,6 +38,7 @@ struct RunArgs {
     int threads = 0;
     int64_t seed = -1;
     int64_t frames = 0; ///< 0: all
+    int64_t every = 0;  ///< --every: 0 when not given (every frame)
     bool quiet = false;
     bool sceneOutputsAnywhere = false; ///< --scene-outputs-anywhere
     std::string up;                    ///< --up: empty keeps the scene's
@@ -47,7 +48,48 @@ struct RunArgs {
 /// beside -o.
 struct RunOutputs {
     std::string vdb, stats, png, mesh, checkpoint;
+    uint64_t every = 1; ///< sequences write every this many frames (and the last)
 };
+
+/// The run of '#' characters in an output's file name that makes it a sequence ("clay.####.vdb"):
+/// where it starts and how many; width 0 when the name has none.
+struct FramePattern {
+    size_t pos = 0, width = 0;
+};
+
+/// @a o's frame pattern. @throw Error if its file name holds '#' in more than one run.
+FramePattern framePatternOf(const FileArg& o)
+{
+    const size_t slash = o.path.find_last_of('/');
+    const size_t nameStart = slash == std::string::npos ? 0 : slash + 1;
+    const size_t first = o.path.find('#', nameStart);
+    if (first == std::string::npos) return {};
+    const size_t end = std::min(o.path.find_first_not_of('#', first), o.path.size());
+    if (o.path.find('#', end) != std::string::npos) {
+        throw vdbclay::Error(o.text() +
+                             ": more than one run of '#' in the file name; one run (e.g. clay.####.vdb) "
+                             "stands for the frame number");
+    }
+    return {first, end - first};
+}
+
+/// @a path with its frame pattern @a p replaced by @a frame, zero-padded to the pattern's width.
+std::string frameFile(const std::string& path, FramePattern p, uint64_t frame)
+{
+    std::string n = std::to_string(frame);
+    if (n.size() < p.width) n.insert(0, p.width - n.size(), '0');
+    return path.substr(0, p.pos) + n + path.substr(p.pos + p.width);
+}
+
+/// A sequence's name without its frame pattern ("clay.####.vdb" -> "clay.vdb"), for the default
+/// checkpoint beside it.
+std::string withoutFramePattern(const std::string& path, FramePattern p)
+{
+    std::string base = path.substr(0, p.pos);
+    std::string rest = path.substr(p.pos + p.width);
+    if (!base.empty() && !rest.empty() && base.back() == '.' && rest.front() == '.') rest.erase(0, 1);
+    return base + rest;
+}
 
 double secondsSince(Clock::time_point t0)
 {
@@ -174,6 +216,7 @@ std::string continueCommand(const RunArgs& a, const std::string& checkpoint)
     opt("--stats", a.stats);
     opt("--png", a.png);
     opt("--mesh", a.mesh);
+    if (a.every > 0) opt("--every", std::to_string(a.every));
     opt("--rule", a.rule);
     if (a.seed >= 0) opt("--seed", std::to_string(a.seed));
     opt("--memory-budget", a.memoryBudget);
@@ -275,7 +318,12 @@ RunOutputs outputsOf(const RunArgs& a, const vdbclay::Scene& scene)
     o.stats = a.stats.empty() ? scene.outputs.stats : a.stats;
     o.png = a.png.empty() ? scene.outputs.png : a.png;
     o.mesh = a.mesh.empty() ? scene.outputs.mesh : a.mesh;
-    o.checkpoint = a.checkpoint.empty() ? defaultCheckpointPath(o.vdb) : a.checkpoint;
+    o.every = a.every > 0 ? uint64_t(a.every) : 1;
+    const FramePattern vdbFrames = framePatternOf({"-o", o.vdb});
+    o.checkpoint =
+        a.checkpoint.empty()
+            ? defaultCheckpointPath(vdbFrames.width ? withoutFramePattern(o.vdb, vdbFrames) : o.vdb)
+            : a.checkpoint;
     return o;
 }
 
@@ -315,7 +363,25 @@ void checkRunOutputs(const RunArgs& a, const vdbclay::Scene& scene, const RunOut
             if (fromScene[i]) checkInsideWorkingDirectory(outputs[i], "--scene-outputs-anywhere");
     }
     checkMeshName(outputs[3]);
+    // '#' numbers the frames of -o, --png and --mesh; the report and the checkpoint are one file each.
+    bool sequence = false;
+    for (int i : {0, 2, 3})
+        sequence |= framePatternOf(outputs[i]).width > 0;
+    for (int i : {1, 4}) {
+        if (outputs[i].path.find('#', outputs[i].path.find_last_of('/') + 1) != std::string::npos) {
+            throw vdbclay::Error(outputs[i].text() +
+                                 ": '#' numbers the frames of -o, --png and --mesh; this output is one file");
+        }
+    }
+    if (a.every > 0 && !sequence) {
+        throw vdbclay::Error("--every " + std::to_string(a.every) +
+                             ": no output is a sequence (put a run of '#' in the name given to -o, --png or "
+                             "--mesh, e.g. clay.####.vdb)");
+    }
     checkOutputs(outputs, inputs);
+    checkFormatName(outputs[0], ".vdb", "a clay .vdb (OpenVDB)");
+    checkFormatName(outputs[2], ".png", "a PNG picture");
+    checkFormatName(outputs[4], ".vdb", "a clay .vdb (OpenVDB)");
 }
 
 /// The lines a run begins with: the scene, the push and transport when not the paper's, the memory
@@ -366,11 +432,88 @@ std::function<void(const vdbclay::FrameReport&)> frameProgress(bool quiet, bool 
     };
 }
 
+/// The outputs named as sequences, written as the run's frames finish: every o.every-th frame and
+/// the run's last, each file atomically, so that a run stopped at any point leaves whole frames.
+class FrameWriter {
+public:
+    FrameWriter(const RunOutputs& o, uint64_t lastFrame) : mEvery(o.every), mLast(lastFrame)
+    {
+        add(Kind::Vdb, "-o", o.vdb);
+        add(Kind::Png, "--png", o.png);
+        add(Kind::Mesh, "--mesh", o.mesh);
+    }
+
+    /// True when @a path is one of the sequences (written here, not after the run).
+    bool writes(const std::string& path) const
+    {
+        for (const Sequence& q : mSeqs)
+            if (q.path == path) return true;
+        return false;
+    }
+
+    /// After frame @a frame finished: writes the sequences' files for it when it is due.
+    void frameDone(const vdbclay::Sculptor& sculptor, uint64_t frame)
+    {
+        if (mSeqs.empty() || (frame % mEvery != 0 && frame != mLast)) return;
+        const auto t0 = Clock::now();
+        const vdbclay::Scene& scene = sculptor.scene();
+        for (Sequence& q : mSeqs) {
+            const std::string path = frameFile(q.path, q.pattern, frame);
+            switch (q.kind) {
+            case Kind::Vdb: vdbclay::writeClayFile(path, *sculptor.mass(), sculptor.checkpointMeta()); break;
+            case Kind::Png:
+                vdbclay::renderPng(path, *sculptor.mass(), scene.rule.threshold, scene.dimensions);
+                break;
+            case Kind::Mesh: vdbclay::writeSurfaceMesh(path, *sculptor.mass(), scene.rule.threshold); break;
+            }
+            if (q.count++ == 0) q.first = path;
+            q.last = path;
+        }
+        mSeconds += secondsSince(t0);
+    }
+
+    /// Seconds spent writing frames.
+    double seconds() const { return mSeconds; }
+
+    /// One line per sequence: the files it wrote.
+    void printWritten() const
+    {
+        for (const Sequence& q : mSeqs) {
+            if (q.count == 0) continue;
+            if (q.count == 1) {
+                std::printf("wrote %s\n", q.first.c_str());
+            } else {
+                std::printf("wrote %s .. %s (%llu frames)\n", q.first.c_str(), q.last.c_str(),
+                            (unsigned long long)q.count);
+            }
+        }
+    }
+
+private:
+    enum class Kind { Vdb, Png, Mesh };
+    struct Sequence {
+        Kind kind;
+        std::string path;
+        FramePattern pattern;
+        std::string first, last;
+        uint64_t count = 0;
+    };
+    void add(Kind kind, const char* option, const std::string& path)
+    {
+        const FramePattern p = framePatternOf({option, path});
+        if (p.width) mSeqs.push_back({kind, path, p, "", "", 0});
+    }
+
+    uint64_t mEvery, mLast;
+    std::vector<Sequence> mSeqs;
+    double mSeconds = 0;
+};
+
 /// The run's frames, SIGINT/SIGTERM (and VDBCLAY_TEST_RAISE) asking it to stop at the next step
 /// from which a checkpoint resumes exactly; the library's memory watchdog may stop it too. From
 /// here to the end of the run the signals stop it and save it; before, there is nothing to save,
 /// and after, they end the process (removing a half-written output's temporary file).
-vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, bool tty)
+vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, bool tty, FrameWriter& frames)
 {
     const std::function<void(uint64_t)> testSignal = testSignalAtStep();
     vdbclay::Automaton& automaton = sculptor.automaton();
@@ -379,8 +522,11 @@ vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, boo
         return gStopSignal.load(std::memory_order_relaxed) != 0;
     });
     gStopAtOnce.store(false);
-    const vdbclay::RunSummary s =
-        sculptor.run(uint64_t(a.frames), frameProgress(a.quiet, tty, sculptor.totalFrames()));
+    const auto progress = frameProgress(a.quiet, tty, sculptor.totalFrames());
+    const vdbclay::RunSummary s = sculptor.run(uint64_t(a.frames), [&](const vdbclay::FrameReport& r) {
+        if (r.finished) frames.frameDone(sculptor, r.frame);
+        progress(r);
+    });
     gWriting.store(true);
     gStopAtOnce.store(true);
     sculptor.setStopRequest({});
@@ -388,12 +534,17 @@ vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, boo
 }
 
 /// The lines a finished run ends with: frames, steps and times; mass; the global layer; the clay.
-void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene)
+/// @a setupSeconds: building the scene before the first frame (its meshes' level sets, the clay);
+/// @a frameWriteSeconds: writing sequences' frames, part of the frames' time.
+void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene, double setupSeconds,
+                  double frameWriteSeconds)
 {
     const bool exact = s.massFinal == s.massInitial;
-    std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
+    std::printf("frames %llu, steps %llu, time %s (push %s, settle %s", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
                 fmtSeconds(s.stages.total()).c_str());
+    if (frameWriteSeconds > 0) std::printf(", writing frames %s", fmtSeconds(frameWriteSeconds).c_str());
+    std::printf("); set-up before the frames %s\n", fmtSeconds(setupSeconds).c_str());
     std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s",
                 (long long)s.massInitial, (long long)s.massFinal, exact ? "exact" : "DRIFT",
                 (long long)s.residualOverload, s.settled ? "yes" : "no");
@@ -418,20 +569,21 @@ void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene)
 }
 
 /// Writes the .vdb, the picture and the mesh (those named); returns the seconds it took.
-double writeOutputs(const vdbclay::Sculptor& sculptor, const RunOutputs& o)
+double writeOutputs(const vdbclay::Sculptor& sculptor, const RunOutputs& o, const FrameWriter& frames)
 {
     const vdbclay::Scene& scene = sculptor.scene();
     const auto t0 = Clock::now();
     vdbclay::adviseBatchHeapGrowth();
-    if (!o.vdb.empty()) {
+    frames.printWritten();
+    if (!o.vdb.empty() && !frames.writes(o.vdb)) {
         vdbclay::writeClayFile(o.vdb, *sculptor.mass(), sculptor.checkpointMeta());
         std::printf("wrote %s\n", o.vdb.c_str());
     }
-    if (!o.png.empty()) {
+    if (!o.png.empty() && !frames.writes(o.png)) {
         vdbclay::renderPng(o.png, *sculptor.mass(), scene.rule.threshold, scene.dimensions);
         std::printf("wrote %s\n", o.png.c_str());
     }
-    if (!o.mesh.empty()) {
+    if (!o.mesh.empty() && !frames.writes(o.mesh)) {
         vdbclay::writeSurfaceMesh(o.mesh, *sculptor.mass(), scene.rule.threshold);
         std::printf("wrote %s\n", o.mesh.c_str());
     }
@@ -460,11 +612,18 @@ int runScene(const RunArgs& a)
     std::cout.flush();
 
     const uint64_t frame0 = sculptor.frame(), steps0 = sculptor.automaton().stepCount();
-    const vdbclay::RunSummary s = runFrames(sculptor, a, tty);
-    if (sculptor.stopped()) return finishStopped(sculptor, a, out.checkpoint, frame0, steps0, tty);
-    printSummary(s, scene);
+    const uint64_t lastFrame = a.frames > 0
+                                   ? std::min<uint64_t>(frame0 + uint64_t(a.frames), sculptor.totalFrames())
+                                   : sculptor.totalFrames();
+    FrameWriter frames(out, lastFrame);
+    const vdbclay::RunSummary s = runFrames(sculptor, a, tty, frames);
+    if (sculptor.stopped()) {
+        frames.printWritten();
+        return finishStopped(sculptor, a, out.checkpoint, frame0, steps0, tty);
+    }
+    printSummary(s, scene, setupSeconds, frames.seconds());
 
-    const double outputSeconds = writeOutputs(sculptor, out);
+    const double outputSeconds = writeOutputs(sculptor, out, frames) + frames.seconds();
     if (!out.stats.empty()) {
         vdbclay::RunReport report = vdbclay::makeRunReport(sculptor, s, a.threads);
         report.setupSeconds = setupSeconds;
@@ -486,7 +645,9 @@ void addRunOptions(CLI::App* run, RunArgs& ra)
     run->add_option("scene", ra.scene,
                     "scene JSON file (see docs/SCENES.md), - for standard input; omitted: the built-in scene")
         ->check(fileName());
-    run->add_option("-o,--output", ra.out, "write the clay to this .vdb (mass, density, surface grids)")
+    run->add_option("-o,--output", ra.out,
+                    "write the clay to this .vdb (mass, density, surface grids); a run of # in the name "
+                    "(clay.####.vdb) writes every frame, numbered")
         ->check(fileName());
     run->add_option("--threads", ra.threads, "worker threads for the whole command; 0 = all cores")
         ->check(integerIn(0, kMaxThreads));
@@ -494,8 +655,14 @@ void addRunOptions(CLI::App* run, RunArgs& ra)
         ->check(nonEmpty("a rule name"));
     run->add_option("--seed", ra.seed, "override the scene's seed")->check(integerIn(0, INT64_MAX));
     run->add_option("--stats", ra.stats, "write run statistics as JSON to this file")->check(fileName());
-    run->add_option("--png", ra.png, "also render the result to this PNG")->check(fileName());
-    run->add_option("--mesh", ra.mesh, "also write the clay surface to this .obj or .ply")->check(fileName());
+    run->add_option("--png", ra.png, "also render the result to this PNG (# in the name: every frame)")
+        ->check(fileName());
+    run->add_option("--mesh", ra.mesh,
+                    "also write the clay surface to this .obj, .ply or .stl (# in the name: every frame)")
+        ->check(fileName());
+    run->add_option("--every", ra.every,
+                    "sequences (outputs named with #) write every K-th frame and the last (default 1)")
+        ->check(integerIn(1, 100000000));
     run->add_option("--frames", ra.frames,
                     "stop after this many frames (the output can be continued with \"start\")")
         ->check(integerIn(1, 100000000));

@@ -33,6 +33,7 @@
 #include <atomic>
 #include <chrono>
 #include <climits>
+#include <cmath>
 #include <condition_variable>
 #include <memory>
 #include <mutex>
@@ -211,6 +212,38 @@ template <typename T, typename F> py::array_t<T> dense(const Clay& c, const Box&
                 r(x, y, z) = value(acc.getValue(
                     openvdb::Coord(b.min[0] + int32_t(x), b.min[1] + int32_t(y), b.min[2] + int32_t(z))));
     return out;
+}
+
+using IntArray = py::array_t<int64_t, py::array::c_style | py::array::forcecast>;
+
+/// @a obj (a numpy array or nested lists) as int64 masses: integer and boolean dtypes as they are;
+/// a float array only when every value is a whole number (a cast would truncate 999.9 to 999
+/// silently); any other dtype refused. @a what names the argument in the error.
+IntArray integerArray(const py::object& obj, const std::string& what)
+{
+    py::array a = py::array::ensure(obj);
+    if (!a) throw Error(what + ": expected a numpy array (or nested lists) of integers");
+    const char kind = a.dtype().kind();
+    if (kind == 'f') {
+        const auto f = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+        const double* p = f.data();
+        for (py::ssize_t i = 0; i < f.size(); ++i) {
+            if (std::isfinite(p[i]) && p[i] == std::floor(p[i]) && std::abs(p[i]) < 9e18) continue;
+            std::string at;
+            py::ssize_t rest = i;
+            for (py::ssize_t d = f.ndim() - 1; d >= 0; --d) {
+                at = std::to_string(rest % f.shape(d)) + (at.empty() ? "" : ", ") + at;
+                rest /= f.shape(d);
+            }
+            const std::string v = py::repr(py::float_(p[i]));
+            throw Error(what + (at.empty() ? "" : "[" + at + "]") + " is " + v +
+                        ", not a whole number: masses are integers (round the array first, e.g. "
+                        "numpy.rint(a).astype(numpy.int64))");
+        }
+    } else if (kind != 'i' && kind != 'u' && kind != 'b') {
+        throw Error(what + ": expected an integer array, got dtype " + std::string(py::str(a.dtype())));
+    }
+    return IntArray::ensure(a);
 }
 
 /// Writes @a a (int, any integer dtype that fits int32) into @a grid at @a origin: replacing the
@@ -751,8 +784,8 @@ PYBIND11_MODULE(_vdbclay, m)
 
     m.def(
         "from_array",
-        [](const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& a, Int3 origin,
-           int32_t threshold, double voxelSize, int dimensions) {
+        [](const py::object& array, Int3 origin, int32_t threshold, double voxelSize, int dimensions) {
+            const IntArray a = integerArray(array, "from_array: mass");
             RuleParams rp;
             rp.threshold = threshold;
             validate(rp);
@@ -767,7 +800,8 @@ PYBIND11_MODULE(_vdbclay, m)
         },
         py::arg("mass"), py::arg("origin") = Int3{0, 0, 0}, py::arg("threshold") = 1000,
         py::arg("voxel_size") = 1.0, py::arg("dimensions") = 3,
-        "Clay from a dense integer array [x, y, z] whose element [0, 0, 0] is voxel origin.");
+        "Clay from a dense integer array [x, y, z] whose element [0, 0, 0] is voxel origin (a float array "
+        "only if it holds whole numbers: anything else raises vdbclay.Error, never truncated).");
     m.def(
         "make_clay",
         [](const PyShape& s, int32_t mass, int dimensions, int32_t threshold, double voxelSize,
@@ -871,8 +905,8 @@ PYBIND11_MODULE(_vdbclay, m)
             "Ctrl-C stops it between two steps (KeyboardInterrupt; the automaton goes on from there).")
         .def(
             "add_mass",
-            [](PyAutomaton& a, const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& arr,
-               Int3 origin) {
+            [](PyAutomaton& a, const py::object& array, Int3 origin) {
+                const IntArray arr = integerArray(array, "add_mass: mass");
                 auto guard = changing(a);
                 // Checked on a copy of the box first, so a refused edit changes nothing.
                 Box region;
@@ -895,7 +929,7 @@ PYBIND11_MODULE(_vdbclay, m)
             py::arg("mass"), py::arg("origin") = Int3{0, 0, 0},
             "Adds a dense integer array [x, y, z] (negative entries remove clay) at origin, through "
             "Automaton.edit, so the automaton wakes there. Refused, changing nothing, if a voxel would go "
-            "negative or overflow.")
+            "negative or overflow, or if the array holds a value that is not a whole number.")
         .def(
             "push",
             [](PyAutomaton& a, const std::vector<PyShape>& tools, int maxSearch) {

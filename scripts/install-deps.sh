@@ -11,6 +11,8 @@
 #   ccache:                 compiler cache for every build script (clean clones share its hits).
 #   pybind11-dev, python3-dev, python3-numpy: the Python module `vdbclay` (python/, docs/INTEROP.md).
 #   python3-openvdb:        OpenVDB's own Python module; a test proves it reads Tc and mass back.
+#   blender:                the Blender add-on's test and python_blender_import run it headless
+#                           (skipped where it is missing, e.g. after `install-deps.sh cli`).
 #   clang, libclang-rt-dev: the sanitizer and fuzzing build (scripts/test-sanitizers.sh): libFuzzer
 #                           and the sanitizer runtimes come with clang's runtime libraries.
 set -euo pipefail
@@ -28,6 +30,7 @@ case "${1:-all}" in
       curl ca-certificates xz-utils
       clang libclang-rt-dev
       pybind11-dev python3-dev python3-numpy python3-openvdb
+      blender
     )
     ;;
   *) echo "install-deps: unknown set '$1' (expected cli or nothing)" >&2; exit 2 ;;

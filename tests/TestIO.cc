@@ -741,7 +741,7 @@ TEST_F(IOTest, SurfaceMeshObjAndPly)
     EXPECT_NEAR(p.signedVolume, o.signedVolume, 1e-6 * n);
     EXPECT_EQ(listing(), (std::set<std::string>{"clay.PLY", "clay.obj"}));
 
-    EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("clay.stl"), *g, 500); }), "clay.stl"));
+    EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("clay.fbx"), *g, 500); }), "clay.fbx"));
     EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("clay"), *g, 500); }), "unknown"));
     auto none = openvdb::Int32Grid::create(0);
     EXPECT_TRUE(contains(errorOf([&] { writeSurfaceMesh(file("e.obj"), *none, 500); }), "no clay"));

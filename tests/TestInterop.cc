@@ -17,13 +17,16 @@
 
 #include "TempDirTest.h"
 
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
+#include <utility>
 
 using namespace vdbclay;
 using openvdb::Coord;
@@ -950,4 +953,159 @@ TEST_F(InteropTest, RenderAndMeshReadFogVolumesAndLevelSets)
     EXPECT_TRUE(contains(e, "other.vdb") && contains(e, "no clay grid \"mass\", fog volume or level set") &&
                 contains(e, "\"counts\""))
         << e;
+}
+
+namespace {
+
+/// A fog volume named "smoke" with @a xform, density 1 in voxels lo..hi, written to @a path.
+void writeFog(const std::string& path, openvdb::math::Transform::Ptr xform, Coord lo, Coord hi,
+              openvdb::GridClass cls = openvdb::GRID_FOG_VOLUME)
+{
+    auto fog = openvdb::FloatGrid::create(0.f);
+    fog->setName("smoke");
+    fog->setGridClass(cls);
+    fog->setTransform(xform);
+    fog->tree().fill(openvdb::CoordBBox(lo, hi), 1.f, true);
+    fog->tree().voxelizeActiveTiles();
+    openvdb::io::File(path).write({fog});
+}
+
+/// Where @a grid's active voxels lie in the world: (min, max) of their centres.
+std::pair<openvdb::Vec3d, openvdb::Vec3d> worldCentres(const openvdb::GridBase& grid)
+{
+    const openvdb::CoordBBox b = grid.evalActiveVoxelBoundingBox();
+    openvdb::Vec3d lo(1e300), hi(-1e300);
+    for (int c = 0; c < 8; ++c) {
+        const openvdb::Vec3d w = grid.transform().indexToWorld(
+            openvdb::Vec3d(c & 1 ? b.max().x() : b.min().x(), c & 2 ? b.max().y() : b.min().y(),
+                           c & 4 ? b.max().z() : b.min().z()));
+        lo = openvdb::math::minComponent(lo, w);
+        hi = openvdb::math::maxComponent(hi, w);
+    }
+    return {lo, hi};
+}
+
+} // namespace
+
+// A fog volume keeps its place in the world: its translation (whole voxels exactly, a fraction
+// rounded and said), a quarter turn of its axes, and vdbclay's own z-up density its up axis.
+TEST_F(InteropTest, FogVolumeKeepsItsTransform)
+{
+    // At x 5 (world), voxel size 1: the clay's voxels lie at x 5 .. 8 as the fog's do.
+    auto xf = openvdb::math::Transform::createLinearTransform(1.0);
+    xf->postTranslate(openvdb::Vec3d(5, 0, 0));
+    writeFog(file("moved.vdb"), xf, Coord(0, 0, 0), Coord(3, 3, 3));
+    FogClay c = readFogAsClay(file("moved.vdb"), "smoke", 1000);
+    EXPECT_EQ(c.up, UpAxis::Y);
+    EXPECT_EQ(c.mass->evalActiveVoxelBoundingBox(), openvdb::CoordBBox(Coord(5, 0, 0), Coord(8, 3, 3)));
+    EXPECT_EQ(totalMass(*c.mass), 64 * 1000);
+    EXPECT_FALSE(contains(c.note, "rounded")) << c.note;
+    // Written and read back as clay: the same world place.
+    ClayMeta meta;
+    meta.voxelSize = c.voxelSize;
+    meta.up = c.up;
+    writeClayFile(file("moved-clay.vdb"), *c.mass, meta);
+    const ClayFile back = readClayFile(file("moved-clay.vdb"));
+    auto fogGrid = openvdb::io::File(file("moved.vdb"));
+    fogGrid.open();
+    const auto fogWorld = worldCentres(*fogGrid.readGrid("smoke"));
+    fogGrid.close();
+    const auto clayWorld = worldCentres(*back.mass);
+    EXPECT_EQ(clayWorld.first, fogWorld.first);
+    EXPECT_EQ(clayWorld.second, fogWorld.second);
+
+    // Voxel size 0.5 at x 1.3: 2.6 voxels, rounded to 3 and said so.
+    xf = openvdb::math::Transform::createLinearTransform(0.5);
+    xf->postTranslate(openvdb::Vec3d(1.3, 0, 0));
+    writeFog(file("frac.vdb"), xf, Coord(0, 0, 0), Coord(1, 1, 1));
+    c = readFogAsClay(file("frac.vdb"), "smoke", 1000);
+    EXPECT_EQ(c.mass->evalActiveVoxelBoundingBox(), openvdb::CoordBBox(Coord(3, 0, 0), Coord(4, 1, 1)));
+    EXPECT_TRUE(contains(c.note, "0.4 voxel off the clay's grid, rounded")) << c.note;
+
+    // vdbclay's own z-up file: its density is read back z up, voxel for voxel.
+    const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(3, 5, 3), 1000, 1.0);
+    ClayMeta zmeta;
+    zmeta.up = UpAxis::Z;
+    zmeta.voxelSize = 0.25;
+    writeClayFile(file("z.vdb"), *clay, zmeta);
+    c = readFogAsClay(file("z.vdb"), "density", 1000);
+    EXPECT_EQ(c.up, UpAxis::Z);
+    EXPECT_EQ(c.voxelSize, 0.25);
+    EXPECT_EQ(contentHash(*c.mass), contentHash(*clay));
+    EXPECT_TRUE(contains(c.note, "(z up)")) << c.note;
+    // Asked for y up, the same voxels in the same world place: index (x, y, z) of the file is world
+    // (x, -z, y) x 0.25, so they land at (x, -z, y).
+    c = readFogAsClay(file("z.vdb"), "density", 1000, 3, false, UpAxis::Y);
+    EXPECT_EQ(c.up, UpAxis::Y);
+    EXPECT_EQ(totalMass(*c.mass), totalMass(*clay));
+    EXPECT_EQ(c.mass->evalActiveVoxelBoundingBox(), openvdb::CoordBBox(Coord(0, -3, 0), Coord(3, 0, 5)));
+
+    // A fog turned by 45 degrees is not voxel for voxel: refused.
+    xf = openvdb::math::Transform::createLinearTransform(1.0);
+    xf->postRotate(M_PI / 4, openvdb::math::Y_AXIS);
+    writeFog(file("turned.vdb"), xf, Coord(0, 0, 0), Coord(1, 1, 1));
+    const std::string e = errorOf([&] { readFogAsClay(file("turned.vdb"), "smoke", 1000); });
+    EXPECT_TRUE(contains(e, "turned.vdb") && contains(e, "\"smoke\"") &&
+                contains(e, "other than by quarter turns"))
+        << e;
+}
+
+// A FloatGrid of class unknown is neither a level set nor a fog volume: refused with the way to ask
+// for it as density, and read as density when asked.
+TEST_F(InteropTest, UnknownFloatGridReadsAsDensityWhenAsked)
+{
+    writeFog(file("unknown.vdb"), openvdb::math::Transform::createLinearTransform(0.1), Coord(0, 0, 0),
+             Coord(1, 2, 3), openvdb::GRID_UNKNOWN);
+    std::string e = errorOf([&] { fogGridToImport(file("unknown.vdb"), ""); });
+    EXPECT_TRUE(contains(e, "grid \"smoke\" is a FloatGrid of class unknown") && contains(e, "--as density"))
+        << e;
+    e = errorOf([&] { fogGridToImport(file("unknown.vdb"), "smoke"); });
+    EXPECT_TRUE(contains(e, "--as density")) << e;
+    EXPECT_EQ(fogGridToImport(file("unknown.vdb"), "", true), "smoke");
+    EXPECT_EQ(fogGridToImport(file("unknown.vdb"), "smoke", true), "smoke");
+    e = errorOf([&] { readFogAsClay(file("unknown.vdb"), "smoke", 1000); });
+    EXPECT_TRUE(contains(e, "not a FloatGrid fog volume (class unknown)")) << e;
+    const FogClay c = readFogAsClay(file("unknown.vdb"), "smoke", 1000, 3, true);
+    EXPECT_EQ(totalMass(*c.mass), 24 * 1000);
+    EXPECT_EQ(c.voxelSize, 0.1);
+    EXPECT_TRUE(contains(c.note, "read as density (class unknown)")) << c.note;
+    // A level set is not density, even when asked.
+    const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(3, 3, 3), 1000, 1.0);
+    writeClayFile(file("clay.vdb"), *clay, ClayMeta());
+    e = errorOf([&] { fogGridToImport(file("clay.vdb"), "surface", true); });
+    EXPECT_TRUE(contains(e, "grid \"surface\" is a level set") && contains(e, "without --as density")) << e;
+    EXPECT_EQ(fogGridToImport(file("clay.vdb"), "", true), "density");
+}
+
+// Meshes: the box of a file's vertices in its own units (import --resolution divides it), and the
+// surface written as binary STL that loadMesh reads back onto the same voxels.
+TEST_F(InteropTest, MeshBoundsAndStlSurface)
+{
+    {
+        std::ofstream o(file("tri.obj"));
+        o << "v -1 0 0.5\nv 2 0 0.5\nv 0 3 -4\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n";
+    }
+    const std::array<Vec3, 2> b = meshFileBounds(file("tri.obj"));
+    EXPECT_EQ(b[0], (Vec3{{-1, 0, -4}}));
+    EXPECT_EQ(b[1], (Vec3{{2, 3, 1}}));
+    EXPECT_TRUE(contains(errorOf([&] { meshFileBounds(file("missing.obj")); }), "missing.obj"));
+
+    const MassGridPtr clay = boxClay(Coord(0, 0, 0), Coord(9, 9, 9), 1000, 0.5);
+    writeSurfaceMesh(file("s.stl"), *clay, 1000);
+    writeSurfaceMesh(file("s.obj"), *clay, 1000);
+    std::ifstream in(file("s.stl"), std::ios::binary);
+    std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GE(data.size(), 84u);
+    EXPECT_EQ(data.compare(0, 8, "vdbclay "), 0);
+    uint32_t n = 0;
+    std::memcpy(&n, data.data() + 80, 4);
+    EXPECT_GT(n, 0u);
+    EXPECT_EQ(data.size(), 84 + 50 * size_t(n));
+    // The STL and the OBJ are the same surface: the same clay from both.
+    const MassGridPtr fromStl = makeClay(*loadMesh(file("s.stl"), 0.5), 1000);
+    const MassGridPtr fromObj = makeClay(*loadMesh(file("s.obj"), 0.5), 1000);
+    EXPECT_EQ(contentHash(*fromStl), contentHash(*fromObj));
+    EXPECT_EQ(fromStl->evalActiveVoxelBoundingBox(), openvdb::CoordBBox(Coord(0, 0, 0), Coord(9, 9, 9)));
+    EXPECT_TRUE(
+        contains(errorOf([&] { writeSurfaceMesh(file("s.fbx"), *clay, 1000); }), "use .obj, .ply or .stl"));
 }

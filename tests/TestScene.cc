@@ -12,6 +12,7 @@
 #include "AllocationCounter.h"
 #include "TempDirTest.h"
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -798,4 +799,117 @@ TEST_F(SceneTest, MemoryEstimateOfFileClayCountsItsRealLeaves)
     EXPECT_GE(e.clayBytes, uint64_t(g->memUsage()));
     EXPECT_LT(e.total(), uint64_t(16) << 30) << e.describe();
     std::remove(path.c_str());
+}
+
+namespace {
+
+/// The clay after running @a json to the end (2 threads): its content hash.
+uint64_t hashAfterRun(const std::string& json, const std::string& baseDir = "")
+{
+    Sculptor s(parseScene(json, "s.json", baseDir), 2);
+    s.run();
+    return contentHash(*s.mass());
+}
+
+} // namespace
+
+// "units": "world": the same scene given in world units, y up or z up (Blender's coordinates), at
+// voxel size 0.5, is the voxel-index scene: the same clay, tools, turns, paths and obstacles, hash
+// for hash after the run.
+TEST_F(SceneTest, WorldUnitsAreTheSameScene)
+{
+    const std::string voxels = R"({"threshold": 1000,
+        "clay": [{"shape": "box", "min": [0,0,0], "max": [9,9,9], "mass": 800}],
+        "tools": [{"shape": "cylinder", "center": [5,13,5], "radius": 3, "height": 4, "axis": "x",
+                   "transform": {"rotate": [0,30,0], "pivot": [5,13,5]},
+                   "path": [{"translate": [0,-1,0], "rotate": [0,10,0], "frames": 3}]}],
+        "obstacles": [{"shape": "cylinder", "center": [5,-2,5], "radius": 20, "height": 2}]})";
+    // Up z: index (x, y, z) is world (x, -z, y) x 0.5.
+    const std::string worldZ = R"({"threshold": 1000, "units": "world", "up": "z", "voxel_size": 0.5,
+        "clay": [{"shape": "box", "min": [0,-4.5,0], "max": [4.5,0,4.5], "mass": 800}],
+        "tools": [{"shape": "cylinder", "center": [2.5,-2.5,6.5], "radius": 1.5, "height": 2, "axis": "x",
+                   "transform": {"rotate": [0,0,30], "pivot": [2.5,-2.5,6.5]},
+                   "path": [{"translate": [0,0,-0.5], "rotate": [0,0,10], "frames": 3}]}],
+        "obstacles": [{"shape": "cylinder", "center": [2.5,-2.5,-1], "radius": 10, "height": 1}]})";
+    // Up y: world units are voxel indices x 0.5.
+    const std::string worldY = R"({"threshold": 1000, "units": "world", "voxel_size": 0.5,
+        "clay": [{"shape": "box", "min": [0,0,0], "max": [4.5,4.5,4.5], "mass": 800}],
+        "tools": [{"shape": "cylinder", "center": [2.5,6.5,2.5], "radius": 1.5, "height": 2, "axis": "x",
+                   "transform": {"rotate": [0,30,0], "pivot": [2.5,6.5,2.5]},
+                   "path": [{"translate": [0,-0.5,0], "rotate": [0,10,0], "frames": 3}]}],
+        "obstacles": [{"shape": "cylinder", "center": [2.5,-1,2.5], "radius": 10, "height": 1}]})";
+    const Scene z = parseScene(worldZ, "s.json", "");
+    ASSERT_EQ(z.tools.size(), 1u);
+    EXPECT_EQ(z.tools[0].path[0].translate, (Vec3{{0, -1, 0}}));
+    EXPECT_EQ(z.tools[0].path[0].rotateDeg, (Vec3{{0, 10, 0}}));
+    EXPECT_EQ(z.tools[0].shape.shape->bounds().min,
+              parseScene(voxels, "s.json", "").tools[0].shape.shape->bounds().min);
+    const uint64_t expected = hashAfterRun(voxels);
+    EXPECT_EQ(hashAfterRun(worldZ), expected);
+    EXPECT_EQ(hashAfterRun(worldY), expected);
+    // "voxels" is the default, and may be said.
+    EXPECT_EQ(hashAfterRun(voxels.substr(0, 1) + R"("units": "voxels", )" + voxels.substr(1)), expected);
+}
+
+TEST_F(SceneTest, WorldUnitsRefusals)
+{
+    expectRefused(scene(R"("units": "metres")"), {"units", "expected \"voxels\"", "\"metres\""});
+    expectRefused(scene(R"("units": "world", "dimensions": 2, "up": "z")"), {"units", "2D", "\"up\": \"y\""});
+    const std::string turning =
+        R"([{"shape": "box", "min": [0,10,0], "max": [9,12,9], "path": [{"rotate": [0,5,5], "frames": 3}]}])";
+    expectRefused(scene(R"("units": "world", "up": "z")", turning),
+                  {"tools[0].path[0].frames", "about both world y and z", "one segment per frame"});
+}
+
+// A mesh (or level set) may carry its own "up" for its file: a z-up mesh in a y-up scene lands as
+// it does in a z-up scene.
+TEST_F(SceneTest, AShapeCarriesItsFilesUp)
+{
+    {
+        std::ofstream o(file("wedge.obj"));
+        o << "v 0 0 0\nv 4 0 0\nv 0 2 0\nv 0 0 6\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    }
+    const std::string mesh = R"({"shape": "mesh", "file": "wedge.obj", "mass": 1000)";
+    const Scene sceneUp = parseScene(R"({"up": "z", "clay": [)" + mesh + "}]}", "s.json", dir);
+    const Scene shapeUp = parseScene(R"({"clay": [)" + mesh + R"(, "up": "z"}]})", "s.json", dir);
+    const Scene plain = parseScene(R"({"clay": [)" + mesh + "}]}", "s.json", dir);
+    const Box a = sceneUp.clay[0].shape.shape->bounds(), b = shapeUp.clay[0].shape.shape->bounds(),
+              c = plain.clay[0].shape.shape->bounds();
+    EXPECT_EQ(a.min, b.min);
+    EXPECT_EQ(a.max, b.max);
+    EXPECT_NE(a.max, c.max); // y up: the wedge's height is its y, not its z
+    expectRefused(R"({"clay": [)" + mesh + R"(, "up": "x"}]})", {"clay[0].up", "\"x\""});
+    expectRefused(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 5, "up": "z"}]})",
+                  {"clay[0].up", "unknown field"});
+}
+
+// A tool turning about world x, y and z at once (Blender's keyframed turns, one segment per frame)
+// in a z-up world scene follows its world pose exactly at every frame.
+TEST_F(SceneTest, WorldUnitsTurnsFollowTheWorldPose)
+{
+    std::string path;
+    for (int k = 0; k < 12; ++k)
+        path += std::string(k ? ", " : "") + R"({"rotate": [7, 11, 13], "translate": [0.25, 0, -0.5]})";
+    const Scene sc = parseScene(R"({"units": "world", "up": "z", "voxel_size": 0.5,
+        "clay": [{"shape": "box", "min": [0,0,0], "max": [2,2,2], "mass": 10}],
+        "tools": [{"shape": "box", "min": [4,-2,4], "max": [6,0,6], "pivot": [5,-1,5], "path": [)" +
+                                    path + "]}]}",
+                                "s.json", "");
+    const ToolSpec& t = sc.tools[0];
+    const Vec3 pivotW{{5, -1, 5}}, pointW{{6, 0.5, 3}};
+    for (uint64_t k = 0; k <= 12; ++k) {
+        // The world pose: turned by (7k, 11k, 13k) degrees about x, then y, then z about the pivot,
+        // which moved (0.25k, 0, -0.5k).
+        const double r = M_PI / 180.0;
+        const double ax = 7.0 * k * r, ay = 11.0 * k * r, az = 13.0 * k * r;
+        Vec3 d{{pointW[0] - pivotW[0], pointW[1] - pivotW[1], pointW[2] - pivotW[2]}};
+        d = {{d[0], std::cos(ax) * d[1] - std::sin(ax) * d[2], std::sin(ax) * d[1] + std::cos(ax) * d[2]}};
+        d = {{std::cos(ay) * d[0] + std::sin(ay) * d[2], d[1], -std::sin(ay) * d[0] + std::cos(ay) * d[2]}};
+        d = {{std::cos(az) * d[0] - std::sin(az) * d[1], std::sin(az) * d[0] + std::cos(az) * d[1], d[2]}};
+        const Vec3 expectW{{pivotW[0] + d[0] + 0.25 * k, pivotW[1] + d[1], pivotW[2] + d[2] - 0.5 * k}};
+        const Vec3 expect = worldToIndex(expectW, 0.5, UpAxis::Z);
+        const Vec3 got = t.poseAt(k).apply(worldToIndex(pointW, 0.5, UpAxis::Z));
+        for (int a = 0; a < 3; ++a)
+            EXPECT_NEAR(got[a], expect[a], 1e-9) << "frame " << k << " axis " << a;
+    }
 }

@@ -129,6 +129,38 @@ class AutomatonTests(unittest.TestCase):
         auto.add_mass(np.full((1, 1, 1), -10), origin=(0, 0, 0))
         self.assertEqual(clay.total_mass(), 70)
 
+    def test_float_masses_are_whole_numbers_or_refused(self):
+        # A float array holding whole numbers is taken as they are; 999.9 or 0.7 is refused, never
+        # truncated, and a refused add_mass changes nothing.
+        clay = vdbclay.from_array(np.full((2, 2, 2), 1000.0))
+        self.assertEqual(clay.total_mass(), 8000)
+        with self.assertRaisesRegex(vdbclay.Error, r"from_array: mass\[0, 0, 0\] is 999.9, not a whole number"):
+            vdbclay.from_array(np.full((2, 2, 2), 999.9))
+        with self.assertRaisesRegex(vdbclay.Error, r"mass\[1, 0, 1\] is nan"):
+            a = np.zeros((2, 2, 2))
+            a[1, 0, 1] = np.nan
+            vdbclay.from_array(a)
+        with self.assertRaisesRegex(vdbclay.Error, "expected an integer array, got dtype complex128"):
+            vdbclay.from_array(np.zeros((2, 2, 2), dtype=complex))
+        auto = vdbclay.Automaton(clay)
+        before = clay.content_hash()
+        with self.assertRaisesRegex(vdbclay.Error, r"add_mass: mass is 0.7, not a whole number"):
+            auto.add_mass(0.7)
+        with self.assertRaisesRegex(vdbclay.Error, r"add_mass: mass\[0, 1, 0\] is 0.5"):
+            auto.add_mass(np.array([[[0.0], [0.5]]]))
+        self.assertEqual(clay.content_hash(), before)
+        auto.add_mass(np.full((1, 1, 1), 7.0), origin=(0, 0, 0))
+        self.assertEqual(clay.total_mass(), 8007)
+
+    def test_help_lists_the_classes(self):
+        import pydoc
+        self.assertIn("Clay", vdbclay.__all__)
+        self.assertIn("Sculptor", vdbclay.__all__)
+        self.assertNotIn("_vdbclay", vdbclay.__all__)
+        text = pydoc.render_doc(vdbclay, renderer=pydoc.plaintext)
+        for name in ("class Clay", "class Automaton", "class Sculptor", "from_array(", "make_clay("):
+            self.assertIn(name, text)
+
     def test_push_moves_clay_out_of_a_tool_exactly(self):
         clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (15, 7, 15)), mass=1000)
         auto = vdbclay.Automaton(clay)

@@ -26,5 +26,10 @@ if _openvdb:
     except OSError:
         pass
 
+from . import _vdbclay  # noqa: E402
 from ._vdbclay import *  # noqa: E402,F401,F403
 from ._vdbclay import Error, __version__  # noqa: E402,F401
+
+# The public names (the extension's classes and functions): help(vdbclay) lists them, and
+# `from vdbclay import *` takes exactly these.
+__all__ = sorted(name for name in dir(_vdbclay) if not name.startswith("_"))

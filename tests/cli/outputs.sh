@@ -73,14 +73,14 @@ printf '{"start": "cont.vdb", "frames": 2}' > cont.json
 "$bin" run cont.json --quiet -o cont.vdb > /dev/null 2> err.txt || fail "continue in place: $(cat err.txt)"
 
 # 3. Every output is checked before the work: nothing is written when the last one is bad.
-refused mesh-format-first "--mesh out.stl: unknown mesh format \".stl\"" run1 -o first.vdb --mesh out.stl
+refused mesh-format-first "--mesh out.fbx: unknown mesh format \".fbx\"" run1 -o first.vdb --mesh out.fbx
 [ -e first.vdb ] && fail "mesh-format-first: first.vdb was written before the mesh was refused"
 mkdir adir
 refused output-dir-first "--stats adir: is a directory" run1 -o first.vdb --stats adir
 [ -e first.vdb ] && fail "output-dir-first: first.vdb was written"
 refused png-missing-dir-first "cannot write nodir/x.png" run1 -o first.vdb --png nodir/x.png
 [ -e first.vdb ] && fail "png-missing-dir-first: first.vdb was written"
-refused mesh-subcommand-format "-o out.stl: unknown mesh format" "$bin" mesh direct.vdb -o out.stl
+refused mesh-subcommand-format "-o out.fbx: unknown mesh format" "$bin" mesh direct.vdb -o out.fbx
 
 # 4. A file size limit with SIGXFSZ at its default action: reported, nothing left behind.
 cp direct.vdb before.vdb

@@ -10,7 +10,9 @@
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace vdbclay {
@@ -62,24 +64,39 @@ void setClayTransform(MassGrid& mass, double voxelSize, UpAxis up);
 
 /// The fog volume `vdbclay import` reads from @a path: @a gridName when it names a FloatGrid fog
 /// volume; with @a gridName empty, the first fog volume if the file holds no FloatGrid level set
-/// (level sets come first). Empty: import reads a level set instead.
-/// @throw Error as readClayFile if the file is not a readable .vdb.
-std::string fogGridToImport(const std::string& path, const std::string& gridName);
+/// (level sets come first). Empty: import reads a level set instead. With @a asDensity, any FloatGrid
+/// that is not a level set counts as a fog volume (`vdbclay import --as density`): @a gridName, else
+/// the first such grid.
+/// @throw Error as readClayFile if the file is not a readable .vdb; if the grid import would read is
+///        a FloatGrid of another class (unknown, staggered) and not @a asDensity (it says to ask for
+///        density); with @a asDensity, if there is no such grid or @a gridName is not one.
+std::string fogGridToImport(const std::string& path, const std::string& gridName, bool asDensity = false);
+
+/// The box (min, max) of a mesh file's vertices, in its own world units and axes: what `vdbclay
+/// import --resolution` divides into voxels. Reads the file as loadMesh() does (OBJ, STL, PLY).
+/// @throw Error as loadMesh() for a file it cannot read.
+std::array<Vec3, 2> meshFileBounds(const std::string& path, uint64_t memoryBudget = 0);
 
 /// Clay from a fog volume: a float density per voxel (1 = a full cell).
 struct FogClay {
-    MassGridPtr mass;
-    double voxelSize = 1; ///< the fog volume's own
-    std::string note;     ///< one line for the user: the grid, its class and the rule applied
+    MassGridPtr mass;      ///< in the index space of the clay's transform (setClayTransform, set)
+    double voxelSize = 1;  ///< the fog volume's own
+    UpAxis up = UpAxis::Y; ///< z when the fog is vdbclay's own z-up density (its vdbclay_up or rotation)
+    std::string note;      ///< one line for the user: the grid, its class and the rule applied
 };
 /// Reads the FloatGrid fog volume @a gridName of @a path as clay: each voxel (active voxels and
-/// tiles) holds round(density x @a fullMass), voxel for voxel in the grid's index space at its voxel
-/// size (2D: only the z = 0 layer). Density above 1 is overfull clay.
+/// tiles) holds round(density x @a fullMass), voxel for voxel at its voxel size and where it lies in
+/// the world: the fog's transform (translation, a rotation by quarter turns, vdbclay's own z-up
+/// rotation) is kept, its voxels moved to the clay's index space (a translation that is not a whole
+/// number of voxels is rounded to one, and the note says by how much). 2D: only the z = 0 layer.
+/// Density above 1 is overfull clay. @a asDensity: any FloatGrid that is not a level set is read.
+/// @a up: the clay's up axis (its index y along world z for UpAxis::Z); by default the fog's own.
 /// @throw Error naming the file and grid if it is missing, not a FloatGrid fog volume, has
-///        non-cubic voxels or a non-linear transform, a non-zero background, a negative or
-///        non-finite density, a cell that does not fit an int32, or holds no clay.
+///        non-cubic voxels, a non-linear transform or one turning its axes other than by quarter
+///        turns, a non-zero background, a negative or non-finite density, a cell that does not fit
+///        an int32, or holds no clay.
 FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass,
-                      int dimensions = 3);
+                      int dimensions = 3, bool asDensity = false, std::optional<UpAxis> up = std::nullopt);
 
 /// A clay file, or any other .vdb as clay (for `vdbclay render` and `mesh`): the Int32 grid "mass"
 /// if there is one (readClayFile); else the first FloatGrid fog volume, density x Tc (default Tc,

@@ -1,5 +1,5 @@
 /// @file SurfaceMesh.h
-/// @brief The clay surface as a polygon mesh file (OBJ, PLY) in world units.
+/// @brief The clay surface as a polygon mesh file (OBJ, PLY, STL) in world units.
 #pragma once
 
 #include "vdbclay/Fwd.h"
@@ -10,8 +10,8 @@
 namespace vdbclay {
 
 /// Writes the clay surface (openvdb::tools::volumeToMesh of the density at isovalue 0.5, i.e. where
-/// a cell is half full) as OBJ or PLY (ASCII), chosen by @a path's extension, in world units: the
-/// vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform in
+/// a cell is half full) as OBJ or PLY (ASCII) or STL (binary), chosen by @a path's extension, in world units:
+/// the vertices go through @a mass's transform (as read from a clay file, or set by setClayTransform in
 /// IO.h), so the mesh lies on the .vdb and loadMesh() with the same voxel size and up axis puts it
 /// back on the same voxels. With @a keepClayVolume, every vertex then moves along its normal by one
 /// distance (at most half a voxel) so that the mesh encloses the clay's volume (the sum of

@@ -12,6 +12,7 @@
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <ostream>
@@ -114,7 +115,20 @@ std::string describeVdb(const std::string& path)
             s << "  index bbox: empty\n";
         } else {
             s << "  index bbox: [" << box.min().x() << ", " << box.min().y() << ", " << box.min().z()
-              << "] .. [" << box.max().x() << ", " << box.max().y() << ", " << box.max().z() << "]\n";
+              << "] .. [" << box.max().x() << ", " << box.max().y() << ", " << box.max().z()
+              << "]\n"; // Where its voxels lie in the world: the faces of the outermost voxels (half a voxel
+            // beyond the index bbox's voxel centres), through the grid's transform (any rotation).
+            openvdb::Vec3d lo(HUGE_VAL), hi(-HUGE_VAL);
+            for (int c = 0; c < 8; ++c) {
+                const openvdb::Vec3d corner((c & 1 ? box.max().x() : box.min().x()) + (c & 1 ? 0.5 : -0.5),
+                                            (c & 2 ? box.max().y() : box.min().y()) + (c & 2 ? 0.5 : -0.5),
+                                            (c & 4 ? box.max().z() : box.min().z()) + (c & 4 ? 0.5 : -0.5));
+                const openvdb::Vec3d w = g->transform().indexToWorld(corner);
+                lo = openvdb::math::minComponent(lo, w);
+                hi = openvdb::math::maxComponent(hi, w);
+            }
+            s << "  world bounds: [" << lo.x() << ", " << lo.y() << ", " << lo.z() << "] .. [" << hi.x()
+              << ", " << hi.y() << ", " << hi.z() << "] (the outer faces of its voxels)\n";
         }
         const openvdb::Vec3d vs = g->voxelSize();
         s << "  voxel size: " << vs[0];

@@ -8,6 +8,7 @@
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <climits>
 #include <cmath>
 #include <iomanip>
@@ -33,10 +34,77 @@ bool isLevelSet(const openvdb::GridBase& g)
 {
     return g.isType<openvdb::FloatGrid>() && g.getGridClass() == openvdb::GRID_LEVEL_SET;
 }
+/// A FloatGrid that is neither a fog volume nor a level set: density only when asked for.
+bool isOtherFloat(const openvdb::GridBase& g)
+{
+    return g.isType<openvdb::FloatGrid>() && !isFog(g) && !isLevelSet(g);
+}
+std::string otherFloatRefused(const std::string& path, const openvdb::GridBase& g)
+{
+    return path + ": grid \"" + g.getName() + "\" is a FloatGrid of class " +
+           openvdb::GridBase::gridClassToString(g.getGridClass()) +
+           ", neither a level set nor a fog volume; to read it as density (1 = a full cell), ask for it "
+           "(vdbclay import --as density)";
+}
+
+/// Where a fog's voxels go in the clay's index space: clay = signed permutation of the fog's index
+/// + offset, the clay's transform clayTransform(voxel size, up).
+struct FogPlacement {
+    int axis[3] = {0, 1, 2}; ///< clay axis i takes fog axis axis[i]
+    int sign[3] = {1, 1, 1};
+    openvdb::Coord offset;
+    double rounded = 0; ///< the largest distance (voxels) the offset was rounded by
+    bool ok = false;
+    bool identity() const
+    {
+        return axis[0] == 0 && axis[1] == 1 && axis[2] == 2 && sign[0] > 0 && sign[1] > 0 && sign[2] > 0;
+    }
+    openvdb::Coord map(const openvdb::Coord& f) const
+    {
+        openvdb::Coord c;
+        for (int i = 0; i < 3; ++i)
+            c[i] = sign[i] * f[axis[i]] + offset[i];
+        return c;
+    }
+};
+
+FogPlacement placeFog(const openvdb::math::Transform& fog, const openvdb::math::Transform& clay)
+{
+    FogPlacement p;
+    auto to = [&](double x, double y, double z) {
+        return clay.worldToIndex(fog.indexToWorld(openvdb::Vec3d(x, y, z)));
+    };
+    const openvdb::Vec3d o = to(0, 0, 0);
+    bool used[3] = {false, false, false};
+    for (int f = 0; f < 3; ++f) {
+        const openvdb::Vec3d col = to(f == 0, f == 1, f == 2) - o;
+        int hit = -1;
+        for (int i = 0; i < 3; ++i) {
+            const bool unit = std::abs(std::abs(col[i]) - 1.0) < 1e-6;
+            const bool zero = std::abs(col[i]) < 1e-6;
+            if (unit && hit < 0) {
+                hit = i;
+            } else if (!zero) {
+                return p; // not a quarter-turn mapping
+            }
+        }
+        if (hit < 0 || used[hit]) return p;
+        used[hit] = true;
+        p.axis[hit] = f;
+        p.sign[hit] = col[hit] > 0 ? 1 : -1;
+    }
+    for (int i = 0; i < 3; ++i) {
+        const double r = std::round(o[i]);
+        p.offset[i] = int32_t(r);
+        p.rounded = std::max(p.rounded, std::abs(o[i] - r));
+    }
+    p.ok = true;
+    return p;
+}
 
 } // namespace
 
-std::string fogGridToImport(const std::string& path, const std::string& gridName)
+std::string fogGridToImport(const std::string& path, const std::string& gridName, bool asDensity)
 {
     openvdb::initialize();
     openvdb::io::File file(path);
@@ -48,19 +116,41 @@ std::string fogGridToImport(const std::string& path, const std::string& gridName
         throw Error(damaged(path) + reason(e));
     }
     file.close();
+    if (asDensity) {
+        for (const auto& g : *grids) {
+            if (gridName.empty() ? (isFog(*g) || isOtherFloat(*g)) : g->getName() == gridName) {
+                if (!isFog(*g) && !isOtherFloat(*g)) {
+                    throw Error(path + ": grid \"" + gridName + "\" is a " +
+                                (g->isType<openvdb::FloatGrid>() ? std::string("level set")
+                                                                 : g->valueType() + " grid") +
+                                ", not a density FloatGrid; import it without --as density");
+                }
+                return g->getName();
+            }
+        }
+        if (!gridName.empty()) throw Error(path + " has no grid named \"" + gridName + "\"");
+        throw Error(path + ": no FloatGrid other than level sets among its " + std::to_string(grids->size()) +
+                    " grid(s) to read as density");
+    }
     if (!gridName.empty()) {
-        for (const auto& g : *grids)
-            if (g->getName() == gridName) return isFog(*g) ? gridName : std::string();
+        for (const auto& g : *grids) {
+            if (g->getName() != gridName) continue;
+            if (isOtherFloat(*g)) throw Error(otherFloatRefused(path, *g));
+            return isFog(*g) ? gridName : std::string();
+        }
         return ""; // the level set reader says it is missing
     }
     for (const auto& g : *grids)
         if (isLevelSet(*g)) return ""; // a level set first
     for (const auto& g : *grids)
         if (isFog(*g)) return g->getName();
+    for (const auto& g : *grids)
+        if (isOtherFloat(*g)) throw Error(otherFloatRefused(path, *g));
     return "";
 }
 
-FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass, int dimensions)
+FogClay readFogAsClay(const std::string& path, const std::string& gridName, int32_t fullMass, int dimensions,
+                      bool asDensity, std::optional<UpAxis> up)
 {
     openvdb::initialize();
     if (fullMass <= 0) throw Error("the mass per voxel must be > 0, not " + std::to_string(fullMass));
@@ -82,7 +172,7 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
         throw Error(damaged(path) + reason(e));
     }
     file.close();
-    if (!fog || !isFog(*fog)) {
+    if (!fog || !(isFog(*fog) || (asDensity && isOtherFloat(*fog)))) {
         throw Error(what + " is not a FloatGrid fog volume (class " +
                     (fog ? openvdb::GridBase::gridClassToString(fog->getGridClass()) : std::string("?")) +
                     ")");
@@ -102,6 +192,28 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
     out.voxelSize = vs[0];
     out.mass = openvdb::Int32Grid::create(0);
     out.mass->setName("mass");
+    // Where it lies: vdbclay's own z-up density says so (vdbclay_up); else the placement without a
+    // turn of the axes, else any quarter-turn one.
+    const openvdb::StringMetadata::ConstPtr upMeta = fog->getMetadata<openvdb::StringMetadata>("vdbclay_up");
+    FogPlacement place;
+    for (UpAxis axis : {UpAxis::Y, UpAxis::Z}) {
+        if (up && axis != *up) continue;
+        setClayTransform(*out.mass, vs[0], axis);
+        const FogPlacement p = placeFog(fog->transform(), out.mass->transform());
+        if (!p.ok) continue;
+        const bool wanted = up || (upMeta ? (upMeta->value() == "z") == (axis == UpAxis::Z) : p.identity());
+        if (!place.ok || wanted) {
+            place = p;
+            out.up = axis;
+        }
+        if (wanted) break;
+    }
+    if (!place.ok) {
+        throw Error(what +
+                    ": its transform turns its voxels other than by quarter turns; a fog volume is taken "
+                    "voxel for voxel (resample it to an axis-aligned grid first)");
+    }
+    setClayTransform(*out.mass, vs[0], out.up);
     auto acc = out.mass->getAccessor();
     for (auto it = fog->tree().cbeginValueOn(); it; ++it) {
         const double d = *it;
@@ -115,19 +227,21 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
                         std::to_string(fullMass) + " does not fit a cell (int32)");
         }
         if (m <= 0) continue;
-        if (!it.isVoxelValue() && dimensions == 3) { // uniform clay stays a tile
-            acc.addTile(it.getLevel(), it.getCoord(), int32_t(m), true);
-            continue;
-        }
-        openvdb::CoordBBox box;
-        it.getBoundingBox(box);
+        openvdb::CoordBBox fogBox;
+        it.getBoundingBox(fogBox);
+        openvdb::CoordBBox box(place.map(fogBox.min()), place.map(fogBox.min()));
+        box.expand(place.map(fogBox.max()));
         if (dimensions == 2) {
             if (box.min().z() > 0 || box.max().z() < 0) continue;
             box.min().setZ(0);
             box.max().setZ(0);
         }
-        for (auto c = box.begin(); c; ++c)
-            acc.setValueOn(*c, int32_t(m));
+        if (it.isVoxelValue()) {
+            acc.setValueOn(box.min(), int32_t(m));
+        } else { // uniform clay stays tiles where whole nodes fit (fill), leaves elsewhere
+            out.mass->tree().fill(box, int32_t(m), true);
+            acc.clear();
+        }
     }
     if (out.mass->activeVoxelCount() == 0) {
         throw Error(what + ": no voxel" + (dimensions == 2 ? " of the z = 0 layer" : "") +
@@ -135,10 +249,15 @@ FogClay readFogAsClay(const std::string& path, const std::string& gridName, int3
                     " per full voxel)");
     }
     normalizeClay(*out.mass, path, gridName);
-    out.note = "grid \"" + gridName + "\" is a fog volume (class " +
-               openvdb::GridBase::gridClassToString(fog->getGridClass()) +
+    out.note = "grid \"" + gridName + "\" is " + (isFog(*fog) ? "a fog volume" : "read as density") +
+               " (class " + openvdb::GridBase::gridClassToString(fog->getGridClass()) +
                "): each voxel holds round(density x " + std::to_string(fullMass) +
-               "), voxel for voxel at its voxel size " + num(vs[0]);
+               "), voxel for voxel at its voxel size " + num(vs[0]) + ", where it lies in the world";
+    if (out.up == UpAxis::Z) out.note += " (z up)";
+    if (place.rounded > 1e-6) {
+        out.note += "; its voxels sit " + num(place.rounded) +
+                    " voxel off the clay's grid, rounded to the nearest voxel";
+    }
     return out;
 }
 
@@ -171,12 +290,9 @@ ClayFile readAsClay(const std::string& path, std::string& note)
     ClayFile out;
     if (!fog.empty()) {
         FogClay c = readFogAsClay(path, fog, out.meta.rule.threshold);
-        openvdb::io::File file(path);
-        file.open(false);
-        c.mass->setTransform(file.readGridMetadata(fog)->transform().copy());
-        file.close();
-        out.mass = c.mass;
+        out.mass = c.mass; // in the fog's place, through the clay's transform
         out.meta.voxelSize = c.voxelSize;
+        out.meta.up = c.up;
         note = "no clay grid \"mass\" in " + path + ": using fog volume \"" + fog +
                "\" as density (1 = a full cell)";
         return out;

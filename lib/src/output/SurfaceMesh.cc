@@ -1,6 +1,6 @@
 // The clay surface as a mesh file (SurfaceMesh.h): volumeToMesh of the density (Surface.h), in
 // world units through the grid's transform, optionally moved along its normals to enclose the clay's
-// volume, written as ASCII OBJ or PLY (triangles only) atomically (core/AtomicFile.h).
+// volume, written as ASCII OBJ or PLY or binary STL (triangles only) atomically (core/AtomicFile.h).
 #include "vdbclay/SurfaceMesh.h"
 
 #include "vdbclay/Metrics.h"
@@ -14,6 +14,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <iomanip>
 #include <ostream>
 #include <vector>
@@ -62,6 +64,41 @@ void keepVolume(SurfaceMesh& mesh, double target)
     }
 }
 
+/// Binary STL (little endian): an 80-byte header, the triangle count, then per triangle its unit
+/// normal, its three vertices (float32) and a zero attribute word.
+void writeBinaryStl(std::ostream& os, const SurfaceMesh& mesh, size_t faces, double isovalue,
+                    double voxelSize)
+{
+    char header[80] = {};
+    std::snprintf(header, sizeof header, "vdbclay %s clay surface at density %g (world units, voxel size %g)",
+                  VDBCLAY_VERSION, isovalue, voxelSize);
+    os.write(header, sizeof header);
+    const uint32_t n = uint32_t(faces);
+    os.write(reinterpret_cast<const char*>(&n), 4);
+    auto triangle = [&](uint32_t a, uint32_t b, uint32_t c) {
+        const openvdb::Vec3s &pa = mesh.points[a], &pb = mesh.points[b], &pc = mesh.points[c];
+        openvdb::Vec3s normal = (pb - pa).cross(pc - pa);
+        const float l = normal.length();
+        normal = l > 0 ? normal / l : openvdb::Vec3s(0.f);
+        float v[12];
+        for (int i = 0; i < 3; ++i) {
+            v[i] = normal[i];
+            v[3 + i] = pa[i];
+            v[6 + i] = pb[i];
+            v[9 + i] = pc[i];
+        }
+        char rec[50] = {};
+        std::memcpy(rec, v, sizeof v);
+        os.write(rec, sizeof rec);
+    };
+    for (const auto& t : mesh.triangles)
+        triangle(t[0], t[1], t[2]);
+    for (const auto& q : mesh.quads) {
+        triangle(q[0], q[1], q[2]);
+        triangle(q[0], q[2], q[3]);
+    }
+}
+
 } // namespace
 
 void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t threshold, double isovalue,
@@ -69,8 +106,9 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
 {
     openvdb::initialize();
     const std::string ext = extensionOf(path);
-    if (ext != ".obj" && ext != ".ply") {
-        throw Error("cannot write " + path + ": unknown mesh format \"" + ext + "\" (use .obj or .ply)");
+    if (ext != ".obj" && ext != ".ply" && ext != ".stl") {
+        throw Error("cannot write " + path + ": unknown mesh format \"" + ext +
+                    "\" (use .obj, .ply or .stl)");
     }
     if (!(isovalue > 0) || !std::isfinite(isovalue)) {
         throw Error("cannot write " + path + ": the isovalue must be positive and finite");
@@ -119,6 +157,8 @@ void writeSurfaceMesh(const std::string& path, const MassGrid& mass, int32_t thr
                 os << "f " << q[0] + 1 << ' ' << q[1] + 1 << ' ' << q[2] + 1 << '\n';
                 os << "f " << q[0] + 1 << ' ' << q[2] + 1 << ' ' << q[3] + 1 << '\n';
             }
+        } else if (ext == ".stl") {
+            writeBinaryStl(os, mesh, faces, isovalue, xform.voxelSize()[0]);
         } else {
             os << "ply\nformat ascii 1.0\n";
             os << "comment vdbclay " << VDBCLAY_VERSION << " clay surface at density " << isovalue

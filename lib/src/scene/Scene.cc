@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cstring>
 #include <cmath>
@@ -151,6 +152,19 @@ struct Ctx {
     }
 
     ShapeSpec shape(const json& obj, const std::string& field, bool forClay) const;
+
+    /// A mesh's or level set's own "up" (its file's axes), else the scene's.
+    UpAxis upOfFile(const json& obj, const std::string& field) const
+    {
+        const json* v = find(obj, "up");
+        if (!v) return up;
+        const std::string name = string(*v, join(field, "up"));
+        try {
+            return parseUpAxis(name);
+        } catch (const Error& e) {
+            fail(join(field, "up"), e.what());
+        }
+    }
 };
 
 ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) const
@@ -262,17 +276,19 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
         if (!(r > 0)) fail(join(field, "radius"), "must be > 0, got " + obj["radius"].dump());
         s.shape = wrap([&] { return makeCapsule(a, b, r); });
     } else if (s.kind == "levelset") {
-        allowed({"file", "grid"});
+        allowed({"file", "grid", "up"});
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
         if (const json* g = find(obj, "grid")) s.grid = string(*g, join(field, "grid"));
+        const UpAxis fileUp = upOfFile(obj, field);
         // Loaded here, at the scene's voxel size, so a bad file is reported with its scene field.
-        s.shape = wrap([&] { return loadLevelSet(s.file, voxelSize, s.grid, up); });
+        s.shape = wrap([&] { return loadLevelSet(s.file, voxelSize, s.grid, fileUp); });
     } else if (s.kind == "mesh") {
-        allowed({"file"});
+        allowed({"file", "up"});
         s.file = path(string(need(obj, field, "file"), join(field, "file")));
+        const UpAxis fileUp = upOfFile(obj, field);
         // Bounds and the level set's size (placed) are checked before the mesh is voxelized.
-        s.shape =
-            wrap([&] { return loadMesh(s.file, voxelSize, up, place ? *place : Placement(), meshBudget); });
+        s.shape = wrap(
+            [&] { return loadMesh(s.file, voxelSize, fileUp, place ? *place : Placement(), meshBudget); });
     } else if (s.kind == "vdb" && forClay) {
         extra.clear(); // exact masses come from the file
         allowed({"file", "grid"});
@@ -288,6 +304,241 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     if (place && s.kind != "mesh") s.shape = wrap([&] { return makePlaced(s.shape, *place); });
     return s;
 }
+
+// ---- "units": "world" ---------------------------------------------------------------------------
+// A scene in world units (the scene's up convention, e.g. Blender's coordinates as they are) is
+// rewritten into voxel indices (y up) before it is read, field by field, so that everything after
+// (checks, messages naming fields) is the same for both. Values of the wrong type are left as they
+// are, for the reader to refuse.
+
+/// R = Rz Ry Rx of Euler angles in degrees (x first), as the shapes' rotation() (ShapeMath.h).
+std::array<Vec3, 3> eulerMatrix(const Vec3& deg)
+{
+    const double k = M_PI / 180.0;
+    const double sx = std::sin(deg[0] * k), cx = std::cos(deg[0] * k), sy = std::sin(deg[1] * k),
+                 cy = std::cos(deg[1] * k), sz = std::sin(deg[2] * k), cz = std::cos(deg[2] * k);
+    return {{{{cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx}},
+             {{sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx}},
+             {{-sy, cy * sx, cy * cx}}}};
+}
+
+/// The Euler angles (degrees, x first) of rotation matrix @a m = Rz Ry Rx, each snapped to 1e-9
+/// degree (a quarter turn stays exactly 90, which the shapes turn without rounding).
+Vec3 eulerOf(const std::array<Vec3, 3>& m)
+{
+    const double k = 180.0 / M_PI;
+    auto snap = [](double d) { return std::round(d * 1e9) / 1e9 + 0.0; };
+    const double sy = std::max(-1.0, std::min(1.0, -m[2][0]));
+    if (std::fabs(sy) > 1 - 1e-12) { // gimbal lock: x and z turn about one axis; put it all in z
+        return {{0, snap(std::asin(sy) * k), snap(std::atan2(-m[0][1], m[1][1]) * k)}};
+    }
+    return {{snap(std::atan2(m[2][1], m[2][2]) * k), snap(std::asin(sy) * k),
+             snap(std::atan2(m[1][0], m[0][0]) * k)}};
+}
+
+struct WorldUnits {
+    const Ctx& cx;
+    double vs;
+    UpAxis up;
+
+    /// The index axis of world axis @a a, and its sign (up z: x -> x, y -> -z, z -> y).
+    int axisOf(int a) const { return up == UpAxis::Z ? (a == 1 ? 2 : (a == 2 ? 1 : 0)) : a; }
+    double signOf(int a) const { return up == UpAxis::Z && a == 1 ? -1.0 : 1.0; }
+
+    static bool isVec(const json* v)
+    {
+        if (!v || !v->is_array() || v->size() < 2 || v->size() > 3) return false;
+        for (const json& x : *v)
+            if (!x.is_number()) return false;
+        return true;
+    }
+    static Vec3 get(const json& v)
+    {
+        Vec3 r{{0, 0, 0}};
+        for (size_t i = 0; i < v.size(); ++i)
+            r[i] = v[i].get<double>();
+        return r;
+    }
+    static void set(json& v, const Vec3& r)
+    {
+        const size_t n = v.size();
+        v = json::array();
+        for (size_t i = 0; i < n; ++i)
+            v.push_back(r[i]);
+    }
+    /// A position: divided by the voxel size and turned for up.
+    void point(json& obj, const char* key) const
+    {
+        json* v = obj.is_object() && obj.contains(key) ? &obj[key] : nullptr;
+        if (isVec(v)) set(*v, worldToIndex(get(*v), vs, up));
+    }
+    /// A length.
+    void length(json& obj, const char* key) const
+    {
+        if (obj.is_object() && obj.contains(key) && obj[key].is_number())
+            obj[key] = obj[key].get<double>() / vs;
+    }
+    /// Per-axis factors (a scale): moved to their index axes, unsigned.
+    void perAxis(json& v) const
+    {
+        if (!isVec(&v) || v.size() != 3) return;
+        const Vec3 w = get(v);
+        Vec3 r{{1, 1, 1}};
+        for (int a = 0; a < 3; ++a)
+            r[axisOf(a)] = w[a];
+        set(v, r);
+    }
+    /// A rotation (Euler degrees, x first, about world axes) as the same turn about index axes.
+    void rotation(json& v) const
+    {
+        if (!isVec(&v) || up == UpAxis::Y) return;
+        const Vec3 w = get(v);
+        set(v, w[1] != 0 && w[2] != 0 ? eulerToIndex(w) : mapAngles(w));
+    }
+    /// The index-space Euler angles of world Euler angles @a w (degrees, x first).
+    Vec3 eulerToIndex(const Vec3& w) const
+    {
+        const std::array<Vec3, 3> m0 = eulerMatrix(w);
+        std::array<Vec3, 3> m{}; // index = P world: M_index = P M_world P^T, P[axisOf(a)][a] = signOf(a)
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                m[axisOf(i)][axisOf(j)] = signOf(i) * signOf(j) * m0[i][j];
+        return eulerOf(m);
+    }
+    /// World Euler angles that turn about x and at most one of y, z: the same turn about index axes
+    /// is the angles moved to their index axes (x, y, z becomes x, z, y: still in order).
+    Vec3 mapAngles(const Vec3& w) const
+    {
+        Vec3 r{{0, 0, 0}};
+        for (int a = 0; a < 3; ++a)
+            r[axisOf(a)] = signOf(a) * w[a];
+        return r;
+    }
+    /// A path segment's turn per frame (degrees about world axes, x first), for up z. The tool's
+    /// pose is its turn so far as one set of Euler angles (@a turned in world axes, @a pose in index
+    /// axes), so the segment is rewritten for the index pose to follow the world pose: while the
+    /// turn stays about x and at most one of y, z, its angles move axis by axis (exact at every
+    /// frame); otherwise the pose at the segment's end is converted, which is exact at every frame
+    /// only for a segment of one frame.
+    void turnRate(json& seg, const std::string& field, Vec3& turned, Vec3& pose) const
+    {
+        json& v = seg["rotate"];
+        if (!isVec(&v) || up == UpAxis::Y) return;
+        double n = 1;
+        if (seg.contains("frames")) {
+            const json& f = seg["frames"];
+            if (!f.is_number() || !(f.get<double>() >= 1)) return; // refused by the reader
+            n = f.get<double>();
+        }
+        const Vec3 rate = get(v);
+        Vec3 end;
+        for (int a = 0; a < 3; ++a)
+            end[a] = turned[a] + rate[a] * n;
+        const Vec3 mappedSoFar = mapAngles(turned);
+        const bool clean =
+            ((turned[1] == 0 && end[1] == 0) || (turned[2] == 0 && end[2] == 0)) && pose == mappedSoFar;
+        Vec3 r;
+        if (clean) {
+            r = mapAngles(rate);
+            for (int a = 0; a < 3; ++a)
+                pose[a] += r[a] * n;
+        } else {
+            if (n != 1) {
+                cx.fail(field + ".frames",
+                        "in world units with up z, a tool that has turned about both world y and z moves "
+                        "along one-frame segments (its turn, about x, then y, then z, becomes a turn "
+                        "about vdbclay's x, z, y, exact only at a segment's end); give one segment per "
+                        "frame");
+            }
+            Vec3 poseEnd = eulerToIndex(end);
+            for (int a = 0; a < 3; ++a) {
+                poseEnd[a] += 360.0 * std::round((pose[a] - poseEnd[a]) / 360.0); // the nearest turn
+                r[a] = poseEnd[a] - pose[a];
+            }
+            pose = poseEnd;
+        }
+        turned = end;
+        set(v, r);
+    }
+    void transform(json& t) const
+    {
+        if (!t.is_object()) return;
+        if (t.contains("translate") && isVec(&t["translate"])) {
+            json& v = t["translate"];
+            set(v, worldToIndex(get(v), vs, up));
+        }
+        point(t, "pivot");
+        if (t.contains("rotate")) rotation(t["rotate"]);
+        if (t.contains("scale")) perAxis(t["scale"]);
+    }
+    void shape(json& obj) const
+    {
+        if (!obj.is_object() || !obj.contains("shape") || !obj["shape"].is_string()) return;
+        const std::string kind = obj["shape"].get<std::string>();
+        if (kind == "sphere") {
+            point(obj, "center");
+            length(obj, "radius");
+        } else if (kind == "box") {
+            point(obj, "min");
+            point(obj, "max");
+            if (isVec(&obj["min"]) && isVec(&obj["max"]) && obj["min"].size() == obj["max"].size()) {
+                Vec3 lo = get(obj["min"]), hi = get(obj["max"]); // a turn for up may swap them
+                for (int a = 0; a < 3; ++a)
+                    if (lo[a] > hi[a]) std::swap(lo[a], hi[a]);
+                set(obj["min"], lo);
+                set(obj["max"], hi);
+            }
+        } else if (kind == "cylinder") {
+            point(obj, "center");
+            length(obj, "radius");
+            length(obj, "height");
+            if (up == UpAxis::Z) {
+                json& a = obj.contains("axis") ? obj["axis"] : (obj["axis"] = "z"); // world z: up
+                if (a.is_string() && a.get<std::string>().size() == 1) {
+                    const int w = std::string("xyz").find(a.get<std::string>()[0]);
+                    if (w >= 0 && w < 3) a = std::string(1, "xyz"[axisOf(w)]);
+                } else if (a.is_number_integer() && a.get<int64_t>() >= 0 && a.get<int64_t>() <= 2) {
+                    a = axisOf(int(a.get<int64_t>()));
+                }
+            }
+        } else if (kind == "capsule") {
+            point(obj, "a");
+            point(obj, "b");
+            length(obj, "radius");
+        }
+        if (obj.contains("transform") && kind != "vdb") transform(obj["transform"]);
+    }
+    void tool(json& obj, const std::string& field) const
+    {
+        shape(obj);
+        if (!obj.is_object()) return;
+        point(obj, "pivot");
+        if (!obj.contains("path") || !obj["path"].is_array()) return;
+        json& path = obj["path"];
+        Vec3 turned{{0, 0, 0}}, pose{{0, 0, 0}}; // the tool's turn so far: world and index Euler angles
+        for (size_t k = 0; k < path.size(); ++k) {
+            json& seg = path[k];
+            if (!seg.is_object()) continue;
+            if (seg.contains("translate") && isVec(&seg["translate"])) {
+                json& v = seg["translate"];
+                set(v, worldToIndex(get(v), vs, up));
+            }
+            if (seg.contains("rotate"))
+                turnRate(seg, field + ".path[" + std::to_string(k) + "]", turned, pose);
+        }
+    }
+    void scene(json& root) const
+    {
+        auto each = [&](const char* key, auto&& f) {
+            if (!root.contains(key) || !root[key].is_array()) return;
+            for (size_t i = 0; i < root[key].size(); ++i)
+                f(root[key][i], std::string(key) + "[" + std::to_string(i) + "]");
+        };
+        each("clay", [&](json& o, const std::string&) { shape(o); });
+        each("tools", [&](json& o, const std::string& f) { tool(o, f); });
+        each("obstacles", [&](json& o, const std::string&) { shape(o); });
+    }
+};
 
 /// In 2D only the z = 0 layer exists: a tool or obstacle that does not reach it would do nothing.
 void requireInPlane(const Ctx& cx, const ShapeSpec& s, const std::string& field)
@@ -378,7 +629,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     cx.keys(root, "",
             {"dimensions",  "voxel_size", "threshold", "rule",      "alpha", "seed",    "clay",
              "tools",       "obstacles",  "settle",    "frames",    "start", "outputs", "memory_budget",
-             "description", "comment",    "push",      "transport", "sweep", "up"});
+             "description", "comment",    "push",      "transport", "sweep", "up",      "units"});
     cx.text(root, "description", "");
     cx.text(root, "comment", "");
     Scene sc;
@@ -404,6 +655,20 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         }
     }
     cx.up = sc.up;
+    if (const json* v = cx.find(root, "units")) {
+        const std::string units = cx.string(*v, "units");
+        if (units != "voxels" && units != "world") {
+            cx.fail("units", "expected \"voxels\" (voxel indices, y up) or \"world\" (world units in the "
+                             "scene's up convention), got \"" +
+                                 units + "\"");
+        }
+        if (units == "world") {
+            if (sc.dimensions == 2 && sc.up == UpAxis::Z) {
+                cx.fail("units", "a 2D scene in world units needs \"up\": \"y\" (its plane is x, y)");
+            }
+            WorldUnits{cx, sc.voxelSize, sc.up}.scene(root);
+        }
+    }
     // Meshes are voxelized as they are read, below: they get the scene's budget (a malformed one is
     // reported further down), or the default.
     cx.meshBudget = defaultMemoryBudget();

@@ -1,6 +1,7 @@
 // Closed triangle meshes (OBJ, STL) as shapes: read, welded, checked, converted to a level set.
 
 #include "vdbclay/Shapes.h"
+#include "vdbclay/IO.h"
 #include "vdbclay/MemoryBudget.h"
 
 #include "shapes/Coverage.h"
@@ -606,16 +607,11 @@ void checkMeshFits(const std::string& path, const std::vector<Vec3>& indexPoints
     }
 }
 
-} // namespace
-
-ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement,
-                  uint64_t memoryBudget)
+/// The triangles of the mesh file @a path (OBJ, STL, PLY), read whole within @a budget bytes.
+Mesh readMeshFile(const std::string& path, uint64_t budget)
 {
-    requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
     // Read whole (a pipe or process substitution is fine); the mesh's bytes count against the budget.
-    const uint64_t budget = memoryBudget ? memoryBudget : defaultMemoryBudget();
     const std::string data = io_internal::readStreamable(path, "mesh", budget);
-
     Mesh mesh;
     const std::string ext = lowerExtension(path);
     bool binaryStl = false;
@@ -644,6 +640,30 @@ ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Pl
         throw Error(path + ": unknown mesh format (expected .obj, .stl or .ply)");
     }
     if (mesh.triangles.empty()) throw Error(path + ": the mesh has no faces");
+    return mesh;
+}
+
+} // namespace
+
+std::array<Vec3, 2> meshFileBounds(const std::string& path, uint64_t memoryBudget)
+{
+    const Mesh mesh = readMeshFile(path, memoryBudget ? memoryBudget : defaultMemoryBudget());
+    std::array<Vec3, 2> b{{{{HUGE_VAL, HUGE_VAL, HUGE_VAL}}, {{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL}}}};
+    for (const openvdb::Vec3s& p : mesh.points) {
+        for (int i = 0; i < 3; ++i) {
+            b[0][i] = std::min(b[0][i], double(p[i]));
+            b[1][i] = std::max(b[1][i], double(p[i]));
+        }
+    }
+    return b;
+}
+
+ShapePtr loadMesh(const std::string& path, double voxelSize, UpAxis up, const Placement& placement,
+                  uint64_t memoryBudget)
+{
+    requireVoxelSize(voxelSize, "loadMesh(" + path + ")");
+    const uint64_t budget = memoryBudget ? memoryBudget : defaultMemoryBudget();
+    Mesh mesh = readMeshFile(path, budget);
     // Open (edges of an odd number of faces: rims of holes) or non-manifold (edges of 4, 6, ...
     // faces) meshes cannot be filled by meshToLevelSet's flood fill: their inside is decided by the
     // generalized winding number instead, and describe() says so.
