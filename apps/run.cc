@@ -390,12 +390,14 @@ vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, boo
 /// The lines a finished run ends with: frames, steps and times; mass; the global layer; the clay.
 void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene)
 {
-    const bool exact = s.massFinal == s.massInitial;
+    const bool exact = s.massDrift == 0; // mass_final = mass_initial + added - removed
     std::printf("frames %llu, steps %llu, time %s (push %s, settle %s)\n", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
                 fmtSeconds(s.stages.total()).c_str());
-    std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s",
-                (long long)s.massInitial, (long long)s.massFinal, exact ? "exact" : "DRIFT",
+    std::printf("mass before %lld, after %lld", (long long)s.massInitial, (long long)s.massFinal);
+    if (s.massAdded || s.massRemoved)
+        std::printf(" (added %lld, removed %lld)", (long long)s.massAdded, (long long)s.massRemoved);
+    std::printf(" (%s); residual overload %lld; settled %s", exact ? "exact" : "DRIFT",
                 (long long)s.residualOverload, s.settled ? "yes" : "no");
     if (s.framesUnsettled > s.framesNoRoom) {
         std::printf(" (%llu frames hit the step budget)",
