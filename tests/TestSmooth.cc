@@ -205,3 +205,64 @@ TEST_F(SmoothTest, ASmoothToolInASceneIsTheSameOnAnyThreadCount)
         }
     }
 }
+
+TEST_F(SmoothTest, SurfaceTensionSmoothsAroundTheToolsOnlyAndKeepsMassExact)
+{
+    // A ball poked by a small sphere: with "surface_tension" the clay round the dent is smoother
+    // (a lower surfaceEnergy near the tool), the mass exact, the clay the same on any thread count.
+    const std::string body = R"("threshold": 1000, "rule": "prorata",
+        "clay": [{"shape": "sphere", "center": [0,0,0], "radius": 12, "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [0,15,0], "radius": 3.5, "path": [{"translate": [0,-1,0], "frames": 6}]}],
+        "settle": {"max_steps": 3000})";
+    const Scene off = parseScene("{" + body + "}", "s.json", "");
+    EXPECT_EQ(off.surfaceTension, 0.0);
+    const Scene on = parseScene("{\"surface_tension\": 0.5, " + body + "}", "s.json", "");
+    EXPECT_EQ(on.surfaceTension, 0.5);
+    expectError([] { parseScene(R"({"surface_tension": 1.5})", "s.json", ""); },
+                "s.json: surface_tension: must lie in [0, 1] (0: off), got 1.5");
+    expectError([] { parseScene(R"({"surface_tension": true})", "s.json", ""); },
+                "s.json: surface_tension: expected a number");
+    Sculptor a(off, 2);
+    const RunSummary ra = a.run();
+    uint64_t hash = 0;
+    int64_t smoothed0 = 0;
+    for (const int threads : {1, 2, 3, 8}) {
+        Sculptor b(on, threads);
+        int64_t smoothed = 0;
+        const RunSummary rb = b.run(0, [&](const FrameReport& f) { smoothed += f.massSmoothed; });
+        EXPECT_EQ(rb.massDrift, 0);
+        EXPECT_EQ(rb.massFinal, ra.massFinal);
+        EXPECT_GT(smoothed, 0);
+        const Box near{{{-8, 2, -8}}, {{8, 16, 8}}};
+        EXPECT_LT(surfaceEnergy(*b.mass(), near, 1000), surfaceEnergy(*a.mass(), near, 1000));
+        if (threads == 1) {
+            hash = contentHash(*b.mass());
+            smoothed0 = smoothed;
+        } else {
+            EXPECT_EQ(contentHash(*b.mass()), hash) << threads;
+            EXPECT_EQ(smoothed, smoothed0) << threads;
+        }
+    }
+}
+
+TEST_F(SmoothTest, SmoothRegionChangesOnlyItsRegion)
+{
+    auto a = bumpySphere(60);
+    const auto before = a->mass()->deepCopy();
+    const int64_t mass = a->totalMass();
+    const Box region{{{-16, 3, -16}}, {{16, 16, 16}}}; // the upper part
+    const int64_t e0 = surfaceEnergy(*a->mass(), kAround, 1000);
+    int64_t moved = 0;
+    for (int i = 0; i < 4; ++i)
+        moved += smoothRegion(*a, region, 0.5).massMoved;
+    EXPECT_GT(moved, 0);
+    EXPECT_EQ(a->totalMass(), mass);
+    EXPECT_LT(surfaceEnergy(*a->mass(), kAround, 1000), e0);
+    auto acc = a->mass()->getConstAccessor();
+    auto old = before->getConstAccessor();
+    for (int x = -16; x <= 16; ++x)
+        for (int y = -16; y <= 2; ++y)
+            for (int z = -16; z <= 16; ++z)
+                ASSERT_EQ(acc.getValue(Coord(x, y, z)), old.getValue(Coord(x, y, z)))
+                    << x << " " << y << " " << z;
+}

@@ -3,16 +3,22 @@
 ///        integer masses conserved exactly (a "smooth" tool; docs/SCENES.md).
 ///
 /// The model. Each voxel's fill is its clay clamped to [0, Tc] (an obstacle voxel counts as full:
-/// clay wets walls and tools at a right angle). A voxel's shelter G is the weighted sum of its 26
-/// neighbours' fills (3D; weights 6 for a face, 3 for an edge, 2 for a corner neighbour; 2D: its 8
-/// neighbours in the layer, 6 and 3): high in a hollow, low on a bump. Clay flows between face
-/// neighbours from the less sheltered to the more sheltered voxel, which is surface tension's
-/// descent of the weighted count of broken bonds (surfaceEnergy below): a voxel on a convex bump
-/// gives, a voxel in a concave crease receives, and a flat surface, whose full voxels have no room
-/// and whose empty voxels have no clay, does not move. A pair moves
-///   t = floor(strength x (G(to) - G(from)) / 12),
-/// (12 = twice a face weight: strength 1 evens the two voxels' shelter), at most what the giver
-/// holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded.
+/// clay wets walls and tools at a right angle). A voxel's shelter G is the sum of the fills of its
+/// 5^3 neighbourhood (5^2 in 2D) weighted by the tent (1 2 3 2 1) along each axis, its own fill
+/// left out: high in a hollow, low on a bump, a measure of the surface's curvature two voxels wide.
+/// Clay flows between face neighbours from the less sheltered to the more sheltered voxel, a
+/// descent of the weighted count of broken bonds: a voxel on a convex bump gives, a voxel in a
+/// concave crease receives, and a flat surface, whose full voxels have no room and whose empty
+/// voxels have no clay, does not move. A pair moves
+///   t = floor(strength x (G(to) - G(from)) / (2 x the face weight)),
+/// (face weight 18 in 3D, 6 in 2D: strength 1 evens the two voxels' shelters), at most what the
+/// giver holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded.
+///
+/// What it does not do: clay moves only into room, so a surface of full cells moves only where its
+/// partly filled cells let it. A sharp bump or terrace of full cells several voxels wide is a local
+/// minimum of the bond count (its edge voxels are more sheltered than the empty voxels beside them)
+/// and stays; coverage-weighted clay, deposits and clay under Tc smooth (docs/SCENES.md, "Actions",
+/// gives figures).
 ///
 /// One pass visits the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose
 /// lower voxel has an even, then an odd coordinate along it), so the pairs of a sub-pass are
@@ -45,9 +51,9 @@ constexpr int kSurfaceTensionMargin = 4;
 
 /// Runs @a passes passes of surface tension (file comment) on the voxels whose centre lies inside
 /// @a tool and that are neither obstacles of @a automaton nor inside one of @a solids. Only those
-/// voxels change (no margin); their shelters read one voxel beyond. Writes the changed voxels
-/// through Automaton::setMasses (nothing when nothing moved). Work: (the tool's bounds + 2)^3 x
-/// passes x 6 x 27.
+/// voxels change (no margin); their shelters read two voxels beyond. Writes the changed voxels
+/// through Automaton::setMasses (nothing when nothing moved). Work: (the tool's bounds + 4)^3 x
+/// passes x 6 x 15.
 /// @throw Error if @a strength is outside (0, 1] or @a passes < 1; nothing is changed then.
 SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, int passes = 1,
                     const std::vector<ShapePtr>& solids = {});
@@ -57,7 +63,8 @@ SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, in
 SmoothReport smoothRegion(Automaton& automaton, const Box& region, double strength, int passes = 1,
                           const std::vector<ShapePtr>& solids = {});
 
-/// The roughness measure smoothing lowers: the weighted count of broken bonds over the voxels of
+/// The roughness measure smoothing lowers: the weighted count of broken bonds (a 3^3 stencil) over the voxels
+/// of
 /// @a region (3D: Σ over each voxel v and neighbour u of weight(u - v) x fill(v) x (Tc - fill(u))
 /// / Tc, the weights above; a neighbour without clay, an obstacle too, reads as empty), i.e. a weighted
 /// surface area in units of Tc (a flat face of one full voxel to empty space: 6 x 1 + 4 x 3 + 4 x 2 = 26). A

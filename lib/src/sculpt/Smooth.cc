@@ -20,14 +20,18 @@ namespace {
 using openvdb::Coord;
 
 constexpr int64_t kFace = 6, kEdge = 3, kCorner = 2;
-constexpr int64_t kPairDivisor = 2 * kFace;
 
-/// Weight of neighbour offset (dx, dy, dz) (not all 0).
+/// Weight of neighbour offset (dx, dy, dz) (not all 0) in surfaceEnergy.
 inline int64_t weight(int dx, int dy, int dz)
 {
     const int n = (dx != 0) + (dy != 0) + (dz != 0);
     return n == 1 ? kFace : n == 2 ? kEdge : kCorner;
 }
+
+/// The shelter's kernel along one axis: (1 2 3 2 1), so a voxel's shelter weighs the fills of its
+/// 5^3 neighbourhood (5^2 in 2D) by the product of these, its own fill left out.
+constexpr int64_t kTent[5] = {1, 2, 3, 2, 1};
+constexpr int kReach = 2;
 
 /// A dense copy of a box grown by one voxel (2D: in x and y only).
 struct Block {
@@ -42,8 +46,8 @@ struct Block {
     {
         for (int i = 0; i < 3; ++i) {
             if (twoD && i == 2) continue;
-            outer.min[i] -= 1;
-            outer.max[i] += 1;
+            outer.min[i] -= kReach;
+            outer.max[i] += kReach;
         }
         nx = int64_t(outer.max[0]) - outer.min[0] + 1;
         ny = int64_t(outer.max[1]) - outer.min[1] + 1;
@@ -59,42 +63,55 @@ struct Block {
     }
 };
 
-/// The shelter of voxel @a i (x, y, z): its neighbours' weighted fills.
-int64_t shelter(const Block& b, int64_t x, int64_t y, int64_t z, int64_t tc)
+/// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills of its neighbourhood,
+/// its own left out; a fill is the clay clamped to [0, Tc], Tc for an obstacle. Separable: a pass
+/// along each axis, voxels beyond the outer box empty.
+void shelters(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<int64_t>& tmp)
 {
-    int64_t g = 0;
-    const int dzr = b.is2D ? 0 : 1;
-    for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dz = -dzr; dz <= dzr; ++dz) {
-                if (!dx && !dy && !dz) continue;
-                const int64_t X = x + dx, Y = y + dy, Z = z + dz;
-                if (X < b.outer.min[0] || X > b.outer.max[0] || Y < b.outer.min[1] || Y > b.outer.max[1] ||
-                    Z < b.outer.min[2] || Z > b.outer.max[2])
-                    continue;
-                const int64_t k = b.index(X, Y, Z);
-                const int64_t fill = b.obstacle[size_t(k)] ? tc : std::min(b.mass[size_t(k)], tc);
-                g += weight(dx, dy, dz) * fill;
-            }
-    return g;
+    const size_t n = b.mass.size();
+    g.resize(n);
+    tmp.resize(n);
+    for (size_t k = 0; k < n; ++k)
+        g[k] = b.obstacle[k] ? tc : std::min(b.mass[k], tc);
+    const std::vector<int64_t> fill = g;
+    const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
+    const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
+    for (int axis = 0; axis < (b.is2D ? 2 : 3); ++axis) {
+        for (int64_t x = 0; x < b.nx; ++x)
+            for (int64_t y = 0; y < b.ny; ++y)
+                for (int64_t z = 0; z < b.nz; ++z) {
+                    const int64_t c[3] = {x, y, z};
+                    const int64_t k = (x * b.ny + y) * b.nz + z;
+                    int64_t sum = 0;
+                    for (int d = -kReach; d <= kReach; ++d) {
+                        const int64_t at = c[axis] + d;
+                        if (at < 0 || at >= dimsN[axis]) continue;
+                        sum += kTent[d + kReach] * g[size_t(k + d * stride[axis])];
+                    }
+                    tmp[size_t(k)] = sum;
+                }
+        g.swap(tmp);
+    }
+    const int64_t self =
+        b.is2D ? kTent[kReach] * kTent[kReach] : kTent[kReach] * kTent[kReach] * kTent[kReach];
+    for (size_t k = 0; k < n; ++k)
+        g[k] -= self * fill[k];
 }
 
 SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
 {
     const int64_t tc = automaton.options().rule.threshold;
     const std::vector<int64_t> before = b.mass;
-    std::vector<int64_t> g(b.mass.size(), 0);
+    std::vector<int64_t> g, tmp;
     const Box& in = b.inner;
     const int axes = b.is2D ? 2 : 3;
+    // Twice a face neighbour's weight: strength 1 evens the shelters of a pair in one exchange.
+    const int64_t divisor =
+        2 * (b.is2D ? kTent[kReach] * kTent[kReach + 1] : kTent[kReach] * kTent[kReach] * kTent[kReach + 1]);
     for (int pass = 0; pass < passes; ++pass)
         for (int axis = 0; axis < axes; ++axis)
             for (int parity = 0; parity < 2; ++parity) {
-                for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
-                    for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
-                        for (int64_t z = in.min[2]; z <= in.max[2]; ++z) {
-                            const int64_t k = b.index(x, y, z);
-                            if (b.member[size_t(k)]) g[size_t(k)] = shelter(b, x, y, z, tc);
-                        }
+                shelters(b, tc, g, tmp);
                 const int64_t step = axis == 0 ? b.ny * b.nz : axis == 1 ? b.nz : 1;
                 for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
                     for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
@@ -107,7 +124,7 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                             if (d == 0) continue;
                             const size_t from = d > 0 ? p : q, to = d > 0 ? q : p;
                             int64_t t =
-                                int64_t(std::floor(strength * double(std::llabs(d)) / double(kPairDivisor)));
+                                int64_t(std::floor(strength * double(std::llabs(d)) / double(divisor)));
                             t = std::min(t, b.mass[from]);
                             t = std::min(t, std::max<int64_t>(0, tc - b.mass[to]));
                             if (t <= 0) continue;
