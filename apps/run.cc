@@ -475,9 +475,10 @@ int runScene(const RunArgs& a)
         vdbclay::writeTextFile(out.stats, vdbclay::runReportJson(report) + "\n");
         std::printf("wrote %s\n", out.stats.c_str());
     }
-    if (s.massFinal != s.massInitial) {
-        std::fprintf(stderr, "vdbclay: error: mass changed from %lld to %lld\n", (long long)s.massInitial,
-                     (long long)s.massFinal);
+    if (s.massDrift != 0) { // mass_final = mass_initial + mass_added - mass_removed, exactly
+        std::fprintf(stderr, "vdbclay: error: mass changed from %lld to %lld (added %lld, removed %lld)\n",
+                     (long long)s.massInitial, (long long)s.massFinal, (long long)s.massAdded,
+                     (long long)s.massRemoved);
         return 3;
     }
     return 0;
