@@ -5,6 +5,7 @@
 #include <vdbclay/Automaton.h>
 #include <vdbclay/Deposit.h>
 #include <vdbclay/IO.h>
+#include <vdbclay/MemoryEstimate.h>
 #include <vdbclay/Metrics.h>
 #include <vdbclay/RunReport.h>
 #include <vdbclay/Scene.h>
@@ -326,4 +327,34 @@ TEST_F(ToolsFileTest, ACheckpointKeepsTheCountsAndTheResumedRunEndsAsTheUnbroken
     EXPECT_EQ(b.massDrift, 0);
     EXPECT_EQ(second.checkpointMeta().massAdded, whole.checkpointMeta().massAdded);
     EXPECT_EQ(second.automaton().stepCount(), whole.automaton().stepCount());
+}
+
+TEST_F(ToolsTest, TheMemoryEstimateCoversTheClayAnAddToolCreates)
+{
+    // A bead laid in empty space (no clay at the start), one into a slab, one at 3 Tc that spreads,
+    // and the study scene: the estimate's leaves and clay bytes cover what the run built.
+    const std::string bead =
+        R"("tools": [{"shape": "sphere", "center": [0,20,0], "radius": 3, "action": "add",
+        "path": [{"translate": [2,0,1], "frames": 20}]}])";
+    const std::vector<std::string> scenes = {
+        "{" + bead + "}",
+        R"({"clay": [{"shape": "box", "min": [-8,0,-8], "max": [40,17,30], "mass": 1000}], )" + bead + "}",
+        R"({"tools": [{"shape": "sphere", "center": [0,20,0], "radius": 3, "action": "add", "mass": 3000,
+            "path": [{"translate": [2,0,1], "frames": 20}]}]})",
+    };
+    for (const std::string& json : scenes) {
+        const Scene s = scene(json);
+        const MemoryEstimate e = estimateSceneMemory(s);
+        Sculptor sc(s, 2);
+        const RunSummary r = sc.run();
+        EXPECT_GT(r.massAdded, 0) << json;
+        EXPECT_GE(e.clayLeavesGrown, uint64_t(sc.mass()->tree().leafCount())) << json;
+        EXPECT_GE(e.clayBytes, uint64_t(sc.mass()->memUsage())) << json;
+    }
+    const Scene study = vdbclay_test::loadTestScene("studies/add-bead.json");
+    const MemoryEstimate e = estimateSceneMemory(study);
+    Sculptor sc(study, 2);
+    sc.run();
+    EXPECT_GE(e.clayLeavesGrown, uint64_t(sc.mass()->tree().leafCount()));
+    EXPECT_GE(e.clayBytes, uint64_t(sc.mass()->memUsage()));
 }
