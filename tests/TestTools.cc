@@ -65,6 +65,20 @@ const char* kMixedScene = R"({
   "settle": {"max_steps": 400}
 })";
 
+/// The same in 2D: a 48 x 24 slab at 800, a disc laying a bead, a disc carving a groove, a plate
+/// pressing; 16 frames.
+const char* kMixedScene2D = R"({
+  "dimensions": 2, "threshold": 1000, "rule": "prorata",
+  "clay": [{"shape": "box", "min": [0,0,0], "max": [47,23,0], "mass": 800}],
+  "tools": [
+    {"shape": "sphere", "center": [-4,26.2,0], "radius": 2.4, "action": "add", "path": [{"translate": [2,0,0], "frames": 16}]},
+    {"shape": "sphere", "center": [30,27,0], "radius": 3, "action": "remove", "path": [{"translate": [0,-1,0], "frames": 16}]},
+    {"shape": "box", "min": [-6,0,0], "max": [-1,20,0], "path": [{"translate": [0.5,0,0], "frames": 16}]}
+  ],
+  "obstacles": [{"shape": "box", "min": [-40,-4,0], "max": [80,-1,0]}],
+  "settle": {"max_steps": 400}
+})";
+
 } // namespace
 
 // ---- the scene's fields -------------------------------------------------------------------------
@@ -231,41 +245,43 @@ TEST_F(ToolsTest, AddNeverWritesIntoObstaclesOrSolidToolsAndKeepsFullerClay)
 
 TEST_F(ToolsTest, MixedToolsAccountForEveryUnitOnAnyThreadCount)
 {
-    const Scene s = scene(kMixedScene);
-    uint64_t hash0 = 0;
-    int64_t added0 = 0, removed0 = 0;
-    for (const int threads : {1, 2, 3, 8}) {
-        Sculptor sc(s, threads);
-        int64_t framesAdded = 0, framesRemoved = 0;
-        const RunSummary r = sc.run(0, [&](const FrameReport& f) {
-            framesAdded += f.massAdded;
-            framesRemoved += f.massRemoved;
-        });
-        EXPECT_EQ(r.massInitial, int64_t(24 * 24 * 24) * 800);
-        EXPECT_GT(r.massAdded, 0);
-        EXPECT_GT(r.massRemoved, 0);
-        EXPECT_EQ(r.massAdded, framesAdded);
-        EXPECT_EQ(r.massRemoved, framesRemoved);
-        EXPECT_EQ(r.massFinal, r.massInitial + r.massAdded - r.massRemoved);
-        EXPECT_EQ(r.massDrift, 0);
-        EXPECT_EQ(sc.massAdded(), r.massAdded);
-        EXPECT_EQ(sc.massRemoved(), r.massRemoved);
-        EXPECT_EQ(totalMass(*sc.mass()), r.massFinal);
-        const uint64_t hash = contentHash(*sc.mass());
-        if (threads == 1) {
-            hash0 = hash;
-            added0 = r.massAdded;
-            removed0 = r.massRemoved;
-        } else {
-            EXPECT_EQ(hash, hash0) << threads;
-            EXPECT_EQ(r.massAdded, added0) << threads;
-            EXPECT_EQ(r.massRemoved, removed0) << threads;
+    for (const Scene& s : {scene(kMixedScene), scene(kMixedScene2D)}) {
+        uint64_t hash0 = 0;
+        int64_t added0 = 0, removed0 = 0;
+        for (const int threads : {1, 2, 3, 8}) {
+            Sculptor sc(s, threads);
+            int64_t framesAdded = 0, framesRemoved = 0;
+            const RunSummary r = sc.run(0, [&](const FrameReport& f) {
+                framesAdded += f.massAdded;
+                framesRemoved += f.massRemoved;
+            });
+            EXPECT_EQ(r.massInitial,
+                      s.dimensions == 3 ? int64_t(24 * 24 * 24) * 800 : int64_t(48 * 24) * 800);
+            EXPECT_GT(r.massAdded, 0);
+            EXPECT_GT(r.massRemoved, 0);
+            EXPECT_EQ(r.massAdded, framesAdded);
+            EXPECT_EQ(r.massRemoved, framesRemoved);
+            EXPECT_EQ(r.massFinal, r.massInitial + r.massAdded - r.massRemoved);
+            EXPECT_EQ(r.massDrift, 0);
+            EXPECT_EQ(sc.massAdded(), r.massAdded);
+            EXPECT_EQ(sc.massRemoved(), r.massRemoved);
+            EXPECT_EQ(totalMass(*sc.mass()), r.massFinal);
+            const uint64_t hash = contentHash(*sc.mass());
+            if (threads == 1) {
+                hash0 = hash;
+                added0 = r.massAdded;
+                removed0 = r.massRemoved;
+            } else {
+                EXPECT_EQ(hash, hash0) << threads;
+                EXPECT_EQ(r.massAdded, added0) << threads;
+                EXPECT_EQ(r.massRemoved, removed0) << threads;
+            }
+            // The run's report carries the counts.
+            const std::string json = runReportJson(makeRunReport(sc, r, threads));
+            EXPECT_NE(json.find("\"mass_added\": " + std::to_string(r.massAdded)), std::string::npos);
+            EXPECT_NE(json.find("\"mass_removed\": " + std::to_string(r.massRemoved)), std::string::npos);
+            EXPECT_NE(json.find("\"mass_drift\": 0"), std::string::npos);
         }
-        // The run's report carries the counts.
-        const std::string json = runReportJson(makeRunReport(sc, r, threads));
-        EXPECT_NE(json.find("\"mass_added\": " + std::to_string(r.massAdded)), std::string::npos);
-        EXPECT_NE(json.find("\"mass_removed\": " + std::to_string(r.massRemoved)), std::string::npos);
-        EXPECT_NE(json.find("\"mass_drift\": 0"), std::string::npos);
     }
 }
 
