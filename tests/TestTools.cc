@@ -374,3 +374,27 @@ TEST_F(ToolsTest, TheMemoryEstimateCoversTheClayAnAddToolCreates)
     EXPECT_GE(e.clayLeavesGrown, uint64_t(sc.mass()->tree().leafCount()));
     EXPECT_GE(e.clayBytes, uint64_t(sc.mass()->memUsage()));
 }
+
+TEST_F(ToolsTest, ARemoveToolPushesNothingAndItsCellsAreSolid)
+{
+    // A drill going down into a block: every frame it takes clay, none is pushed, and the clay
+    // settles around it (its cells are obstacles: no clay flows back into the hole while it is there).
+    const Scene s = scene(R"({"threshold": 1000, "rule": "prorata",
+        "clay": [{"shape": "box", "min": [0,0,0], "max": [15,15,15], "mass": 1000}],
+        "tools": [{"shape": "cylinder", "center": [8,20,8], "radius": 3, "height": 8, "axis": 1, "action": "remove",
+                   "path": [{"translate": [0,-2,0], "frames": 8}]}]})");
+    Sculptor sc(s, 2);
+    uint64_t frames = 0;
+    const RunSummary r = sc.run(0, [&](const FrameReport& f) {
+        ++frames;
+        EXPECT_EQ(f.push.voxelsPushed, 0u) << f.frame;
+        EXPECT_EQ(f.push.massMoved, 0) << f.frame;
+    });
+    EXPECT_EQ(frames, 8u);
+    EXPECT_GT(r.massRemoved, 0);
+    EXPECT_EQ(r.massDrift, 0);
+    // The drill's axis, below the top and above its tip (y = 20 - 16 - 4 = 0): emptied.
+    auto acc = sc.mass()->getConstAccessor();
+    for (int y = 1; y <= 15; ++y)
+        EXPECT_EQ(acc.getValue(Coord(8, y, 8)), 0) << y;
+}

@@ -506,8 +506,7 @@ struct Sculptor::Impl {
             // what is left free (never a solid tool's voxel): a scene of push tools only is the push.
             for (const ShapePtr& t : withAction(sub, ToolAction::Remove))
                 massRemoved += carve(*automaton, *t).mass;
-            const PushReport r =
-                push(*automaton, solids.size() == sub.size() ? sub : withAction(sub, ToolAction::Push), po);
+            const PushReport r = push(*automaton, withAction(sub, ToolAction::Push), po);
             for (size_t i = 0; i < sub.size(); ++i) {
                 const ToolSpec& spec = scene.tools[i];
                 if (spec.action != ToolAction::Add) continue;
