@@ -354,11 +354,14 @@ std::function<void(const vdbclay::FrameReport&)> frameProgress(bool quiet, bool 
                          (unsigned long long)r.settle.steps, (long long)r.settle.residualOverload);
             if (r.frame == total && r.finished) std::fprintf(stderr, "\n");
         } else {
-            std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
-                        "residual overload %lld\n",
+            std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), ",
                         (unsigned long long)r.frame, (unsigned long long)total,
                         (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
-                        (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
+                        (long long)r.push.massTrapped);
+            if (r.massAdded || r.massRemoved || r.massSmoothed)
+                std::printf("added %lld, removed %lld, smoothed %lld, ", (long long)r.massAdded,
+                            (long long)r.massRemoved, (long long)r.massSmoothed);
+            std::printf("%llu steps (%s), residual overload %lld\n", (unsigned long long)r.settle.steps,
                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
                         (long long)r.settle.residualOverload);
             std::fflush(stdout); // a log file follows the run frame by frame
