@@ -420,11 +420,14 @@ std::function<void(const vdbclay::FrameReport&)> frameProgress(bool quiet, bool 
                          (unsigned long long)r.settle.steps, (long long)r.settle.residualOverload);
             if (r.frame == total && r.finished) std::fprintf(stderr, "\n");
         } else {
-            std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), %llu steps (%s), "
-                        "residual overload %lld, %.3f s\n",
+            std::printf("frame %llu/%llu: pushed %llu voxels (%lld clay, %lld trapped), ",
                         (unsigned long long)r.frame, (unsigned long long)total,
                         (unsigned long long)r.push.voxelsPushed, (long long)r.push.massMoved,
-                        (long long)r.push.massTrapped, (unsigned long long)r.settle.steps,
+                        (long long)r.push.massTrapped);
+            if (r.massAdded || r.massRemoved || r.massSmoothed)
+                std::printf("added %lld, removed %lld, smoothed %lld, ", (long long)r.massAdded,
+                            (long long)r.massRemoved, (long long)r.massSmoothed);
+            std::printf("%llu steps (%s), residual overload %lld, %.3f s\n", (unsigned long long)r.settle.steps,
                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
                         (long long)r.settle.residualOverload, r.seconds);
             std::fflush(stdout); // a log file follows the run frame by frame
@@ -539,14 +542,16 @@ vdbclay::RunSummary runFrames(vdbclay::Sculptor& sculptor, const RunArgs& a, boo
 void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene, double setupSeconds,
                   double frameWriteSeconds)
 {
-    const bool exact = s.massFinal == s.massInitial;
+    const bool exact = s.massDrift == 0; // mass_final = mass_initial + added - removed
     std::printf("frames %llu, steps %llu, time %s (push %s, settle %s", (unsigned long long)s.frames,
                 (unsigned long long)s.steps, fmtSeconds(s.seconds).c_str(), fmtSeconds(s.pushSeconds).c_str(),
                 fmtSeconds(s.stages.total()).c_str());
     if (frameWriteSeconds > 0) std::printf(", writing frames %s", fmtSeconds(frameWriteSeconds).c_str());
     std::printf("); set-up before the frames %s\n", fmtSeconds(setupSeconds).c_str());
-    std::printf("mass before %lld, after %lld (%s); residual overload %lld; settled %s",
-                (long long)s.massInitial, (long long)s.massFinal, exact ? "exact" : "DRIFT",
+    std::printf("mass before %lld, after %lld", (long long)s.massInitial, (long long)s.massFinal);
+    if (s.massAdded || s.massRemoved)
+        std::printf(" (added %lld, removed %lld)", (long long)s.massAdded, (long long)s.massRemoved);
+    std::printf(" (%s); residual overload %lld; settled %s", exact ? "exact" : "DRIFT",
                 (long long)s.residualOverload, s.settled ? "yes" : "no");
     if (s.framesUnsettled > s.framesNoRoom) {
         std::printf(" (%llu frames hit the step budget)",
@@ -632,9 +637,10 @@ int runScene(const RunArgs& a)
         vdbclay::writeTextFile(out.stats, vdbclay::runReportJson(report) + "\n");
         std::printf("wrote %s\n", out.stats.c_str());
     }
-    if (s.massFinal != s.massInitial) {
-        std::fprintf(stderr, "vdbclay: error: mass changed from %lld to %lld\n", (long long)s.massInitial,
-                     (long long)s.massFinal);
+    if (s.massDrift != 0) { // mass_final = mass_initial + mass_added - mass_removed, exactly
+        std::fprintf(stderr, "vdbclay: error: mass changed from %lld to %lld (added %lld, removed %lld)\n",
+                     (long long)s.massInitial, (long long)s.massFinal, (long long)s.massAdded,
+                     (long long)s.massRemoved);
         return 3;
     }
     return 0;

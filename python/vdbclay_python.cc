@@ -10,6 +10,7 @@
 // Sculptor.run returns the run's report: the dict of the CLI's --stats file, parsed from the same
 // JSON text (vdbclay/RunReport.h), so the two never differ in a key.
 #include <vdbclay/Automaton.h>
+#include <vdbclay/Deposit.h>
 #include <vdbclay/IO.h>
 #include <vdbclay/MakeClay.h>
 #include <vdbclay/MemoryBudget.h>
@@ -21,6 +22,7 @@
 #include <vdbclay/Scene.h>
 #include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
+#include <vdbclay/Smooth.h>
 #include <vdbclay/SurfaceMesh.h>
 
 #include <openvdb/openvdb.h>
@@ -319,6 +321,9 @@ py::dict frameDict(const FrameReport& r)
     py::dict d;
     d["frame"] = r.frame;
     d["push"] = pushDict(r.push);
+    d["mass_added"] = r.massAdded;
+    d["mass_removed"] = r.massRemoved;
+    d["mass_smoothed"] = r.massSmoothed;
     d["settle"] = stepDict(r.settle);
     d["finished"] = r.finished;
     return d;
@@ -946,6 +951,63 @@ PYBIND11_MODULE(_vdbclay, m)
             },
             py::arg("tools"), py::arg("max_search") = 16,
             "The paper's push: clay inside the tools moves out along their normals (mass exact).")
+        .def(
+            "deposit",
+            [](PyAutomaton& a, const PyShape& tool, int32_t mass, const std::vector<PyShape>& solids) {
+                std::vector<ShapePtr> s;
+                for (const PyShape& p : solids)
+                    s.push_back(p.shape);
+                auto guard = changing(a);
+                DepositReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = deposit(*a.automaton, *tool.shape, mass, s);
+                }
+                return r.mass;
+            },
+            py::arg("tool"), py::arg("mass"), py::arg("solids") = std::vector<PyShape>{},
+            "An \"add\" tool: fills every voxel the tool covers to at least mass x the part of it "
+            "covered (boundary voxels in proportion), never an obstacle or a voxel inside one of solids. "
+            "Returns the clay added.")
+        .def(
+            "carve",
+            [](PyAutomaton& a, const PyShape& tool) {
+                auto guard = changing(a);
+                DepositReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = carve(*a.automaton, *tool.shape);
+                }
+                return r.mass;
+            },
+            py::arg("tool"),
+            "A \"remove\" tool: takes away the clay inside the tool (a boundary voxel's in proportion to "
+            "the part of it covered). Returns the clay removed.")
+        .def(
+            "smooth",
+            [](PyAutomaton& a, const PyShape& tool, double strength, int passes) {
+                auto guard = changing(a);
+                SmoothReport r;
+                {
+                    py::gil_scoped_release nogil;
+                    r = smooth(*a.automaton, *tool.shape, strength, passes);
+                }
+                return r.massMoved;
+            },
+            py::arg("tool"), py::arg("strength") = 0.5, py::arg("passes") = 1,
+            "A \"smooth\" tool: surface tension inside the tool (clay moves along the surface from bumps "
+            "to hollows; mass exact; nothing outside the tool changes). Returns the clay moved.")
+        .def(
+            "surface_energy",
+            [](const PyAutomaton& a, Int3 lo, Int3 hi) {
+                auto g = reading(a);
+                const Box b{{{lo[0], lo[1], lo[2]}}, {{hi[0], hi[1], hi[2]}}};
+                return surfaceEnergy(*a.automaton->mass(), b, a.automaton->options().rule.threshold,
+                                     a.automaton->options().dimensions);
+            },
+            py::arg("min"), py::arg("max"),
+            "The roughness measure smoothing lowers (Smooth.h: the weighted count of broken bonds, in "
+            "units of Tc) over the voxels min..max (inclusive).")
         .def_property_readonly(
             "clay",
             [](const PyAutomaton& a) {
@@ -1012,6 +1074,15 @@ PYBIND11_MODULE(_vdbclay, m)
             "Bytes a run may use (\"memory_budget\" in the scene): 0 the default (3/4 of memory), "
             "NO_MEMORY_BUDGET none. Set from bytes, a size such as \"8G\" or \"none\", or None (0).")
         .def_readonly("dimensions", &Scene::dimensions)
+        .def_property_readonly(
+            "tool_actions",
+            [](const Scene& s) {
+                std::vector<std::string> a;
+                for (const ToolSpec& t : s.tools)
+                    a.push_back(toolActionName(t.action));
+                return a;
+            },
+            "Each tool's \"action\": push, add, remove or smooth.")
         .def_readonly("voxel_size", &Scene::voxelSize)
         .def_property_readonly("up", [](const Scene& s) { return std::string(upAxisName(s.up)); })
         .def_property(
@@ -1095,6 +1166,20 @@ PYBIND11_MODULE(_vdbclay, m)
                 writeClayFile(path, *c.mass, c.meta);
             },
             py::arg("path"), "Writes the clay as a .vdb that a scene's \"start\" continues exactly.")
+        .def_property_readonly(
+            "mass_added",
+            [](const PySculptor& p) {
+                GridGuard g(p.lock, false);
+                return p.sculptor->massAdded();
+            },
+            "Clay the add tools deposited since the scene's frame 0 (a start file's too).")
+        .def_property_readonly(
+            "mass_removed",
+            [](const PySculptor& p) {
+                GridGuard g(p.lock, false);
+                return p.sculptor->massRemoved();
+            },
+            "Clay the remove tools took away since the scene's frame 0.")
         .def_property_readonly("done",
                                [](const PySculptor& p) {
                                    GridGuard g(p.lock, false);

@@ -169,6 +169,45 @@ class AutomatonTests(unittest.TestCase):
         self.assertEqual(auto.total_mass, 16 * 8 * 16 * 1000)
         self.assertEqual(int(clay.mass_array(min=(4, 5, 4), max=(11, 7, 11)).sum()), 0)
 
+    def test_deposit_carve_and_smooth_account_for_every_unit(self):
+        clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (15, 7, 15)), mass=1000)
+        auto = vdbclay.Automaton(clay)
+        removed = auto.carve(vdbclay.box((4, 4, 4), (11, 12, 11)))
+        self.assertEqual(removed, 8 * 4 * 8 * 1000)
+        self.assertEqual(int(clay.mass_array(min=(4, 4, 4), max=(11, 7, 11)).sum()), 0)
+        added = auto.deposit(vdbclay.box((0, 8, 0), (3, 9, 3)), mass=700)
+        self.assertEqual(added, 4 * 2 * 4 * 700)
+        self.assertEqual(auto.total_mass, 16 * 8 * 16 * 1000 - removed + added)
+        before = auto.total_mass
+        rough = auto.surface_energy((-2, -2, -2), (17, 12, 17))
+        moved = auto.smooth(vdbclay.sphere((2, 8, 2), 4), strength=1.0)
+        self.assertGreater(moved, 0)
+        self.assertEqual(auto.total_mass, before)
+        self.assertLess(auto.surface_energy((-2, -2, -2), (17, 12, 17)), rough)
+        with self.assertRaises(vdbclay.Error):
+            auto.smooth(vdbclay.sphere((2, 8, 2), 4), strength=2.0)
+
+    def test_a_scene_with_add_and_remove_tools_reports_its_counts(self):
+        scene = vdbclay.Scene.from_json(
+            '{"clay": [{"shape": "box", "min": [0,0,0], "max": [11,11,11], "mass": 1000}],'
+            ' "tools": [{"shape": "sphere", "center": [0,14,6], "radius": 2, "action": "add",'
+            '            "path": [{"translate": [1,0,0], "frames": 6}]},'
+            '           {"shape": "sphere", "center": [6,12,6], "radius": 3, "action": "remove",'
+            '            "path": [{"translate": [0,-1,0], "frames": 6}]}]}')
+        self.assertEqual(scene.tool_actions, ["add", "remove"])
+        s = vdbclay.Sculptor(scene, threads=2)
+        frames = []
+        report = s.run(progress=lambda r: frames.append((r["mass_added"], r["mass_removed"])))
+        self.assertGreater(report["mass_added"], 0)
+        self.assertGreater(report["mass_removed"], 0)
+        self.assertEqual(report["mass_final"],
+                         report["mass_initial"] + report["mass_added"] - report["mass_removed"])
+        self.assertEqual(report["mass_drift"], 0)
+        self.assertEqual(sum(a for a, _ in frames), report["mass_added"])
+        self.assertEqual(sum(r for _, r in frames), report["mass_removed"])
+        self.assertEqual(s.mass_added, report["mass_added"])
+        self.assertEqual(s.mass_removed, report["mass_removed"])
+
 
 def overloaded_lump(threads=2):
     """A cube at Tc with an overfull block on top: many steps of work for the automaton."""

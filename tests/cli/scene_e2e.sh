@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# End to end through the CLI: run a scene, then check exact mass, settling, the PNG, and that
+# End to end through the CLI: run a scene, then check exact mass (added and removed counted), settling, the PNG, and that
 # `vdbclay info` reads the output back with the same total mass.
 # usage: scene_e2e.sh VDBCLAY SCENE.json WORKDIR
 set -euo pipefail
@@ -9,7 +9,11 @@ mkdir -p "$work"; out="$work/$name"
 "$bin" run "$scene" -o "$out.vdb" --stats "$out.json" --png "$out.png" --mesh "$out.obj" --quiet --threads 2 > "$out.log"
 num() { sed -n "s/^  \"$1\": \\([-0-9]*\\).*/\\1/p" "$out.json"; }
 m0=$(num mass_initial); m1=$(num mass_final); unsettled=$(num frames_unsettled)
-[ -n "$m0" ] && [ "$m0" = "$m1" ] || { echo "FAIL $name: mass $m0 -> $m1"; exit 1; }
+added=$(num mass_added); removed=$(num mass_removed)
+# Every unit accounted for: the final mass is the initial one plus what add tools put in, less what
+# remove tools took away.
+[ -n "$m0" ] && [ -n "$added" ] && [ -n "$removed" ] && [ "$((m0 + added - removed))" = "$m1" ] \
+  || { echo "FAIL $name: mass $m0 + $added - $removed -> $m1"; exit 1; }
 grep -q '"settled": true' "$out.json" || { echo "FAIL $name: not settled"; cat "$out.json"; exit 1; }
 [ "$unsettled" = 0 ] || { echo "FAIL $name: $unsettled frames hit the step budget"; exit 1; }
 [ "$(num mass_drift)" = 0 ] && grep -q '"heterogeneity_cv": ' "$out.json" && grep -q '"compaction": ' "$out.json" \

@@ -33,6 +33,9 @@ struct ClayMeta {
     /// The world's up axis: the grids' transform is voxelSize, rotated for UpAxis::Z (Shapes.h).
     /// Stored as vdbclay_up only when it is z.
     UpAxis up = UpAxis::Y;
+    /// Clay that add tools deposited and remove tools took away in the frames run so far (a
+    /// Sculptor resumes its counts from them). Stored only when not 0.
+    int64_t massAdded = 0, massRemoved = 0;
     std::string version; ///< vdbclay version that wrote it (filled by writeClayFile)
 };
 

@@ -41,9 +41,10 @@ RunReport makeRunReport(const Sculptor& sculptor, const RunSummary& summary, int
 /// push_seconds, setup_seconds, output_seconds, stage_seconds {gather, repartition, grow,
 /// bookkeeping}, pass_busy_seconds, pass_idle_seconds; transport_seconds, transport_solves,
 /// transport_iterations, transport_mass_moved, frames_transport_no_room; mass_initial, mass_final,
-/// mass_drift, mass_trapped, residual_overload, settled, frames_unsettled, frames_no_room;
-/// blocks_visited, blocks_over_tc, blocks_updated; clay_voxels, max_cell, occupied_voxels,
-/// interior_cells, interior_mean_density, heterogeneity_cv, compaction; content_hash (16 hex digits).
+/// mass_added, mass_removed, mass_drift (mass_final - mass_initial - mass_added + mass_removed),
+/// mass_trapped, residual_overload, settled, frames_unsettled, frames_no_room; blocks_visited,
+/// blocks_over_tc, blocks_updated; clay_voxels, max_cell, occupied_voxels, interior_cells,
+/// interior_mean_density, heterogeneity_cv, compaction; content_hash (16 hex digits).
 std::string runReportJson(const RunReport& report, int indent = 2);
 
 } // namespace vdbclay

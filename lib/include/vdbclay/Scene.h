@@ -6,6 +6,7 @@
 /// (as a path such as tools[0].path[1].frames) and what was expected.
 #pragma once
 
+#include "vdbclay/Deposit.h"
 #include "vdbclay/MemoryBudget.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Shapes.h"
@@ -43,7 +44,13 @@ struct PathSegment {
 struct ToolSpec {
     ShapeSpec shape;
     std::vector<PathSegment> path; ///< never empty
-    Vec3 pivot{{0, 0, 0}};         ///< rotation centre at frame 0 (default: centre of the bounds)
+    /// "action": what the tool does to the clay it meets (default push).
+    ToolAction action = ToolAction::Push;
+    /// "mass" (add only): the clay a voxel wholly inside the tool is filled to; 0 (unset): Tc.
+    int32_t mass = 0;
+    /// "strength" (smooth only): in (0, 1], how far one frame's smoothing goes (Smooth.h).
+    double strength = 0.5;
+    Vec3 pivot{{0, 0, 0}}; ///< rotation centre at frame 0 (default: centre of the bounds)
     /// The tool's pose after @a frame frames (frame 0 = as written).
     Pose poseAt(uint64_t frame) const;
     uint64_t pathFrames() const;
@@ -83,6 +90,11 @@ struct Scene {
     /// "sweep": the push acts on the volume each tool sweeps between two frames (the move split into
     /// sub-steps of at most a quarter voxel), so clay never passes through a thin or fast tool.
     bool sweep = false;
+    /// "surface_tension": in [0, 1], 0 (the default) off. Each frame, after the tools act and before
+    /// the clay settles, surface tension (Smooth.h) of this strength runs over the voxels near the
+    /// tools (their bounds grown by kSurfaceTensionMargin), so a frame costs what the surface the
+    /// tools change costs, not the model.
+    double surfaceTension = 0;
     uint64_t frames = 0; ///< frames to run (default: the longest tool path)
     std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty
     OutputSpec outputs;

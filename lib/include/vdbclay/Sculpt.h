@@ -20,7 +20,13 @@ namespace vdbclay {
 
 struct FrameReport {
     uint64_t frame = 0; ///< 1-based frame just run
+    /// The tools' action this frame: what the push tools moved (and, when an add tool deposited
+    /// clay, its region and contact size joined to region and contactSize: the global layer seeds
+    /// there). A resumed open frame is past it: empty.
     PushReport push;
+    int64_t massAdded = 0;    ///< clay the add tools deposited this frame
+    int64_t massRemoved = 0;  ///< clay the remove tools took away this frame
+    int64_t massSmoothed = 0; ///< clay the smooth tools moved this frame (Smooth.h)
     /// Scene::transport global: what the global layer did right after the push (once per frame; a
     /// resumed open frame does not repeat it).
     GlobalTransportReport transport;
@@ -45,7 +51,10 @@ struct RunSummary {
     std::vector<double> frameSeconds; ///< each frame's wall time (FrameReport::seconds), in order
     int64_t massInitial = 0;
     int64_t massFinal = 0;
-    int64_t massDrift = 0; ///< massFinal - massInitial: exactly 0 unless mass was lost or made
+    int64_t massAdded = 0;   ///< clay the add tools deposited during this run
+    int64_t massRemoved = 0; ///< clay the remove tools took away during this run
+    /// massFinal - (massInitial + massAdded - massRemoved): exactly 0 unless mass was lost or made
+    int64_t massDrift = 0;
     int64_t residualOverload = 0;
     bool settled = false;         ///< the last frame settled
     uint64_t framesUnsettled = 0; ///< frames whose settling hit the step budget or had no room
@@ -107,6 +116,11 @@ public:
 
     /// The metadata of the scene's start file (defaults when there is none or it has none).
     const ClayMeta& startMeta() const;
+    /// Clay the add tools deposited (massAdded) and the remove tools took away (massRemoved) since
+    /// the scene's frame 0: a start file's counts (ClayMeta) plus this Sculptor's frames. The clay's
+    /// mass is always the initial clay's + massAdded() - massRemoved().
+    int64_t massAdded() const;
+    int64_t massRemoved() const;
     /// estimateSceneMemory(scene()): the constructor's, when it checked the budget (computed
     /// here otherwise), so a caller reporting it does not pay for a second estimate.
     const MemoryEstimate& memoryEstimate();

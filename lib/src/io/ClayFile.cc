@@ -106,6 +106,9 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     if (meta.frameSteps > 0) {
         clayMeta.insertMeta(kMetaFrameSteps, openvdb::Int64Metadata(int64_t(meta.frameSteps)));
     }
+    if (meta.massAdded != 0) clayMeta.insertMeta(kMetaMassAdded, openvdb::Int64Metadata(meta.massAdded));
+    if (meta.massRemoved != 0)
+        clayMeta.insertMeta(kMetaMassRemoved, openvdb::Int64Metadata(meta.massRemoved));
     clayMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
     // Every value, tiles included (the background is 0): the leaves' values in parallel, then the
     // tiles above them.
@@ -250,6 +253,16 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaFrameSteps, i64, path, "int64")) {
         if (i64 < 0) throw Error(path + ": invalid vdbclay metadata: " + kMetaFrameSteps + " is negative");
         m.frameSteps = uint64_t(i64);
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaMassAdded, i64, path, "int64")) {
+        if (i64 < 0) throw Error(path + ": invalid vdbclay metadata: " + kMetaMassAdded + " is negative");
+        m.massAdded = i64;
+        any = true;
+    }
+    if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaMassRemoved, i64, path, "int64")) {
+        if (i64 < 0) throw Error(path + ": invalid vdbclay metadata: " + kMetaMassRemoved + " is negative");
+        m.massRemoved = i64;
         any = true;
     }
     if (readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaDimensions, i32, path, "int32")) {

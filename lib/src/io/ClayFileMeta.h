@@ -17,7 +17,9 @@ constexpr const char* kMetaDimensions = "vdbclay_dimensions";
 constexpr const char* kMetaVoxelSize = "vdbclay_voxel_size";
 constexpr const char* kMetaVersion = "vdbclay_version";
 constexpr const char* kMetaUp = "vdbclay_up";
-constexpr const char* kMetaMaxMass = "vdbclay_max_mass"; ///< the largest cell, int64
+constexpr const char* kMetaMassAdded = "vdbclay_mass_added";     ///< int64, only when > 0
+constexpr const char* kMetaMassRemoved = "vdbclay_mass_removed"; ///< int64, only when > 0
+constexpr const char* kMetaMaxMass = "vdbclay_max_mass";         ///< the largest cell, int64
 
 } // namespace io_internal
 } // namespace vdbclay

@@ -151,7 +151,7 @@ struct Ctx {
         return baseDir + "/" + file;
     }
 
-    ShapeSpec shape(const json& obj, const std::string& field, bool forClay) const;
+    ShapeSpec shape(const json& obj, const std::string& field, bool forClay, bool forTool = false) const;
 
     /// A mesh's or level set's own "up" (its file's axes), else the scene's.
     UpAxis upOfFile(const json& obj, const std::string& field) const
@@ -167,7 +167,7 @@ struct Ctx {
     }
 };
 
-ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) const
+ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay, bool forTool) const
 {
     if (!obj.is_object()) fail(field, std::string("expected an object, got ") + obj.type_name());
     ShapeSpec s;
@@ -179,6 +179,8 @@ ShapeSpec Ctx::shape(const json& obj, const std::string& field, bool forClay) co
     std::vector<const char*> extra;
     if (forClay)
         extra = {"mass", "transform"};
+    else if (forTool)
+        extra = {"path", "pivot", "transform", "action", "mass", "strength"};
     else
         extra = {"path", "pivot", "transform"};
     auto allowed = [&](std::initializer_list<const char*> geo) {
@@ -561,6 +563,40 @@ void requireInPlane(const Ctx& cx, const ShapeSpec& s, const std::string& field)
     }
 }
 
+/// A tool's "action" and the fields that belong to it: "mass" (add), "strength" (smooth).
+void parseAction(const Ctx& cx, const json& obj, const std::string& f, int32_t threshold, ToolSpec& t)
+{
+    if (const json* v = cx.find(obj, "action")) {
+        try {
+            t.action = parseToolAction(cx.string(*v, f + ".action"));
+        } catch (const Error& e) {
+            cx.fail(f + ".action", e.what());
+        }
+    }
+    const std::string name = toolActionName(t.action);
+    if (const json* m = cx.find(obj, "mass")) {
+        if (t.action != ToolAction::Add)
+            cx.fail(f + ".mass", "only an \"add\" tool has a mass (this tool's action is \"" + name + "\")");
+        if (m->is_number() && m->get<double>() <= 0) cx.fail(f + ".mass", "must be > 0, got " + m->dump());
+        if (m->is_number() && m->get<double>() > double(INT32_MAX)) {
+            cx.fail(f + ".mass", "exceeds the most clay a voxel holds (" + std::to_string(INT32_MAX) +
+                                     "), got " + m->dump());
+        }
+        t.mass = int32_t(cx.integer(*m, f + ".mass", 1, INT32_MAX));
+    } else if (t.action == ToolAction::Add) {
+        t.mass = threshold;
+    }
+    if (const json* v = cx.find(obj, "strength")) {
+        if (t.action != ToolAction::Smooth) {
+            cx.fail(f + ".strength",
+                    "only a \"smooth\" tool has a strength (this tool's action is \"" + name + "\")");
+        }
+        t.strength = cx.number(*v, f + ".strength");
+        if (!(t.strength > 0 && t.strength <= 1))
+            cx.fail(f + ".strength", "must lie in (0, 1], got " + v->dump());
+    }
+}
+
 } // namespace
 
 // ---- ToolSpec ----------------------------------------------------------------------------------
@@ -629,7 +665,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     cx.keys(root, "",
             {"dimensions",  "voxel_size", "threshold", "rule",      "alpha", "seed",    "clay",
              "tools",       "obstacles",  "settle",    "frames",    "start", "outputs", "memory_budget",
-             "description", "comment",    "push",      "transport", "sweep", "up",      "units"});
+             "description", "comment",    "push",      "transport", "sweep", "up",      "units",
+             "surface_tension"});
     cx.text(root, "description", "");
     cx.text(root, "comment", "");
     Scene sc;
@@ -716,6 +753,11 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         if (!v->is_boolean()) cx.fail("sweep", std::string("expected true or false, got ") + v->type_name());
         sc.sweep = v->get<bool>();
     }
+    if (const json* v = cx.find(root, "surface_tension")) {
+        sc.surfaceTension = cx.number(*v, "surface_tension");
+        if (!(sc.surfaceTension >= 0 && sc.surfaceTension <= 1))
+            cx.fail("surface_tension", "must lie in [0, 1] (0: off), got " + v->dump());
+    }
 
     auto list = [&](const char* key) -> const json* {
         const json* v = cx.find(root, key);
@@ -746,7 +788,8 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
             const std::string f = "tools[" + std::to_string(i) + "]";
             const json& obj = (*arr)[i];
             ToolSpec t;
-            t.shape = cx.shape(obj, f, false);
+            t.shape = cx.shape(obj, f, false, true);
+            parseAction(cx, obj, f, sc.rule.threshold, t);
             const json* path = cx.find(obj, "path");
             if (!path)
                 cx.fail(f, "missing field \"path\" (a tool moves; shapes that never move are obstacles)");

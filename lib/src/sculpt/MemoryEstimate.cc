@@ -79,6 +79,7 @@
 #include "vdbclay/Sculpt.h"
 
 #include "vdbclay/IO.h"
+#include "vdbclay/Smooth.h"
 
 #include "io/ClayFileMeta.h"
 #include "push/ClayLeaves.h"
@@ -485,6 +486,22 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             toolExtent = std::max(toolExtent, std::sqrt(d2));
         }
     }
+    // An add tool may put clay anywhere its sweep (grown by the voxel its coverage reaches) passes:
+    // clay that moves, up to the tool's mass in every voxel of it (over Tc: an overload that spreads).
+    for (size_t t = 0; t < scene.tools.size(); ++t) {
+        const ToolSpec& spec = scene.tools[t];
+        if (spec.action != ToolAction::Add || sweeps[t].all.empty()) continue;
+        const int64_t mass = spec.mass > 0 ? spec.mass : tc;
+        Area a{growBox(sweeps[t].all, 1, dims), true, true};
+        a.overTc = mass > tc;
+        areas.push_back(a);
+        const double m = double(mass) * double(voxelsIn(a.box));
+        if (massBound != UINT64_MAX)
+            massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
+        const double settled = mass > tc ? std::ceil(m / double(tc)) : 0.0;
+        settledVoxels =
+            settled >= 1.8e19 - double(settledVoxels) ? UINT64_MAX : settledVoxels + uint64_t(settled);
+    }
     // Tools that overlap share their cells (a cell is an obstacle once): no more voxels and slots
     // than their sweeps hold together.
     if (!toolBoxes.empty()) {
@@ -676,6 +693,27 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     for (const ToolSweep& sw : sweeps)
         sources = std::min(sources + sw.inside, e.toolVoxels);
     e.pushBytes = std::min(sources, clayVoxels) * kPushBytesPerSource;
+    // Surface tension (Smooth.cc) copies a smooth tool's bounds grown by two voxels, or with the
+    // scene's "surface_tension" every tool's bounds grown by kSurfaceTensionMargin + 2, into dense
+    // arrays (kSmoothBytesPerVoxel), one at a time; a frame's bounds hold at most sw.most voxels.
+    {
+        uint64_t most = 0, all = 0;
+        auto grownCube = [&](uint64_t voxels, double by) {
+            const double side = (dims == 2 ? std::sqrt(double(voxels)) : std::cbrt(double(voxels))) + 2 * by;
+            const double v = dims == 2 ? side * side : side * side * side;
+            return v >= 1.8e19 ? UINT64_MAX : uint64_t(std::ceil(v));
+        };
+        for (size_t t = 0; t < sweeps.size(); ++t) {
+            all = all > UINT64_MAX - sweeps[t].most ? UINT64_MAX : all + sweeps[t].most;
+            if (scene.tools[t].action == ToolAction::Smooth)
+                most = std::max(most, grownCube(sweeps[t].most, 2));
+        }
+        if (scene.surfaceTension > 0 && all > 0)
+            most = std::max(most, grownCube(all, kSurfaceTensionMargin + 2));
+        const uint64_t bytes =
+            most > UINT64_MAX / kSmoothBytesPerVoxel ? UINT64_MAX : most * kSmoothBytesPerVoxel;
+        e.pushBytes = e.pushBytes > UINT64_MAX - bytes ? UINT64_MAX : e.pushBytes + bytes;
+    }
     for (size_t t = 0; t < sweeps.size(); ++t) {
         if (scene.push != PushMode::Compress) continue;
         bool pools = false;

@@ -48,6 +48,10 @@ constexpr uint64_t kToolBytesPerSlot = 2 * 80 + 2 * 48 + 64;
 /// planned clay (a hash node of ~48 bytes, a bucket of 8, an entry of 24 doubled for growth) and the
 /// two cell masses written (16 each).
 constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2 * 16;
+/// Per voxel surface tension copies (sculpt/Smooth.cc): its mass (8), the mass before (8), its
+/// shelter, the separable pass's scratch and the fills (3 x 8), obstacle and member flags (2), and
+/// the changed cells written back (16).
+constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + 16;
 /// Per leaf of the surface level set writing a .vdb builds (output/SurfaceFog.cc, SurfaceSweep.cc),
 /// besides the leaf itself: the grown fog's origin, masks and source (12 + 2 x 64 + 8), its index (a
 /// hash node, ~32), the leaf made (8); the sweep's per-leaf record (184), input (8), key (12), face

@@ -60,6 +60,8 @@ std::string runReportJson(const RunReport& r, int indent)
     j["pass_idle_seconds"] = s.stages.passIdle;
     j["mass_initial"] = s.massInitial;
     j["mass_final"] = s.massFinal;
+    j["mass_added"] = s.massAdded;
+    j["mass_removed"] = s.massRemoved;
     j["residual_overload"] = s.residualOverload;
     j["settled"] = s.settled;
     j["frames_unsettled"] = s.framesUnsettled;

@@ -36,8 +36,10 @@
 // The clay, the step counts and the hashes are those of marking the whole bounds every frame.
 #include "vdbclay/Sculpt.h"
 
+#include "vdbclay/Deposit.h"
 #include "vdbclay/IO.h"
 #include "vdbclay/Metrics.h"
+#include "vdbclay/Smooth.h"
 
 #include "automaton/AutomatonInternal.h"
 #include "automaton/Tiles.h"
@@ -205,6 +207,10 @@ struct Sculptor::Impl {
     // stop (0 when the last stop poll was the caller's, or asked nothing).
     std::unique_ptr<sculpt_internal::MemoryWatchdog> watchdog;
     uint64_t budgetStop = 0;
+    /// Clay the add tools put in and the remove tools took away since the scene's frame 0 (a start
+    /// file's counts included): checkpointMeta() records them.
+    int64_t massAdded = 0, massRemoved = 0;
+    int64_t massSmoothed = 0; ///< clay the smooth tools moved (this Sculptor's frames)
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -212,6 +218,24 @@ struct Sculptor::Impl {
         for (const ToolSpec& t : scene.tools)
             tools.push_back(makeTransformed(t.shape.shape, t.poseAt(f)));
         return tools;
+    }
+
+    /// Of @a tools (placed scene.tools, in order), those whose action is @a action.
+    std::vector<ShapePtr> withAction(const std::vector<ShapePtr>& tools, ToolAction action) const
+    {
+        std::vector<ShapePtr> out;
+        for (size_t i = 0; i < tools.size(); ++i)
+            if (scene.tools[i].action == action) out.push_back(tools[i]);
+        return out;
+    }
+    /// Of @a tools, the solid ones (toolIsSolid: push and remove): their voxels are obstacles while
+    /// clay settles. A scene of push tools only: all of them.
+    std::vector<ShapePtr> solid(const std::vector<ShapePtr>& tools) const
+    {
+        std::vector<ShapePtr> out;
+        for (size_t i = 0; i < tools.size(); ++i)
+            if (toolIsSolid(scene.tools[i].action)) out.push_back(tools[i]);
+        return out;
     }
 
     /// The caller's stop poll, then the memory watchdog (budgetStop says whether it asked).
@@ -258,7 +282,7 @@ struct Sculptor::Impl {
     {
         if (automaton->quietSteps() == 0 || automaton->residualOverload() == 0) return true;
         if (scene.tools.empty() || frame >= scene.frames) return false;
-        return !unite(regionOf(toolsAt(frame + 1)), toolRegion).empty();
+        return !unite(regionOf(solid(toolsAt(frame + 1))), toolRegion).empty();
     }
 
     /// Settles the open frame through Automaton::settle with the rest of its step budget: the
@@ -485,8 +509,37 @@ struct Sculptor::Impl {
                     sub.push_back(makeTransformed(t.shape.shape, p));
                 }
             }
-            placeTools(sub);
-            const PushReport r = push(*automaton, sub, po);
+            const std::vector<ShapePtr> solids = solid(sub);
+            placeTools(solids);
+            // Remove tools take their clay first, push tools then move theirs, add tools last fill
+            // what is left free (never a solid tool's voxel): a scene of push tools only is the push.
+            for (const ShapePtr& t : withAction(sub, ToolAction::Remove))
+                massRemoved += carve(*automaton, *t).mass;
+            const PushReport r = push(*automaton, withAction(sub, ToolAction::Push), po);
+            for (size_t i = 0; i < sub.size(); ++i) {
+                const ToolSpec& spec = scene.tools[i];
+                if (spec.action != ToolAction::Add) continue;
+                const DepositReport d =
+                    deposit(*automaton, *sub[i], spec.mass > 0 ? spec.mass : scene.rule.threshold, solids);
+                massAdded += d.mass;
+                if (d.voxels == 0) continue;
+                // Clay added over Tc (into clay) is an overload: the global layer seeds there.
+                total.region = unite(total.region, d.region);
+                total.contactSize =
+                    std::max(total.contactSize,
+                             scene.dimensions == 2 ? double(d.voxels) : std::sqrt(double(d.voxels)));
+            }
+            // Smooth tools last, on the clay as the other tools left it (one pass a sub-step).
+            for (size_t i = 0; i < sub.size(); ++i) {
+                if (scene.tools[i].action != ToolAction::Smooth) continue;
+                massSmoothed += smooth(*automaton, *sub[i], scene.tools[i].strength, 1, solids).massMoved;
+            }
+            // The scene's surface tension, once a frame, around every tool (not inside a solid one).
+            if (k == substeps && scene.surfaceTension > 0) {
+                Box near = clay_internal::grownBy(regionOf(sub), kSurfaceTensionMargin);
+                if (scene.dimensions == 2) near.min[2] = near.max[2] = 0;
+                massSmoothed += smoothRegion(*automaton, near, scene.surfaceTension, 1, solids).massMoved;
+            }
             total.voxelsPushed += r.voxelsPushed;
             total.massMoved += r.massMoved;
             total.voxelsTrapped = r.voxelsTrapped; // clay inside the tools as they end
@@ -582,6 +635,8 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
         im.frame = f.meta.frames;
         im.open = f.meta.frameSteps > 0;
         im.openSteps = f.meta.frameSteps;
+        im.massAdded = f.meta.massAdded;
+        im.massRemoved = f.meta.massRemoved;
     } else {
         im.mass = openvdb::Int32Grid::create(0);
         for (const ClaySpec& c : scene.clay) {
@@ -637,7 +692,7 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     im.automaton = std::make_unique<Automaton>(im.mass, opt, im.obstacles->deepCopy());
     if (steps) im.automaton->setStepCount(steps);
     // An open frame's tools are where its push left them; that push is not repeated.
-    if (!scene.tools.empty()) im.placeTools(im.toolsAt(im.open ? im.frame + 1 : im.frame));
+    if (!scene.tools.empty()) im.placeTools(im.solid(im.toolsAt(im.open ? im.frame + 1 : im.frame)));
 }
 
 Sculptor::~Sculptor() = default;
@@ -697,6 +752,14 @@ const ClayMeta& Sculptor::startMeta() const
 {
     return mImpl->startMeta;
 }
+int64_t Sculptor::massAdded() const
+{
+    return mImpl->massAdded;
+}
+int64_t Sculptor::massRemoved() const
+{
+    return mImpl->massRemoved;
+}
 
 ClayMeta Sculptor::checkpointMeta() const
 {
@@ -715,6 +778,8 @@ ClayMeta Sculptor::checkpointMeta() const
     m.frameSteps = im.open ? im.openSteps : 0;
     m.voxelSize = im.scene.voxelSize;
     m.up = im.scene.up;
+    m.massAdded = im.massAdded;
+    m.massRemoved = im.massRemoved;
     return m;
 }
 
@@ -736,7 +801,11 @@ FrameReport Sculptor::runFrame()
     if (!im.open) {
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
+        const int64_t added0 = im.massAdded, removed0 = im.massRemoved, smoothed0 = im.massSmoothed;
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
+        rep.massSmoothed = im.massSmoothed - smoothed0;
+        rep.massAdded = im.massAdded - added0;
+        rep.massRemoved = im.massRemoved - removed0;
         // The global layer (frame_policy::layerRuns), after the automaton's try: compressible clay
         // settles in a few cheap steps, as with the local transport; the layer runs only on what the
         // try leaves in the push's region (frame_policy::layerOptions).
@@ -775,6 +844,7 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     im.stopped = false;
     RunSummary s;
     s.massInitial = im.automaton->totalMass();
+    const int64_t added0 = im.massAdded, removed0 = im.massRemoved;
     const auto t0 = Clock::now();
     while (!done() && (maxFrames == 0 || s.frames < maxFrames)) {
         if (!im.open && im.stopRequested() && im.boundaryResumesExactly()) {
@@ -812,7 +882,9 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
     s.metrics = measureClay(*im.mass, im.scene.rule.threshold, im.automaton->obstacles().get(),
                             im.scene.dimensions, im.automaton->options().threads);
     s.massFinal = s.metrics.mass;
-    s.massDrift = s.massFinal - s.massInitial;
+    s.massAdded = im.massAdded - added0;
+    s.massRemoved = im.massRemoved - removed0;
+    s.massDrift = s.massFinal - (s.massInitial + s.massAdded - s.massRemoved);
     s.residualOverload = im.automaton->residualOverload();
     s.settled = im.automaton->settled();
     return s;

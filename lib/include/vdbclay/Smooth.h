@@ -1,0 +1,75 @@
+/// @file Smooth.h
+/// @brief Surface tension: clay moves along its surface from convex places to concave ones, with
+///        integer masses conserved exactly (a "smooth" tool; docs/SCENES.md).
+///
+/// The model. Each voxel's fill is its clay clamped to [0, Tc] (an obstacle voxel counts as full:
+/// clay wets walls and tools at a right angle). A voxel's shelter G is the sum of the fills of its
+/// 5^3 neighbourhood (5^2 in 2D) weighted by the tent (1 2 3 2 1) along each axis, its own fill
+/// left out: high in a hollow, low on a bump, a measure of the surface's curvature two voxels wide.
+/// Clay flows between face neighbours from the less sheltered to the more sheltered voxel, a
+/// descent of the weighted count of broken bonds: a voxel on a convex bump gives, a voxel in a
+/// concave crease receives, and a flat surface, whose full voxels have no room and whose empty
+/// voxels have no clay, does not move. A pair moves
+///   t = floor(strength x (G(to) - G(from)) / (2 x the face weight)),
+/// (face weight 18 in 3D, 6 in 2D: strength 1 evens the two voxels' shelters), at most what the
+/// giver holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded.
+///
+/// What it does not do: clay moves only into room, so a surface of full cells moves only where its
+/// partly filled cells let it. A sharp bump or terrace of full cells several voxels wide is a local
+/// minimum of the bond count (its edge voxels are more sheltered than the empty voxels beside them)
+/// and stays; coverage-weighted clay, deposits and clay under Tc smooth (docs/SCENES.md, "Actions",
+/// gives figures).
+///
+/// One pass visits the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose
+/// lower voxel has an even, then an odd coordinate along it), so the pairs of a sub-pass are
+/// disjoint; the shelters are recomputed from the masses before each sub-pass. Everything is
+/// integer and in a fixed order: the result does not depend on the thread count.
+#pragma once
+
+#include "vdbclay/Fwd.h"
+#include "vdbclay/Shapes.h"
+#include "vdbclay/Types.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace vdbclay {
+
+class Automaton;
+
+/// What one smooth() did.
+struct SmoothReport {
+    int64_t massMoved = 0; ///< clay moved from one voxel to another (each unit once)
+    uint64_t voxels = 0;   ///< voxels whose mass changed
+    Box region;            ///< the voxels changed (their bounds; empty when nothing moved)
+};
+
+/// Strength bounds: a tool's "strength" lies in (0, kMaxSmoothStrength].
+constexpr double kMaxSmoothStrength = 1.0;
+/// A scene's "surface_tension" acts on the tools' bounds grown by this many voxels (Scene.h).
+constexpr int kSurfaceTensionMargin = 4;
+
+/// Runs @a passes passes of surface tension (file comment) on the voxels whose centre lies inside
+/// @a tool and that are neither obstacles of @a automaton nor inside one of @a solids. Only those
+/// voxels change (no margin); their shelters read two voxels beyond. Writes the changed voxels
+/// through Automaton::setMasses (nothing when nothing moved). Work: (the tool's bounds + 4)^3 x
+/// passes x 6 x 15.
+/// @throw Error if @a strength is outside (0, 1] or @a passes < 1; nothing is changed then.
+SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, int passes = 1,
+                    const std::vector<ShapePtr>& solids = {});
+
+/// The same over every voxel of @a region that is neither an obstacle nor inside one of @a solids
+/// (the scene's surface tension).
+SmoothReport smoothRegion(Automaton& automaton, const Box& region, double strength, int passes = 1,
+                          const std::vector<ShapePtr>& solids = {});
+
+/// The roughness measure smoothing lowers: the weighted count of broken bonds (a 3^3 stencil) over the voxels
+/// of
+/// @a region (3D: Σ over each voxel v and neighbour u of weight(u - v) x fill(v) x (Tc - fill(u))
+/// / Tc, the weights above; a neighbour without clay, an obstacle too, reads as empty), i.e. a weighted
+/// surface area in units of Tc (a flat face of one full voxel to empty space: 6 x 1 + 4 x 3 + 4 x 2 = 26). A
+/// smooth surface has the least for its volume; bumps, terraces and pits add to it. @a dimensions 2: in the
+/// z = 0 layer with the 2D weights. Exact (integers, in units of 1/Tc).
+int64_t surfaceEnergy(const MassGrid& mass, const Box& region, int32_t threshold, int dimensions = 3);
+
+} // namespace vdbclay

@@ -1,0 +1,274 @@
+// Surface tension (Smooth.h): pairs of face neighbours inside a region exchange clay, from the less
+// sheltered voxel to the more sheltered one. The region's masses are copied into a dense block (the
+// region grown by one voxel, read once through accessors), the passes run on it, and the voxels that
+// changed are written back through Automaton::setMasses over their bounds.
+#include "vdbclay/Smooth.h"
+#include "vdbclay/Automaton.h"
+
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <string>
+
+namespace vdbclay {
+
+namespace {
+
+using openvdb::Coord;
+
+constexpr int64_t kFace = 6, kEdge = 3, kCorner = 2;
+
+/// Weight of neighbour offset (dx, dy, dz) (not all 0) in surfaceEnergy.
+inline int64_t weight(int dx, int dy, int dz)
+{
+    const int n = (dx != 0) + (dy != 0) + (dz != 0);
+    return n == 1 ? kFace : n == 2 ? kEdge : kCorner;
+}
+
+/// The shelter's kernel along one axis: (1 2 3 2 1), so a voxel's shelter weighs the fills of its
+/// 5^3 neighbourhood (5^2 in 2D) by the product of these, its own fill left out.
+constexpr int64_t kTent[5] = {1, 2, 3, 2, 1};
+constexpr int kReach = 2;
+
+/// A dense copy of a box grown by one voxel (2D: in x and y only).
+struct Block {
+    Box inner, outer;
+    int64_t nx = 0, ny = 0, nz = 0;
+    bool is2D = false;
+    std::vector<int64_t> mass;  ///< clay (outer box)
+    std::vector<char> obstacle; ///< counts as full, never changes
+    std::vector<char> member;   ///< may change (inner box only)
+
+    Block(const Box& region, bool twoD) : inner(region), outer(region), is2D(twoD)
+    {
+        for (int i = 0; i < 3; ++i) {
+            if (twoD && i == 2) continue;
+            outer.min[i] -= kReach;
+            outer.max[i] += kReach;
+        }
+        nx = int64_t(outer.max[0]) - outer.min[0] + 1;
+        ny = int64_t(outer.max[1]) - outer.min[1] + 1;
+        nz = int64_t(outer.max[2]) - outer.min[2] + 1;
+        const size_t n = size_t(nx * ny * nz);
+        mass.assign(n, 0);
+        obstacle.assign(n, 0);
+        member.assign(n, 0);
+    }
+    int64_t index(int64_t x, int64_t y, int64_t z) const
+    {
+        return ((x - outer.min[0]) * ny + (y - outer.min[1])) * nz + (z - outer.min[2]);
+    }
+};
+
+/// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills of its neighbourhood,
+/// its own left out; a fill is the clay clamped to [0, Tc], Tc for an obstacle. Separable: a pass
+/// along each axis, voxels beyond the outer box empty.
+void shelters(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<int64_t>& tmp)
+{
+    const size_t n = b.mass.size();
+    g.resize(n);
+    tmp.resize(n);
+    for (size_t k = 0; k < n; ++k)
+        g[k] = b.obstacle[k] ? tc : std::min(b.mass[k], tc);
+    const std::vector<int64_t> fill = g;
+    const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
+    const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
+    for (int axis = 0; axis < (b.is2D ? 2 : 3); ++axis) {
+        for (int64_t x = 0; x < b.nx; ++x)
+            for (int64_t y = 0; y < b.ny; ++y)
+                for (int64_t z = 0; z < b.nz; ++z) {
+                    const int64_t c[3] = {x, y, z};
+                    const int64_t k = (x * b.ny + y) * b.nz + z;
+                    int64_t sum = 0;
+                    for (int d = -kReach; d <= kReach; ++d) {
+                        const int64_t at = c[axis] + d;
+                        if (at < 0 || at >= dimsN[axis]) continue;
+                        sum += kTent[d + kReach] * g[size_t(k + d * stride[axis])];
+                    }
+                    tmp[size_t(k)] = sum;
+                }
+        g.swap(tmp);
+    }
+    const int64_t self =
+        b.is2D ? kTent[kReach] * kTent[kReach] : kTent[kReach] * kTent[kReach] * kTent[kReach];
+    for (size_t k = 0; k < n; ++k)
+        g[k] -= self * fill[k];
+}
+
+SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
+{
+    const int64_t tc = automaton.options().rule.threshold;
+    const std::vector<int64_t> before = b.mass;
+    std::vector<int64_t> g, tmp;
+    const Box& in = b.inner;
+    const int axes = b.is2D ? 2 : 3;
+    // Twice a face neighbour's weight: strength 1 evens the shelters of a pair in one exchange.
+    const int64_t divisor =
+        2 * (b.is2D ? kTent[kReach] * kTent[kReach + 1] : kTent[kReach] * kTent[kReach] * kTent[kReach + 1]);
+    for (int pass = 0; pass < passes; ++pass)
+        for (int axis = 0; axis < axes; ++axis)
+            for (int parity = 0; parity < 2; ++parity) {
+                shelters(b, tc, g, tmp);
+                const int64_t step = axis == 0 ? b.ny * b.nz : axis == 1 ? b.nz : 1;
+                for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
+                    for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
+                        for (int64_t z = in.min[2]; z <= in.max[2]; ++z) {
+                            const int64_t c[3] = {x, y, z};
+                            if (((c[axis] % 2) + 2) % 2 != parity || c[axis] >= in.max[axis]) continue;
+                            const size_t p = size_t(b.index(x, y, z)), q = size_t(int64_t(p) + step);
+                            if (!b.member[p] || !b.member[q]) continue;
+                            const int64_t d = g[q] - g[p];
+                            if (d == 0) continue;
+                            const size_t from = d > 0 ? p : q, to = d > 0 ? q : p;
+                            int64_t t =
+                                int64_t(std::floor(strength * double(std::llabs(d)) / double(divisor)));
+                            t = std::min(t, b.mass[from]);
+                            t = std::min(t, std::max<int64_t>(0, tc - b.mass[to]));
+                            if (t <= 0) continue;
+                            b.mass[from] -= t;
+                            b.mass[to] += t;
+                        }
+            }
+    SmoothReport r;
+    std::vector<Automaton::CellMass> cells;
+    for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
+        for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
+            for (int64_t z = in.min[2]; z <= in.max[2]; ++z) {
+                const size_t k = size_t(b.index(x, y, z));
+                if (b.mass[k] == before[k]) continue;
+                const std::array<int32_t, 3> at{{int32_t(x), int32_t(y), int32_t(z)}};
+                cells.push_back(Automaton::CellMass{at, int32_t(b.mass[k])});
+                r.region = unite(r.region, Box{at, at});
+                if (b.mass[k] > before[k]) r.massMoved += b.mass[k] - before[k];
+            }
+    if (cells.empty()) return r;
+    r.voxels = cells.size();
+    automaton.setMasses(r.region, cells);
+    return r;
+}
+
+void check(double strength, int passes)
+{
+    if (!(strength > 0 && strength <= kMaxSmoothStrength))
+        throw Error("smooth: the strength must lie in (0, 1], got " + std::to_string(strength));
+    if (passes < 1) throw Error("smooth: passes must be >= 1, got " + std::to_string(passes));
+}
+
+/// Reads the masses and obstacles of @a b's outer box; @a inside decides membership of the inner
+/// voxels that are not obstacles.
+template <typename Inside> void load(const Automaton& automaton, Block& b, Inside&& inside)
+{
+    auto acc = automaton.mass()->getConstAccessor();
+    std::unique_ptr<openvdb::tree::ValueAccessor<const ObstacleGrid::TreeType>> oacc;
+    if (const ObstacleGridPtr& obs = automaton.obstacles())
+        oacc = std::make_unique<openvdb::tree::ValueAccessor<const ObstacleGrid::TreeType>>(obs->constTree());
+    const Box& o = b.outer;
+    for (int64_t x = o.min[0]; x <= o.max[0]; ++x)
+        for (int64_t y = o.min[1]; y <= o.max[1]; ++y)
+            for (int64_t z = o.min[2]; z <= o.max[2]; ++z) {
+                const Coord c{int32_t(x), int32_t(y), int32_t(z)};
+                const size_t k = size_t(b.index(x, y, z));
+                b.mass[k] = acc.getValue(c);
+                const bool obstacle = oacc && oacc->isValueOn(c);
+                b.obstacle[k] = obstacle;
+                const bool inner = x >= b.inner.min[0] && x <= b.inner.max[0] && y >= b.inner.min[1] &&
+                                   y <= b.inner.max[1] && z >= b.inner.min[2] && z <= b.inner.max[2];
+                if (inner && !obstacle) b.member[k] = inside(c);
+                if (!inner || b.member[k]) continue;
+                if (!obstacle && !b.obstacle[k]) b.obstacle[k] = inside.solid(c);
+            }
+}
+
+struct InsideTool {
+    const Shape& tool;
+    const std::vector<ShapePtr>& solids;
+    static bool in(const Shape& s, const Coord& c)
+    {
+        const Box bb = s.bounds();
+        if (c.x() < bb.min[0] || c.x() > bb.max[0] || c.y() < bb.min[1] || c.y() > bb.max[1] ||
+            c.z() < bb.min[2] || c.z() > bb.max[2])
+            return false;
+        return s.distance(Vec3{{double(c.x()), double(c.y()), double(c.z())}}) < 0;
+    }
+    bool solid(const Coord& c) const
+    {
+        for (const ShapePtr& s : solids)
+            if (in(*s, c)) return true;
+        return false;
+    }
+    bool operator()(const Coord& c) const { return in(tool, c) && !solid(c); }
+};
+
+struct InsideRegion {
+    const std::vector<ShapePtr>& solids;
+    bool solid(const Coord& c) const
+    {
+        for (const ShapePtr& s : solids)
+            if (InsideTool::in(*s, c)) return true;
+        return false;
+    }
+    bool operator()(const Coord& c) const { return !solid(c); }
+};
+
+} // namespace
+
+SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, int passes,
+                    const std::vector<ShapePtr>& solids)
+{
+    check(strength, passes);
+    const bool is2D = automaton.options().dimensions == 2;
+    Box region = tool.bounds();
+    if (is2D)
+        region =
+            intersect(region, Box{{{INT32_MIN / 2, INT32_MIN / 2, 0}}, {{INT32_MAX / 2, INT32_MAX / 2, 0}}});
+    if (region.empty()) return SmoothReport();
+    Block b(region, is2D);
+    load(automaton, b, InsideTool{tool, solids});
+    return run(automaton, b, strength, passes);
+}
+
+SmoothReport smoothRegion(Automaton& automaton, const Box& region, double strength, int passes,
+                          const std::vector<ShapePtr>& solids)
+{
+    check(strength, passes);
+    const bool is2D = automaton.options().dimensions == 2;
+    Box r = region;
+    if (is2D) r = intersect(r, Box{{{INT32_MIN / 2, INT32_MIN / 2, 0}}, {{INT32_MAX / 2, INT32_MAX / 2, 0}}});
+    if (r.empty()) return SmoothReport();
+    Block b(r, is2D);
+    load(automaton, b, InsideRegion{solids});
+    return run(automaton, b, strength, passes);
+}
+
+int64_t surfaceEnergy(const MassGrid& mass, const Box& region, int32_t threshold, int dimensions)
+{
+    const bool is2D = dimensions == 2;
+    Box r = region;
+    if (is2D) r = intersect(r, Box{{{INT32_MIN / 2, INT32_MIN / 2, 0}}, {{INT32_MAX / 2, INT32_MAX / 2, 0}}});
+    if (r.empty()) return 0;
+    const int64_t tc = threshold;
+    auto acc = mass.getConstAccessor();
+    auto fill = [&](int64_t x, int64_t y, int64_t z) {
+        return std::min<int64_t>(acc.getValue(Coord(int32_t(x), int32_t(y), int32_t(z))), tc);
+    };
+    const int dzr = is2D ? 0 : 1;
+    int64_t total = 0;
+    for (int64_t x = r.min[0]; x <= r.max[0]; ++x)
+        for (int64_t y = r.min[1]; y <= r.max[1]; ++y)
+            for (int64_t z = r.min[2]; z <= r.max[2]; ++z) {
+                const int64_t f = fill(x, y, z);
+                if (f <= 0) continue;
+                for (int dx = -1; dx <= 1; ++dx)
+                    for (int dy = -1; dy <= 1; ++dy)
+                        for (int dz = -dzr; dz <= dzr; ++dz) {
+                            if (!dx && !dy && !dz) continue;
+                            total += weight(dx, dy, dz) * f * (tc - fill(x + dx, y + dy, z + dz));
+                        }
+            }
+    return total / tc;
+}
+
+} // namespace vdbclay
