@@ -427,7 +427,8 @@ std::function<void(const vdbclay::FrameReport&)> frameProgress(bool quiet, bool 
             if (r.massAdded || r.massRemoved || r.massSmoothed)
                 std::printf("added %lld, removed %lld, smoothed %lld, ", (long long)r.massAdded,
                             (long long)r.massRemoved, (long long)r.massSmoothed);
-            std::printf("%llu steps (%s), residual overload %lld, %.3f s\n", (unsigned long long)r.settle.steps,
+            std::printf("%llu steps (%s), residual overload %lld, %.3f s\n",
+                        (unsigned long long)r.settle.steps,
                         r.finished ? vdbclay::stopReasonName(r.settle.reason) : "interrupted",
                         (long long)r.settle.residualOverload, r.seconds);
             std::fflush(stdout); // a log file follows the run frame by frame

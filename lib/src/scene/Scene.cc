@@ -663,9 +663,9 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         throw Error(source + ": invalid JSON: " + (p == std::string::npos ? what : what.substr(p + 2)));
     }
     cx.keys(root, "",
-            {"dimensions",  "voxel_size", "threshold", "rule",      "alpha", "seed",    "clay",
-             "tools",       "obstacles",  "settle",    "frames",    "start", "outputs", "memory_budget",
-             "description", "comment",    "push",      "transport", "sweep", "up",      "units",
+            {"dimensions",     "voxel_size", "threshold", "rule",      "alpha", "seed",    "clay",
+             "tools",          "obstacles",  "settle",    "frames",    "start", "outputs", "memory_budget",
+             "description",    "comment",    "push",      "transport", "sweep", "up",      "units",
              "surface_tension"});
     cx.text(root, "description", "");
     cx.text(root, "comment", "");
