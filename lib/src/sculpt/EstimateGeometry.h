@@ -91,10 +91,11 @@ ToolSweep sweep(const ToolSpec& tool, uint64_t frames, int dims, bool countInsid
 /// surface's band 4 voxels (output/Surface.cc: a half width of 3, swept one voxel further).
 Box neighbourhood(Box b, bool neighbours, int dims);
 
-/// Distance evaluations one estimate may spend counting clay leaves (ClayCover), and the members one
-/// count may try against nodes and leaves (many shapes, or boxes, near each leaf; a leaf a member
-/// holds whole counts one): ~0.1 s each.
-constexpr uint64_t kCoverBudget = uint64_t(1) << 23;
+/// Distance evaluations one estimate may spend counting clay leaves (ClayCover: a 2048-wide sphere's
+/// surface, its inside tiles, takes ~3 10^7 with the leaves around them), and the members one count
+/// may try against nodes and leaves (many shapes, or boxes, near each leaf; a leaf a member holds
+/// whole counts one): ~0.1 to 0.3 s each.
+constexpr uint64_t kCoverBudget = uint64_t(1) << 25;
 constexpr uint64_t kCoverTests = uint64_t(1) << 26;
 
 /// Where clay may lie during a run, leaf by leaf: within `margin` voxels of a clay shape's voxels
