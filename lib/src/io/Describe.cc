@@ -37,6 +37,9 @@ openvdb::GridPtrVecPtr readAllGrids(openvdb::io::File& file, const std::string& 
 
 /// For an Int32 grid that records Tc (vdbclay_threshold), the accuracy metrics of Metrics.h, in
 /// the dimensions it records (3 without vdbclay_dimensions).
+/// Tiles of clay (in voxels) up to which describeVdb hashes and measures a grid.
+constexpr uint64_t kDescribeTileVoxelsMax = uint64_t(1) << 28;
+
 void describeClayMetrics(std::ostream& s, const openvdb::Int32Grid& g, const std::string& path)
 {
     int32_t tc = 0, dims = 3;
@@ -146,15 +149,27 @@ std::string describeVdb(const std::string& path)
                 } catch (const Error&) {
                     s << "  total mass: more than 64 bits count\n";
                 }
-                try {
-                    const uint64_t h = contentHash(*ig);
-                    char hash[32];
-                    std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
-                    s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
-                } catch (const Error&) {
-                    s << "  content hash: none (the grid holds tiles of more than 2^35 voxels of clay)\n";
+                // The hash and the metrics walk a tile's voxels (or its faces): info stays quick on any
+                // file by leaving them out for tiles of more than 2^28 voxels (run --stats hashes them).
+                uint64_t tileVoxels = 0;
+                auto tile = ig->tree().cbeginValueAll();
+                tile.setMaxDepth(tile.getLeafDepth() - 1);
+                for (; tile && tileVoxels <= kDescribeTileVoxelsMax; ++tile)
+                    if (*tile != 0) tileVoxels += tile.getVoxelCount();
+                if (tileVoxels > kDescribeTileVoxelsMax) {
+                    s << "  content hash: none (the grid holds tiles of more than 2^28 voxels of clay; "
+                         "`vdbclay run --stats` hashes them)\n";
+                } else {
+                    try {
+                        const uint64_t h = contentHash(*ig);
+                        char hash[32];
+                        std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h);
+                        s << "  content hash: " << hash << " (equal hashes: equal clay, voxel for voxel)\n";
+                    } catch (const Error& e) {
+                        s << "  content hash: none (" << e.what() << ")\n";
+                    }
+                    describeClayMetrics(s, *ig, path);
                 }
-                describeClayMetrics(s, *ig, path);
             }
         }
         if (g->metaCount() > 1) {

@@ -304,9 +304,16 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
             }
             const openvdb::CoordBBox inner(b.min().offsetBy(1), b.max().offsetBy(-1));
             out.add(t.value, threshold, false, true, inner.volume());
-            for (auto c = b.begin(); c; ++c) {
-                if (inner.isInside(*c)) continue;
-                out.add(t.value, threshold, false, interiorAt(*c));
+            // The voxels on its faces alone: whole planes at the x ends, the ring of y and z between.
+            const Coord lo = b.min(), hi = b.max();
+            for (int32_t x = lo.x(); x <= hi.x(); ++x) {
+                const bool plane = x == lo.x() || x == hi.x();
+                for (int32_t y = lo.y(); y <= hi.y(); ++y) {
+                    const bool row = plane || y == lo.y() || y == hi.y();
+                    const int32_t step = row ? 1 : hi.z() - lo.z();
+                    for (int32_t z = lo.z(); z <= hi.z(); z += step)
+                        out.add(t.value, threshold, false, interiorAt(Coord(x, y, z)));
+                }
             }
             return;
         }
