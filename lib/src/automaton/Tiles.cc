@@ -8,6 +8,8 @@
 
 #include <algorithm>
 #include <limits>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace vdbclay {
@@ -113,41 +115,25 @@ uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc)
     using Lower = Upper::ChildNodeType;
     // A value and state a tile may hold: at most Tc, active exactly when nonzero.
     auto fits = [tc](int32_t v, bool on) { return int64_t(v) <= tc && on == (v != 0) && v >= 0; };
-    struct Collapse {
-        Coord origin;
-        int32_t value;
-        bool on;
+    // Each node (leaf, lower, upper) holding one value and state that fits becomes a tile of its
+    // parent, lowest level first (a collapsed lower node can make its upper node constant).
+    auto collapse = [&](auto* /*level's node type*/ tag, openvdb::Index level) {
+        using NodeT = std::remove_pointer_t<decltype(tag)>;
+        std::vector<NodeT*> nodes;
+        tree.getNodes(nodes);
+        std::vector<std::pair<Coord, int32_t>> todo; // origin, value
+        for (NodeT* n : nodes) {
+            int32_t v = 0;
+            bool on = false;
+            if (n->isConstant(v, on, 0) && fits(v, on)) todo.emplace_back(n->origin(), v);
+        }
+        for (const auto& c : todo)
+            tree.addTile(level, c.first, c.second, c.second != 0);
+        return uint64_t(todo.size());
     };
-    std::vector<Collapse> todo;
-    for (auto it = tree.cbeginLeaf(); it; ++it) {
-        int32_t v = 0;
-        bool on = false;
-        if (it->isConstant(v, on, 0) && fits(v, on)) todo.push_back({it->origin(), v, on});
-    }
-    for (const Collapse& c : todo)
-        tree.addTile(1, c.origin, c.value, c.on);
-    const uint64_t removed = todo.size();
-    // Nodes of equal tiles, lowest first (a collapsed lower node can make its upper node constant).
-    todo.clear();
-    std::vector<Lower*> lowers;
-    tree.getNodes(lowers);
-    for (Lower* n : lowers) {
-        int32_t v = 0;
-        bool on = false;
-        if (n->isConstant(v, on, 0) && fits(v, on)) todo.push_back({n->origin(), v, on});
-    }
-    for (const Collapse& c : todo)
-        tree.addTile(2, c.origin, c.value, c.on);
-    todo.clear();
-    std::vector<Upper*> uppers;
-    tree.getNodes(uppers);
-    for (Upper* n : uppers) {
-        int32_t v = 0;
-        bool on = false;
-        if (n->isConstant(v, on, 0) && fits(v, on)) todo.push_back({n->origin(), v, on});
-    }
-    for (const Collapse& c : todo)
-        tree.addTile(3, c.origin, c.value, c.on);
+    const uint64_t removed = collapse(static_cast<MassTree::LeafNodeType*>(nullptr), 1);
+    collapse(static_cast<Lower*>(nullptr), 2);
+    collapse(static_cast<Upper*>(nullptr), 3);
     // Root tiles of the background, inactive: gone, as Tree::prune leaves them.
     tree.root().eraseBackgroundTiles();
     return removed;

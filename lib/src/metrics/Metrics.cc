@@ -86,6 +86,16 @@ uint64_t clayVoxelCount(const MassGrid& mass)
 
 namespace {
 
+/// The leaves of @a mass, in tree order.
+std::vector<const MassGrid::TreeType::LeafNodeType*> leavesOf(const MassGrid& mass)
+{
+    std::vector<const MassGrid::TreeType::LeafNodeType*> leaves;
+    leaves.reserve(mass.tree().leafCount());
+    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
+        leaves.push_back(&*it);
+    return leaves;
+}
+
 /// The tiles of @a mass holding clay (nonzero), by bounds and value.
 struct ClayTile {
     openvdb::CoordBBox box;
@@ -122,10 +132,7 @@ uint64_t contentHash(const MassGrid& mass)
     // Order-independent: a sum of per-voxel hashes (mod 2^64), so the tree's layout and the order of
     // the parallel parts do not matter.
     using Leaf = MassGrid::TreeType::LeafNodeType;
-    std::vector<const Leaf*> leaves;
-    leaves.reserve(mass.tree().leafCount());
-    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
-        leaves.push_back(&*it);
+    const std::vector<const Leaf*> leaves = leavesOf(mass);
     const std::vector<ClayTile> tiles = clayTiles(mass);
     // Tiles cut into x slabs of at most 2^15 voxels each, so one large tile spreads over the threads.
     struct Part {
@@ -247,10 +254,7 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
 {
     checkArgs("measureClay", threshold, dims);
     using MassLeaf = MassGrid::TreeType::LeafNodeType;
-    std::vector<const MassLeaf*> leaves;
-    leaves.reserve(mass.tree().leafCount());
-    for (auto it = mass.tree().cbeginLeaf(); it; ++it)
-        leaves.push_back(&*it);
+    const std::vector<const MassLeaf*> leaves = leavesOf(mass);
     const std::vector<ClayTile> tiles = clayTiles(mass);
     openvdb::CoordBBox obstacleBounds; // empty without obstacles
     if (obstacles) obstacleBounds = obstacles->evalActiveVoxelBoundingBox();

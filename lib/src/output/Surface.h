@@ -8,6 +8,7 @@
 #include <openvdb/openvdb.h>
 
 #include <array>
+#include <memory>
 #include <cstdint>
 #include <vector>
 
@@ -76,6 +77,10 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 /// goes to OpenVDB's fogToSdf.
 openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
                                                  float isoValue, float band, uint64_t* swept = nullptr);
+
+/// The tree a sweep runs over: a leaf at each of @a g's origins with its mask, values allocated, not
+/// set (the sweep's initialisation writes them), over @a background.
+std::shared_ptr<openvdb::FloatTree> sweepTreeOf(const GrownLeaves& g, float background);
 
 /// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
 /// values become the distances; the fog's values are read from @a source (the fog itself, or the

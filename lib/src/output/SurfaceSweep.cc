@@ -424,6 +424,23 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     return swept;
 }
 
+std::shared_ptr<FloatTree> sweepTreeOf(const GrownLeaves& g, float background)
+{
+    const size_t n = g.origins.size();
+    std::vector<LeafT*> made(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
+            made[i]->buffer().allocate();
+            made[i]->setValueMask(g.masks[i]);
+        }
+    });
+    auto tree = std::make_shared<FloatTree>(background);
+    for (LeafT* leaf : made)
+        tree->addLeaf(leaf);
+    return tree;
+}
+
 bool holdsTiles(const FloatTree& tree)
 {
     auto it = tree.cbeginValueAll();
@@ -464,18 +481,7 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& densi
     // The fog's leaves and active voxels, with room for the distances: no value is copied, the
     // initialisation reads the fog's values from the density (the grown voxels hold its background).
     const GrownLeaves g = growByBox(density, radius);
-    const size_t n = g.origins.size();
-    std::vector<LeafT*> made(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) {
-            made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
-            made[i]->buffer().allocate();
-            made[i]->setValueMask(g.masks[i]);
-        }
-    });
-    auto tree = std::make_shared<FloatTree>(density.tree().background());
-    for (LeafT* leaf : made)
-        tree->addLeaf(leaf);
+    std::shared_ptr<FloatTree> tree = sweepTreeOf(g, density.tree().background());
     openvdb::FloatGrid::Ptr sdf = density.copyWithNewTree();
     sdf->setTree(tree);
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);

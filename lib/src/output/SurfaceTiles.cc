@@ -20,9 +20,6 @@
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <set>
 #include <vector>
@@ -120,18 +117,7 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromTiledDensity(const openvdb::FloatGrid& 
         g.origins.push_back(it->origin());
         g.masks.push_back(it->getValueMask());
     }
-    const size_t n = g.origins.size();
-    std::vector<LeafT*> made(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) {
-            made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
-            made[i]->buffer().allocate();
-            made[i]->setValueMask(g.masks[i]);
-        }
-    });
-    auto tree = std::make_shared<FloatTree>(density.tree().background());
-    for (LeafT* leaf : made)
-        tree->addLeaf(leaf);
+    std::shared_ptr<FloatTree> tree = sweepTreeOf(g, density.tree().background());
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
     if (swept) *swept = count;
 
