@@ -490,15 +490,16 @@ struct Automaton::Impl {
         // update flows from a tile's new leaf into a missing one.
         const uint64_t savedMask = w.mask, savedChanged = w.changed;
         w.mask = uint64_t(1) << d.bit;
+        bool intoMissing = d.cells != 0; // as a grid without tiles would have deferred it
         PassTotals one;
         for (int round = 0;; ++round) {
             one = PassTotals();
             processRange(passInput(phase, false), work.data(), d.item, d.item + 1, one);
             if (one.overflow || round == 1 || one.deferred.empty() || one.deferred[0].cells == 0) break;
             touch(one.deferred[0].cells, /*tilesOnly=*/false);
-            if (d.cells == 0) ++grown;
+            intoMissing = true;
         }
-        if (d.cells != 0) ++grown;
+        grown += intoMissing;
         if (d.cells == 0) tot.overTc += one.overTc; // the pass could not read it
         w.mask = savedMask;
         w.changed = savedChanged | w.changed;

@@ -25,6 +25,9 @@ std::string bboxStr(const CoordBBox& b)
     return coordStr(b.min()) + "-" + coordStr(b.max());
 }
 
+/// densifyTiles probes a region's slots one by one up to this many (else it walks the tiles).
+constexpr uint64_t kProbedSlotsMax = 4096;
+
 /// The tiles holding clay (active, nonzero) that meet @a rb, by their bounds.
 std::vector<CoordBBox> clayTilesMeeting(const MassTree& tree, const CoordBBox& rb)
 {
@@ -94,6 +97,19 @@ uint64_t densifyTiles(MassTree& tree, const Box& region)
     const CoordBBox rb(Coord(region.min[0], region.min[1], region.min[2]),
                        Coord(region.max[0], region.max[1], region.max[2]));
     uint64_t made = 0;
+    // A small region (a tool's bounds): its slots probed, rather than every tile of the tree walked.
+    const CoordBBox slots(Coord(rb.min().x() >> 3, rb.min().y() >> 3, rb.min().z() >> 3),
+                          Coord(rb.max().x() >> 3, rb.max().y() >> 3, rb.max().z() >> 3));
+    if (slots.volume() <= kProbedSlotsMax) {
+        openvdb::tree::ValueAccessor<MassTree> acc(tree);
+        for (auto k = slots.begin(); k; ++k) {
+            const Coord o((*k).x() * 8, (*k).y() * 8, (*k).z() * 8);
+            if (acc.probeConstLeaf(o) || acc.getValue(o) == 0) continue;
+            acc.touchLeaf(o);
+            ++made;
+        }
+        return made;
+    }
     for (const CoordBBox& tile : clayTilesMeeting(tree, rb)) {
         CoordBBox part = tile;
         part.intersect(rb);
