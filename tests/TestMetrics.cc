@@ -368,3 +368,47 @@ TEST_F(MetricsTest, MeasureClayOverLeavesIsTheSerialSumOnAnyThreadCount)
     EXPECT_EQ(t.clayVoxels, 512u);
     EXPECT_EQ(t.interiorCells, 6u * 6 * 6);
 }
+
+TEST_F(MetricsTest, TilesNextToTilesLeavesAndNothingMeasureAsTheirVoxels)
+{
+    // 8^3 tiles whose faces meet tiles of clay, a 128^3 tile, a tile of another value, a leaf with a
+    // hole on the shared face, a leaf of full clay, and nothing: each measured as its voxels.
+    auto g = openvdb::Int32Grid::create(0);
+    openvdb::Int32Tree& t = g->tree();
+    t.addTile(2, Coord(0, 0, 0), 700, true); // 128^3
+    for (int i = 0; i < 4; ++i)
+        t.addTile(1, Coord(128 + 8 * i, 0, 0), 1000, true); // a row of 8^3 tiles off its +x face
+    t.addTile(1, Coord(128, 8, 0), 900, true);
+    t.addTile(1, Coord(136, 8, 0), 1000, true);
+    for (int x = 144; x < 152; ++x) // a leaf of clay over the tile at (144, 0, 0) ...
+        for (int y = 8; y < 16; ++y)
+            for (int z = 0; z < 8; ++z)
+                t.setValue(Coord(x, y, z), 1000);
+    t.setValue(Coord(147, 8, 3), 0);   // ... with a hole on the shared face
+    t.addTile(1, Coord(152, 8, 0), 1000, true);
+    for (int x = 152; x < 160; ++x) // a full leaf over the tile at (152, 8, 0)
+        for (int y = 16; y < 24; ++y)
+            for (int z = 0; z < 8; ++z)
+                t.setValue(Coord(x, y, z), 1000);
+    // Two 3x3x3 blocks of 8^3 tiles: their centres' faces all meet clay, in one block through tiles
+    // alone, in the other through a full leaf on one side.
+    for (int block : {512, 640})
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                for (int k = 0; k < 3; ++k)
+                    t.addTile(1, Coord(block + 8 * i, 8 * j, 8 * k), 1000, true);
+    for (int x = 656; x < 664; ++x)
+        for (int y = 8; y < 16; ++y)
+            for (int z = 8; z < 16; ++z)
+                t.setValue(Coord(x, y, z), 1000);
+    auto dense = g->deepCopy();
+    dense->tree().voxelizeActiveTiles();
+    ASSERT_EQ(dense->tree().activeTileCount(), 0u);
+    const ClayMetrics expected = serialMeasure(*dense, 1000, nullptr, 3);
+    EXPECT_EQ(expected.clayVoxels, uint64_t(128 * 128 * 128 + (7 + 2 * 27) * 512 + 2 * 512 - 1));
+    for (int threads : {1, 2, 3, 8}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        expectSameMetrics(measureClay(*g, 1000, nullptr, 3, threads), expected,
+                          "tiled, " + std::to_string(threads) + " threads");
+    }
+}

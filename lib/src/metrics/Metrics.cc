@@ -306,17 +306,54 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                 }
                 return;
             }
-            const openvdb::CoordBBox inner(b.min().offsetBy(1), b.max().offsetBy(-1));
-            out.add(t.value, threshold, false, true, inner.volume());
-            // The voxels on its faces alone: whole planes at the x ends, the ring of y and z between.
+            // Which of its faces hold clay all along beyond them: the layer of voxels just outside
+            // the face, read 8^3 slot by slot (a tile's box is slot-aligned), each slot a tile of clay
+            // (one value: the accessor answers from a node above the leaves) or else voxel by voxel.
             const Coord lo = b.min(), hi = b.max();
+            const int leafDepth = int(MassGrid::TreeType::DEPTH) - 1;
+            bool backed[6];
+            for (int f = 0; f < 6; ++f) {
+                const int axis = f >> 1;
+                openvdb::CoordBBox layer = b;
+                const int32_t at = (f & 1) ? lo[axis] - 1 : hi[axis] + 1; // kFaces: +axis, then -axis
+                layer.min()[axis] = layer.max()[axis] = at;
+                backed[f] = true;
+                for (auto slot = layer.min(); backed[f] && slot.x() <= layer.max().x(); slot.x() += 8)
+                    for (slot.y() = layer.min().y(); backed[f] && slot.y() <= layer.max().y(); slot.y() += 8)
+                        for (slot.z() = layer.min().z(); backed[f] && slot.z() <= layer.max().z(); slot.z() += 8) {
+                            if (acc.getValueDepth(slot) >= 0 && acc.getValueDepth(slot) < leafDepth) {
+                                backed[f] = acc.getValue(slot) != 0;
+                                continue;
+                            }
+                            openvdb::CoordBBox part(slot, slot.offsetBy(7));
+                            part.intersect(layer);
+                            for (auto c = part.begin(); backed[f] && c; ++c)
+                                backed[f] = acc.getValue(*c) != 0;
+                        }
+            }
+            if (std::all_of(backed, backed + 6, [](bool x) { return x; })) {
+                out.add(t.value, threshold, false, true, b.volume());
+                return;
+            }
+            const openvdb::CoordBBox inner(lo.offsetBy(1), hi.offsetBy(-1));
+            out.add(t.value, threshold, false, true, inner.volume());
+            // The voxels on its faces alone: whole planes at the x ends, the ring of y and z between;
+            // each reads the neighbours beyond the faces it lies on that are not backed.
+            auto faceInterior = [&](const Coord& c) {
+                for (int f = 0; f < 6; ++f) {
+                    const int axis = f >> 1;
+                    if (backed[f] || c[axis] != ((f & 1) ? lo[axis] : hi[axis])) continue;
+                    if (acc.getValue(c + kFaces[f]) == 0) return false;
+                }
+                return true;
+            };
             for (int32_t x = lo.x(); x <= hi.x(); ++x) {
                 const bool plane = x == lo.x() || x == hi.x();
                 for (int32_t y = lo.y(); y <= hi.y(); ++y) {
                     const bool row = plane || y == lo.y() || y == hi.y();
                     const int32_t step = row ? 1 : hi.z() - lo.z();
                     for (int32_t z = lo.z(); z <= hi.z(); z += step)
-                        out.add(t.value, threshold, false, interiorAt(Coord(x, y, z)));
+                        out.add(t.value, threshold, false, faceInterior(Coord(x, y, z)));
                 }
             }
             return;
