@@ -384,7 +384,7 @@ TEST_F(MetricsTest, TilesNextToTilesLeavesAndNothingMeasureAsTheirVoxels)
         for (int y = 8; y < 16; ++y)
             for (int z = 0; z < 8; ++z)
                 t.setValue(Coord(x, y, z), 1000);
-    t.setValue(Coord(147, 8, 3), 0);   // ... with a hole on the shared face
+    t.setValue(Coord(147, 8, 3), 0); // ... with a hole on the shared face
     t.addTile(1, Coord(152, 8, 0), 1000, true);
     for (int x = 152; x < 160; ++x) // a full leaf over the tile at (152, 8, 0)
         for (int y = 16; y < 24; ++y)
