@@ -38,6 +38,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -186,6 +187,29 @@ private:
     PlannedClay mAdded;
     PlannedClay::Accessor mAddAcc{mAdded};
 };
+
+inline Coord Pusher::along(const Source& s, const Vec3& n, double t) const
+{
+    const Vec3 p{{double(s.c.x()), double(s.c.y()), double(s.c.z())}};
+    const Vec3 q{{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}};
+    int32_t v[3];
+    for (int i = 0; i < 3; ++i) {
+        const double r = std::floor(q[i] + 0.5);
+        v[i] = int32_t(std::clamp(r, double(INT32_MIN / 2), double(INT32_MAX / 2)));
+    }
+    if (mIs2D) v[2] = 0;
+    return Coord(v[0], v[1], v[2]);
+}
+
+inline bool Pusher::Reader::isFree(const Coord& c, int32_t m, const Box& region, bool planned)
+{
+    if (!inside(region, c)) return false;
+    if (mPusher.mIs2D && c.z() != 0) return false;
+    if (isObstacle(c)) return false;
+    if (mPusher.inAnyTool(c)) return false;
+    const int64_t now = planned ? this->planned(c) : int64_t(massAt(c));
+    return now + m <= INT32_MAX;
+}
 
 } // namespace push_internal
 } // namespace vdbclay
