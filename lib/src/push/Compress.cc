@@ -2,8 +2,11 @@
 
 #include "push/Compress.h"
 
+#include "core/ParallelFor.h"
+
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace vdbclay {
@@ -24,13 +27,14 @@ std::vector<char> covering(const Pusher& pusher, const std::vector<Source>& sour
             n[i] = l > 0 ? n[i] / l : 0.0;
     }
     std::vector<char> covers(pusher.toolCount(), 1);
+    Pusher::Reader r(pusher);
     for (const Source& s : sources) {
         if (!covers[s.tool]) continue;
         const Vec3& n = mean[s.tool];
         for (int d = 0; d < (pusher.is2D() ? 4 : 6); ++d) {
             if (kDir[d][0] * n[0] + kDir[d][1] * n[1] + kDir[d][2] * n[2] > 0.5) continue; // ahead
             const Coord q = s.c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-            if (pusher.inAnyTool(q) || pusher.isObstacle(q) || !isFull(pusher.massAt(q), threshold)) continue;
+            if (pusher.inAnyTool(q) || r.isObstacle(q) || !isFull(r.massAt(q), threshold)) continue;
             covers[s.tool] = 0;
             break;
         }
@@ -38,11 +42,12 @@ std::vector<char> covering(const Pusher& pusher, const std::vector<Source>& sour
     return covers;
 }
 
-std::vector<Coord> fullChain(const Pusher& pusher, const Source& s, const Found& found, int depth,
-                             int32_t threshold)
+void fullChain(Pusher::Reader& r, const Source& s, const Found& found, int depth, int32_t threshold,
+               std::vector<Coord>& chain)
 {
-    std::vector<Coord> chain;
-    if (!found.byMarch || !isFull(pusher.massAt(found.to), threshold)) return chain;
+    chain.clear();
+    if (!found.byMarch || !isFull(r.massAt(found.to), threshold)) return;
+    const Pusher& pusher = r.pusher();
     chain.push_back(found.to);
     // March on in half-voxel steps; at most 2 depth + 2 more points reach depth voxels.
     for (int k = 1; int(chain.size()) < depth && k <= 2 * depth + 2; ++k) {
@@ -50,46 +55,69 @@ std::vector<Coord> fullChain(const Pusher& pusher, const Source& s, const Found&
         const Coord c = pusher.along(s, found.normal, t);
         if (c == chain.back()) continue;
         const int32_t share = s.mass / int32_t(chain.size() + 1) + 1;
-        if (!pusher.isFree(c, share, pusher.chainRegion()) || !isFull(pusher.massAt(c), threshold)) break;
+        if (!r.isFree(c, share, pusher.chainRegion()) || !isFull(r.massAt(c), threshold)) break;
         chain.push_back(c);
     }
     // The shares must fit every voxel of the chain (the target's search checked it with all of m).
-    return chain;
 }
 
-void sharePool(openvdb::Int32Tree& pool, int64_t mass, const Pusher& pusher,
-               const std::vector<const openvdb::Int32Tree*>& earlier)
+void sharePool(Pool& pool, int64_t mass, const Pusher& pusher, const std::vector<const Pool*>& earlier,
+               int threads)
 {
-    const int64_t cells = int64_t(pool.activeVoxelCount());
+    pool.sortTreeOrder();
+    const size_t leaves = pool.leafCount();
+    std::vector<int64_t> perPlace(size_t(kMaxSearchLimit) + 2, 0);
+    int64_t cells = 0;
+    for (size_t l = 0; l < leaves; ++l)
+        for (const int32_t v : pool.leaf(l).v)
+            if (v) ++perPlace[size_t(v)];
+    for (const int64_t n : perPlace)
+        cells += n;
+    if (cells == 0) return;
     const int64_t q = mass / cells;
     int64_t r = mass % cells;
-    std::vector<int64_t> perPlace(size_t(kMaxSearchLimit) + 2, 0);
-    for (auto it = pool.cbeginValueOn(); it; ++it)
-        ++perPlace[size_t(*it)];
     // Places below `last` all get +1; at `last`, the first `atLast` cells in tree order.
     size_t last = 0;
     while (last < perPlace.size() && r >= perPlace[last]) {
         r -= perPlace[last];
         ++last;
     }
-    int64_t atLast = r;
-    for (auto it = pool.beginValueOn(); it; ++it) {
-        const size_t place = size_t(*it);
-        int64_t share = q;
-        if (place < last)
-            share += 1;
-        else if (place == last && atLast > 0) {
-            share += 1;
-            --atLast;
-        }
-        int64_t now = pusher.planned(it.getCoord());
-        for (const openvdb::Int32Tree* e : earlier)
-            now += e->getValue(it.getCoord());
-        if (now + share > INT32_MAX) {
-            throw Error("push: compressing would put more than INT32_MAX clay in a voxel");
-        }
-        it.setValue(int32_t(share));
+    // Each leaf's cells at `last` that get +1: those of the first `atLast` in tree order.
+    std::vector<int64_t> plusAtLast(leaves, 0);
+    for (size_t l = 0; l < leaves && r > 0; ++l) {
+        int64_t n = 0;
+        for (const int32_t v : pool.leaf(l).v)
+            n += size_t(v) == last ? 1 : 0;
+        plusAtLast[l] = std::min(n, r);
+        r -= plusAtLast[l];
     }
+    std::vector<char> overflow(leaves, 0);
+    parallel_internal::forEachIndex(leaves, threads, [&](size_t l) {
+        Pool::Leaf& leaf = pool.leaf(l);
+        Pusher::Reader reader(pusher);
+        std::vector<const Pool::Leaf*> other;
+        for (const Pool* e : earlier)
+            if (const Pool::Leaf* o = e->find(leaf.origin)) other.push_back(o);
+        int64_t atLast = plusAtLast[l];
+        for (uint32_t i = 0; i < kSlotVoxels; ++i) {
+            const size_t place = size_t(leaf.v[i]);
+            if (!place) continue;
+            int64_t share = q;
+            if (place < last)
+                share += 1;
+            else if (place == last && atLast > 0) {
+                share += 1;
+                --atLast;
+            }
+            int64_t now = reader.planned(slotVoxel(leaf.origin, i));
+            for (const Pool::Leaf* o : other)
+                now += o->v[i];
+            if (now + share > INT32_MAX) overflow[l] = 1;
+            leaf.v[i] = int32_t(share);
+        }
+    });
+    for (const char o : overflow)
+        if (o) throw Error("push: compressing would put more than INT32_MAX clay in a voxel");
 }
 
 } // namespace push_internal

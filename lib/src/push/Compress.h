@@ -16,8 +16,9 @@
 // gets a uniform source: the global layer then moves it out evenly (straight sides, docs/ACCURACY.md
 // section 6); spread per column, short columns would get more per cell and the clay would leave next
 // to the plate. The full test reads the grid before this push, so the plan does not depend on the
-// order of the sources. A source whose target is not full, or was found by the flood, is pushed as by
-// the surface push.
+// order of the sources. A pool is a value per voxel in dense arrays per 8^3 leaf (LeafArrays.h): the
+// chains write it leaf by leaf, and sharePool() visits its leaves in parallel, in a Tree543's order. A source
+// whose target is not full, or was found by the flood, is pushed as by the surface push.
 #pragma once
 
 #include "push/Pusher.h"
@@ -49,19 +50,26 @@ inline bool isFull(int32_t m, int32_t threshold)
 /// would count as ahead. Reads the grid before the push.
 std::vector<char> covering(const Pusher& pusher, const std::vector<Source>& sources, int32_t threshold);
 
-/// The chain of @a s, whose target @a found the march found: the contiguous full voxels along the
-/// same normal starting at the target, at most @a depth of them, inside the pusher's chain region
-/// (empty if the target is not full or was found by the flood).
-std::vector<Coord> fullChain(const Pusher& pusher, const Source& s, const Found& found, int depth,
-                             int32_t threshold);
+/// The chain of @a s, whose target @a found the march found, into @a chain: the contiguous full
+/// voxels along the same normal starting at the target, at most @a depth of them, inside the pusher's
+/// chain region, with room for their shares given the clay planned so far as @a r sees it (empty if
+/// the target is not full or was found by the flood).
+void fullChain(Pusher::Reader& r, const Source& s, const Found& found, int depth, int32_t threshold,
+               std::vector<Coord>& chain);
 
-/// A covering tool's pooled clay @a mass shared evenly over its zone @a pool (each cell's value: its
-/// place in the nearest chain + 1), mass / cells each, the remainder +1 to the cells nearest the tool
-/// (smallest place, then tree order). On return each value is the cell's share. @a earlier: the pools
-/// already shared (their shares count toward a cell's value too).
-/// @throw Error (before anything is written) if a share does not fit a cell (int32).
-void sharePool(Tree543<int32_t>& pool, int64_t mass, const Pusher& pusher,
-               const std::vector<const Tree543<int32_t>*>& earlier);
+/// A covering tool's zone: each cell's value its place in the nearest chain + 1 (0: not in the zone).
+using Pool = LeafArrays<int32_t>;
+
+/// A covering tool's pooled clay @a mass shared evenly over its zone @a pool, mass / cells each, the
+/// remainder +1 to the cells nearest the tool (smallest place, then a Tree543's order: the pool's
+/// leaves are put in that order). On return each value is the cell's share (0 for a cell of the zone
+/// that gets none). @a earlier: the pools already shared (their shares count toward a cell's value
+/// too). The leaves are shared in parallel on @a threads (as the automaton's; the same shares on any
+/// count).
+/// @throw Error if a share does not fit a cell (int32); the pool's values are undefined then, and
+/// nothing else is written.
+void sharePool(Pool& pool, int64_t mass, const Pusher& pusher, const std::vector<const Pool*>& earlier,
+               int threads);
 
 } // namespace push_internal
 } // namespace vdbclay

@@ -17,7 +17,9 @@
 //    written as the cells' new masses (Automaton::setMasses: an edit that reads only those cells)
 //    over the region U grown by maxSearch + 2 (and the chains), cut to the part near clay
 //    (ClayLeaves.h: the same clay blocks are woken, the cost follows the clay), so nothing is written
-//    if a tool throws or a pooled share would not fit.
+//    if a tool throws or a pooled share would not fit. The planned clay and the pools are dense arrays
+//    per 8^3 leaf (LeafArrays.h): the pools are shared, and the cells written are gathered, leaf by
+//    leaf in parallel, merged in leaf order (the same cells on any thread count).
 // Sources are inside a tool and targets outside all tools, so no voxel is both; the plan depends only
 // on the grid, the tools and the source order: deterministic.
 
@@ -27,16 +29,15 @@
 #include "push/ClayLeaves.h"
 #include "push/Compress.h"
 #include "push/Pusher.h"
-#include "core/CoordHash.h"
 #include "core/ParallelFor.h"
 
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <cmath>
 #include <memory>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -129,7 +130,7 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     // its sources (Compress.h); the chains may reach beyond the surface push's region.
     const bool compress = options.mode == PushMode::Compress;
     std::vector<char> covers(tools.size(), 0);
-    std::vector<std::unique_ptr<openvdb::Int32Tree>> pools(tools.size());
+    std::vector<std::unique_ptr<Pool>> pools(tools.size());
     std::vector<int64_t> pooled(tools.size(), 0);
     if (compress) {
         covers = covering(pusher, sources, threshold);
@@ -144,24 +145,25 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     // the clay planned before it still leaves room there, else searched again with that clay
     // (Pusher.h: the same targets as a serial search, on any thread count).
     std::vector<Found> found(sources.size());
-    pusher.reserve(sources.size());
     parallel_internal::forEachIndex(sources.size(), automaton.options().threads,
                                     [&](size_t i) { found[i] = pusher.findAlone(sources[i]); });
+    Pusher::Reader reader(pusher);
+    std::vector<Coord> chain;
     for (size_t si = 0; si < sources.size(); ++si) {
         const Source& s = sources[si];
         Found f = found[si]; // trapped alone: trapped with the planned clay too
-        if (f.ok && !pusher.fits(f.to, s.mass)) f = pusher.target(s);
+        if (f.ok && !reader.fits(f.to, s.mass)) f = pusher.target(s, reader);
         if (f.ok) {
             const Coord to = f.to;
-            std::vector<Coord> chain;
-            if (compress) chain = fullChain(pusher, s, f, depth[s.tool], threshold);
+            chain.clear();
+            if (compress) fullChain(reader, s, f, depth[s.tool], threshold, chain);
             if (covers[s.tool] && !chain.empty()) {
                 // Pooled: the zone keeps each cell's smallest distance (in chain places) from the tool, + 1.
-                if (!pools[s.tool]) pools[s.tool] = std::make_unique<openvdb::Int32Tree>(0);
-                openvdb::tree::ValueAccessor<openvdb::Int32Tree> zone(*pools[s.tool]);
+                if (!pools[s.tool]) pools[s.tool] = std::make_unique<Pool>();
+                Pool::Accessor zone(*pools[s.tool]);
                 for (size_t i = 0; i < chain.size(); ++i) {
-                    const int32_t v = zone.getValue(chain[i]);
-                    if (v == 0 || v > int32_t(i) + 1) zone.setValueOn(chain[i], int32_t(i) + 1);
+                    int32_t& v = zone.ref(chain[i]);
+                    if (v == 0 || v > int32_t(i) + 1) v = int32_t(i) + 1;
                 }
                 pooled[s.tool] += s.mass;
                 moves.push_back(Move{s.c, to, 0}); // the source is emptied below; its clay is pooled
@@ -188,19 +190,14 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     }
     if (moves.empty()) return report;
 
-    Box targets;
-    for (const auto& a : pusher.added())
-        targets = unite(targets, Box{{{a.first.x(), a.first.y(), a.first.z()}},
-                                     {{a.first.x(), a.first.y(), a.first.z()}}});
-    std::vector<const openvdb::Int32Tree*> shared;
+    const int threads = automaton.options().threads;
+    Box targets = nonZeroBounds(pusher.added());
+    std::vector<const Pool*> shared;
     for (size_t t = 0; t < tools.size(); ++t) {
         if (!pools[t]) continue;
-        sharePool(*pools[t], pooled[t], pusher, shared);
+        targets = unite(targets, nonZeroBounds(*pools[t])); // every cell of the zone, before the shares
+        sharePool(*pools[t], pooled[t], pusher, shared, threads);
         shared.push_back(pools[t].get());
-        CoordBBox b;
-        pools[t]->evalActiveVoxelBoundingBox(b);
-        targets = unite(targets, Box{{{b.min().x(), b.min().y(), b.min().z()}},
-                                     {{b.max().x(), b.max().y(), b.max().z()}}});
     }
     // Compress chains may end beyond the surface push's region: the report (the global layer's
     // seeds) and the edit cover them. For the surface push the targets lie inside the region.
@@ -212,36 +209,47 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     // Written as the cells' new masses (Automaton::setMasses): the same grid and automaton state as
     // an edit() of the region that empties the sources and adds the targets' and pools' clay, without
     // edit()'s two scans of the region (9 % of a surface stroke's frame).
+    // The cells: the sources emptied, then the voxels given clay (planned or pooled), leaf by leaf in
+    // parallel, each leaf's cells in offset order, the leaves in origin order (any order of the cells
+    // gives setMasses() the same result; this one is the same on any thread count).
+    std::vector<const PlannedClay*> given{&pusher.added()};
+    given.insert(given.end(), shared.begin(), shared.end());
+    std::vector<Coord> origins;
+    for (const PlannedClay* g : given)
+        for (size_t l = 0; l < g->leafCount(); ++l)
+            origins.push_back(g->leaf(l).origin);
+    std::sort(origins.begin(), origins.end());
+    origins.erase(std::unique(origins.begin(), origins.end()), origins.end());
+    const Tree543<int32_t>& massTree = automaton.mass()->constTree();
+    std::vector<std::vector<Automaton::CellMass>> perLeaf(origins.size());
+    parallel_internal::forEachIndex(origins.size(), threads, [&](size_t l) {
+        const Coord& o = origins[l];
+        std::array<int32_t, kSlotVoxels> delta{};
+        for (const PlannedClay* g : given)
+            if (const PlannedClay::Leaf* leaf = g->find(o))
+                for (uint32_t i = 0; i < kSlotVoxels; ++i)
+                    delta[i] += leaf->v[i]; // fits: the mass with every share passed the room test
+        openvdb::tree::ValueAccessor<const Tree543<int32_t>, false> acc(massTree);
+        const auto* massLeaf = acc.probeConstLeaf(o);
+        const int32_t uniform = massLeaf ? 0 : acc.getValue(o);
+        std::vector<Automaton::CellMass>& out = perLeaf[l];
+        for (uint32_t i = 0; i < kSlotVoxels; ++i) {
+            if (!delta[i]) continue;
+            const Coord c = slotVoxel(o, i);
+            const int32_t before = massLeaf ? massLeaf->getValue(i) : uniform;
+            out.push_back(Automaton::CellMass{{{c.x(), c.y(), c.z()}}, int32_t(int64_t(before) + delta[i])});
+        }
+    });
+    size_t count = moves.size();
+    for (const auto& l : perLeaf)
+        count += l.size();
     std::vector<Automaton::CellMass> cells;
-    cells.reserve(moves.size() + pusher.added().size());
-    {
-        auto acc = automaton.mass()->getConstAccessor();
-        // Sources lie inside a tool and targets outside every tool, and each is listed once: no voxel
-        // twice. The pools' voxels may be targets too (or another pool's): those are merged by a map.
-        for (const Move& m : moves)
-            cells.push_back(Automaton::CellMass{{{m.from.x(), m.from.y(), m.from.z()}}, 0});
-        for (const auto& a : pusher.added()) {
-            const Coord& c = a.first;
-            cells.push_back(
-                Automaton::CellMass{{{c.x(), c.y(), c.z()}}, int32_t(int64_t(acc.getValue(c)) + a.second)});
-        }
-        if (!shared.empty()) {
-            std::unordered_map<Coord, size_t, CoordHash> index;
-            for (size_t k = moves.size(); k < cells.size(); ++k)
-                index.emplace(Coord(cells[k].at[0], cells[k].at[1], cells[k].at[2]), k);
-            for (const auto& pool : pools) {
-                if (!pool) continue;
-                for (auto it = pool->cbeginValueOn(); it; ++it) {
-                    if (!*it) continue;
-                    const Coord& c = it.getCoord();
-                    const auto [at, fresh] = index.emplace(c, cells.size());
-                    if (fresh) cells.push_back(Automaton::CellMass{{{c.x(), c.y(), c.z()}}, acc.getValue(c)});
-                    Automaton::CellMass& cell = cells[at->second];
-                    cell.mass = int32_t(int64_t(cell.mass) + *it);
-                }
-            }
-        }
-    } // the accessor goes before the write
+    cells.reserve(count);
+    // Sources lie inside a tool and the voxels given clay outside every tool: no voxel twice.
+    for (const Move& m : moves)
+        cells.push_back(Automaton::CellMass{{{m.from.x(), m.from.y(), m.from.z()}}, 0});
+    for (const auto& l : perLeaf)
+        cells.insert(cells.end(), l.begin(), l.end());
     automaton.setMasses(editRegion, cells);
     return report;
 }

@@ -86,19 +86,6 @@ Vec3 Pusher::unitNormal(const Source& s) const
     return {{n[0] / l, n[1] / l, n[2] / l}};
 }
 
-Coord Pusher::along(const Source& s, const Vec3& n, double t) const
-{
-    const Vec3 p = centre(s.c);
-    const Vec3 q{{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}};
-    int32_t v[3];
-    for (int i = 0; i < 3; ++i) {
-        const double r = std::floor(q[i] + 0.5);
-        v[i] = int32_t(std::clamp(r, double(INT32_MIN / 2), double(INT32_MAX / 2)));
-    }
-    if (mIs2D) v[2] = 0;
-    return Coord(v[0], v[1], v[2]);
-}
-
 bool Pusher::inAnyTool(const Coord& c) const
 {
     for (size_t t = 0; t < mTools.size(); ++t) {
@@ -107,17 +94,14 @@ bool Pusher::inAnyTool(const Coord& c) const
     return false;
 }
 
-bool Pusher::isObstacle(const Coord& c) const
+Pusher::Reader::Reader(const Pusher& p) : mPusher(p), mMass(p.mMass), mAdded(p.mAdded)
 {
-    return mObs && mObs->isValueOn(c);
+    if (p.mObs)
+        mObs =
+            std::make_unique<openvdb::tree::ValueAccessor<const Tree543<openvdb::ValueMask>, false>>(*p.mObs);
 }
 
-int32_t Pusher::massAt(const Coord& c) const
-{
-    return mMass.getValue(c);
-}
-
-Found Pusher::find(const Source& s, bool planned) const
+Found Pusher::find(const Source& s, bool planned, Reader& r) const
 {
     Found f;
     const Vec3 n = unitNormal(s);
@@ -127,7 +111,7 @@ Found Pusher::find(const Source& s, bool planned) const
         const double t = start + 0.5 * k;
         const Coord c = along(s, n, t);
         if (c == s.c) continue;
-        if (isFree(c, s.mass, mRegion, planned)) {
+        if (r.isFree(c, s.mass, mRegion, planned)) {
             f.ok = true;
             f.to = c;
             f.normal = n;
@@ -135,7 +119,7 @@ Found Pusher::find(const Source& s, bool planned) const
             f.byMarch = true;
             return f;
         }
-        if (isWall(c)) break; // clay does not pass through obstacles
+        if (r.isWall(c)) break; // clay does not pass through obstacles
     }
     // The flood: breadth-first from the source through passable voxels, neighbours in a fixed order.
     openvdb::MaskTree seen(false);
@@ -156,25 +140,15 @@ Found Pusher::find(const Source& s, bool planned) const
             }
             if (acc.isValueOn(q)) continue;
             acc.setValueOn(q);
-            if (isFree(q, s.mass, mRegion, planned)) {
+            if (r.isFree(q, s.mass, mRegion, planned)) {
                 f.ok = true;
                 f.to = q;
                 return f;
             }
-            if (!isWall(q) && inside(mRegion, q)) queue.push_back(q);
+            if (!r.isWall(q) && inside(mRegion, q)) queue.push_back(q);
         }
     }
     return f;
-}
-
-bool Pusher::isFree(const Coord& c, int32_t m, const Box& region, bool planned) const
-{
-    if (!inside(region, c)) return false;
-    if (mIs2D && c.z() != 0) return false;
-    if (isObstacle(c)) return false;
-    if (inAnyTool(c)) return false;
-    const int64_t now = planned ? this->planned(c) : int64_t(mMass.getValue(c));
-    return now + m <= INT32_MAX;
 }
 
 } // namespace push_internal

@@ -22,20 +22,26 @@
 // voxels up to the one found alone, and stop there iff it still has room (fits()); a source trapped
 // alone is trapped with it. Checked in source order, a search alone that still fits is the search
 // with the planned clay: the same targets as a serial search.
+//
+// The planned clay is a value per voxel in dense arrays per 8^3 leaf (LeafArrays.h). The grid, the
+// obstacles and the planned clay are read through a Reader's cached accessors, one Reader per thread:
+// a chain or a pass over a leaf costs a lookup per leaf, not per voxel.
 #pragma once
 
-#include "core/CoordHash.h"
+#include "push/LeafArrays.h"
 
 #include "vdbclay/Fwd.h"
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
 
-#include <openvdb/Types.h>
+#include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <climits>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <unordered_map>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -56,37 +62,35 @@ inline bool inside(const Box& b, const Coord& c)
            c.z() >= b.min[2] && c.z() <= b.max[2];
 }
 
-/// The clay planned into voxels so far (the targets' room test, the edit): a hash map from voxel to
-/// its entry, the entries in the order of their first add (source order: deterministic, and near
-/// coordinate order, so the edit's accessor walks the tree in order). A std::map does the same at
-/// ~2.5x the cost (a tree node per voxel, log n compares per lookup).
-class PlannedClay {
-public:
-    int64_t get(const Coord& c) const
-    {
-        const auto it = mIndex.find(c);
-        return it != mIndex.end() ? mEntries[it->second].second : 0;
-    }
-    void add(const Coord& c, int64_t m)
-    {
-        const auto r = mIndex.emplace(c, uint32_t(mEntries.size()));
-        if (r.second)
-            mEntries.emplace_back(c, m);
-        else
-            mEntries[r.first->second].second += m;
-    }
-    void reserve(size_t n)
-    {
-        mIndex.reserve(n);
-        mEntries.reserve(n);
-    }
-    using Entries = std::vector<std::pair<Coord, int64_t>>;
-    const Entries& entries() const { return mEntries; }
+/// The clay planned into voxels so far (the targets' room test, the edit), per voxel: 0 where none.
+/// A voxel's mass with its planned clay never exceeds INT32_MAX (every add passed the room test), so
+/// the planned clay fits an int32.
+using PlannedClay = LeafArrays<int32_t>;
 
-private:
-    std::unordered_map<Coord, uint32_t, CoordHash> mIndex;
-    Entries mEntries;
-};
+/// The voxels of @a a holding a nonzero value (empty box if none).
+inline Box nonZeroBounds(const LeafArrays<int32_t>& a)
+{
+    Box b;
+    for (size_t l = 0; l < a.leafCount(); ++l) {
+        const LeafArrays<int32_t>::Leaf& leaf = a.leaf(l);
+        uint32_t lo[3] = {7, 7, 7}, hi[3] = {0, 0, 0};
+        bool any = false;
+        for (uint32_t i = 0; i < kSlotVoxels; ++i) {
+            if (!leaf.v[i]) continue;
+            const uint32_t p[3] = {i >> 6, (i >> 3) & 7, i & 7};
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::min(lo[k], p[k]);
+                hi[k] = std::max(hi[k], p[k]);
+            }
+            any = true;
+        }
+        if (!any) continue;
+        const Coord& o = leaf.origin;
+        b = unite(b, Box{{{o.x() + int32_t(lo[0]), o.y() + int32_t(lo[1]), o.z() + int32_t(lo[2])}},
+                         {{o.x() + int32_t(hi[0]), o.y() + int32_t(hi[1]), o.z() + int32_t(hi[2])}}});
+    }
+    return b;
+}
 
 /// A clay voxel inside a tool: its mass, the tool that holds it most deeply and its distance there.
 struct Source {
@@ -109,6 +113,32 @@ class Pusher {
 public:
     Pusher(const Automaton& a, const std::vector<ShapePtr>& tools, int maxSearch);
 
+    /// Reads for one thread, through accessors that cache the leaves last visited: the grid before
+    /// the push, the obstacles and the clay planned so far (which it sees as it grows). Several
+    /// Readers may read in parallel while nothing is planned.
+    class Reader {
+    public:
+        explicit Reader(const Pusher& p);
+        int32_t massAt(const Coord& c) { return mMass.getValue(c); } ///< the grid's, before the push
+        bool isObstacle(const Coord& c) { return mObs && mObs->isValueOn(c); }
+        /// The value of @a c after the moves planned so far (pooled shares excluded).
+        int64_t planned(const Coord& c) { return int64_t(massAt(c)) + mAdded.get(c); }
+        /// Whether @a m more clay still fits at @a c with the clay planned so far.
+        bool fits(const Coord& c, int32_t m) { return planned(c) + m <= INT32_MAX; }
+        /// @a c can take @a m more clay (with the clay planned so far unless @a planned is false) and
+        /// lies in @a region, in the plane (2D), outside every tool and obstacle.
+        bool isFree(const Coord& c, int32_t m, const Box& region, bool planned = true);
+        /// An obstacle that is not part of a tool: clay can neither stop in it nor pass through it.
+        bool isWall(const Coord& c) { return isObstacle(c) && !mPusher.inAnyTool(c); }
+        const Pusher& pusher() const { return mPusher; }
+
+    private:
+        const Pusher& mPusher;
+        openvdb::tree::ValueAccessor<const Tree543<int32_t>, false> mMass;
+        std::unique_ptr<openvdb::tree::ValueAccessor<const Tree543<openvdb::ValueMask>, false>> mObs;
+        PlannedClay::ConstAccessor mAdded;
+    };
+
     /// The union of the tools' bounds (2D: clipped to z = 0).
     Box toolBounds() const;
     /// The region targets must lie in (and the chains, until setChainRegion()).
@@ -125,34 +155,27 @@ public:
     Vec3 unitNormal(const Source& s) const;
 
     /// Where the clay of @a s goes, against the grid alone (thread-safe: reads the grid and the tools).
-    Found findAlone(const Source& s) const { return find(s, /*planned=*/false); }
+    Found findAlone(const Source& s) const
+    {
+        Reader r(*this);
+        return find(s, /*planned=*/false, r);
+    }
     /// Where the clay of @a s goes, with the clay planned so far.
-    Found target(const Source& s) const { return find(s, /*planned=*/true); }
-    /// Whether @a m more clay still fits at @a c with the clay planned so far.
-    bool fits(const Coord& c, int32_t m) const { return planned(c) + m <= INT32_MAX; }
+    Found target(const Source& s, Reader& r) const { return find(s, /*planned=*/true, r); }
 
     /// The voxel at the rounded point @a t along @a n from @a s's centre (2D: z = 0).
     Coord along(const Source& s, const Vec3& n, double t) const;
-    /// @a c can take @a m more clay (with the clay planned so far) and lies in @a region, in the
-    /// plane (2D), outside every tool and obstacle.
-    bool isFree(const Coord& c, int32_t m, const Box& region) const { return isFree(c, m, region, true); }
     bool inAnyTool(const Coord& c) const;
-    bool isObstacle(const Coord& c) const;
-    int32_t massAt(const Coord& c) const; ///< the grid's, before the push
     bool is2D() const { return mIs2D; }
     size_t toolCount() const { return mTools.size(); }
 
-    /// The value of @a c after the moves planned so far (pooled shares excluded).
-    int64_t planned(const Coord& c) const { return int64_t(massAt(c)) + mAdded.get(c); }
-    void add(const Coord& c, int32_t m) { mAdded.add(c, m); }
-    void reserve(size_t voxels) { mAdded.reserve(voxels); }
-    const PlannedClay::Entries& added() const { return mAdded.entries(); }
+    /// Plans @a m more clay into @a c (@a m > 0, and it fits: Reader::fits()).
+    void add(const Coord& c, int32_t m) { mAddAcc.ref(c) += m; }
+    /// The clay planned so far, per voxel (0: none).
+    const PlannedClay& added() const { return mAdded; }
 
 private:
-    Found find(const Source& s, bool planned) const;
-    /// An obstacle that is not part of a tool: clay can neither stop in it nor pass through it.
-    bool isWall(const Coord& c) const { return isObstacle(c) && !inAnyTool(c); }
-    bool isFree(const Coord& c, int32_t m, const Box& region, bool planned) const;
+    Found find(const Source& s, bool planned, Reader& r) const;
 
     const std::vector<ShapePtr>& mTools;
     std::vector<Box> mBounds;
@@ -162,7 +185,31 @@ private:
     const Tree543<openvdb::ValueMask>* mObs;
     Box mRegion, mChainRegion;
     PlannedClay mAdded;
+    PlannedClay::Accessor mAddAcc{mAdded};
 };
+
+inline Coord Pusher::along(const Source& s, const Vec3& n, double t) const
+{
+    const Vec3 p{{double(s.c.x()), double(s.c.y()), double(s.c.z())}};
+    const Vec3 q{{p[0] + t * n[0], p[1] + t * n[1], p[2] + t * n[2]}};
+    int32_t v[3];
+    for (int i = 0; i < 3; ++i) {
+        const double r = std::floor(q[i] + 0.5);
+        v[i] = int32_t(std::clamp(r, double(INT32_MIN / 2), double(INT32_MAX / 2)));
+    }
+    if (mIs2D) v[2] = 0;
+    return Coord(v[0], v[1], v[2]);
+}
+
+inline bool Pusher::Reader::isFree(const Coord& c, int32_t m, const Box& region, bool planned)
+{
+    if (!inside(region, c)) return false;
+    if (mPusher.mIs2D && c.z() != 0) return false;
+    if (isObstacle(c)) return false;
+    if (mPusher.inAnyTool(c)) return false;
+    const int64_t now = planned ? this->planned(c) : int64_t(massAt(c));
+    return now + m <= INT32_MAX;
+}
 
 } // namespace push_internal
 } // namespace vdbclay

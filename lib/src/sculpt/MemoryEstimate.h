@@ -44,9 +44,10 @@ constexpr uint64_t kAutomatonLaneBytesPerAnchor = 16 + 1;
 /// leaf is counted with the tree).
 constexpr uint64_t kToolBytesPerSlot = 2 * 80 + 2 * 48 + 64;
 /// Per clay voxel inside a tool at one push (push/Pusher.h): its Source (32 bytes) and the per-leaf
-/// copy it is gathered from (32), what its search found (56), its Move (28), its target in the
-/// planned clay (a hash node of ~48 bytes, a bucket of 8, an entry of 24 doubled for growth) and the
-/// two cell masses written (16 each).
+/// copy it is gathered from (32), what its search found (56), its Move (28), its target's part of
+/// the planned clay (push/LeafArrays.h: a 2 KB array per leaf the targets touch, 32 bytes a target
+/// where a tool's face fills 64 voxels of a leaf; 104 allowed for sparser targets) and the two cell
+/// masses written (16 each).
 constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2 * 16;
 /// Per voxel surface tension copies (sculpt/Smooth.cc): its mass (8), the mass before (8), its
 /// shelter, the separable pass's scratch and the fills (3 x 8), obstacle and member flags (2), and
