@@ -18,6 +18,7 @@
 /// them) and has not received yet this step. The receiver takes min(giver's clay, Tc - its clay),
 /// so one of the two ends at or over Tc/2 and the other under it: the volume (voxels at or over
 /// Tc/2) is kept exactly, and bumps and terraces of full cells move into the creases beside them.
+/// The step does not depend on the strength.
 ///
 /// The exchange step then lets clay flow between face neighbours from the less sheltered to the
 /// more sheltered voxel: a voxel on a convex bump gives, a voxel in a concave crease receives, and

@@ -40,7 +40,7 @@ struct Block {
     int64_t nx = 0, ny = 0, nz = 0;
     bool is2D = false;
     std::vector<int64_t> mass;  ///< clay (outer box)
-    std::vector<char> obstacle; ///< counts as full, never changes
+    std::vector<char> obstacle; ///< half full in the shelters, never changes
     std::vector<char> member;   ///< may change (inner box only)
     std::vector<int32_t> part;  ///< the member voxels' connected part (face neighbours), -1 elsewhere
 
