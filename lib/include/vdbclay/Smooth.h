@@ -2,28 +2,44 @@
 /// @brief Surface tension: clay moves along its surface from convex places to concave ones, with
 ///        integer masses conserved exactly (a "smooth" tool; docs/SCENES.md).
 ///
-/// The model. Each voxel's fill is its clay clamped to [0, Tc] (an obstacle voxel counts as full:
-/// clay wets walls and tools at a right angle). A voxel's shelter G is the sum of the fills of its
-/// 5^3 neighbourhood (5^2 in 2D) weighted by the tent (1 2 3 2 1) along each axis, its own fill
-/// left out: high in a hollow, low on a bump, a measure of the surface's curvature two voxels wide.
-/// Clay flows between face neighbours from the less sheltered to the more sheltered voxel, a
-/// descent of the weighted count of broken bonds: a voxel on a convex bump gives, a voxel in a
-/// concave crease receives, and a flat surface, whose full voxels have no room and whose empty
-/// voxels have no clay, does not move. A pair moves
+/// The model. Each voxel's fill is its clay clamped to [0, Tc] (an obstacle voxel counts as half
+/// full: clay meets walls and tools at about a right angle). A voxel's shelter G is the sum of the
+/// fills of its 5^3 neighbourhood (5^2 in 2D) weighted by the tent (1 2 3 2 1) along each axis, its
+/// own fill left out: high in a hollow, low on a bump, a measure of the surface's curvature two
+/// voxels wide. A pass has two steps, each a descent of the weighted count of broken bonds.
+///
+/// The threshold step moves whole voxels of the surface (a volume-keeping threshold dynamics, as
+/// Merriman, Bence and Osher's scheme with the volume held): the surface's voxels holding at least
+/// Tc/2 (and at most Tc) that are more convex than a flat face (G below a flat face's inner
+/// voxel's), least sheltered first, each give their clay to the most sheltered voxel under Tc/2
+/// within 4 voxels along each axis that lies on the surface, is more concave than a flat face (G
+/// above a flat face's outer voxel's), is strictly more sheltered than the giver, is of the same
+/// connected part of the region (face neighbours; obstacles, solids and the region's edge part
+/// them) and has not received yet this step. The receiver takes min(giver's clay, Tc - its clay),
+/// so one of the two ends at or over Tc/2 and the other under it: the volume (voxels at or over
+/// Tc/2) is kept exactly, and bumps and terraces of full cells move into the creases beside them.
+/// The step does not depend on the strength.
+///
+/// The exchange step then lets clay flow between face neighbours from the less sheltered to the
+/// more sheltered voxel: a voxel on a convex bump gives, a voxel in a concave crease receives, and
+/// a flat surface, whose full voxels have no room and whose empty voxels have no clay, does not
+/// move. A pair moves
 ///   t = floor(strength x (G(to) - G(from)) / (2 x the face weight)),
 /// (face weight 18 in 3D, 6 in 2D: strength 1 evens the two voxels' shelters), at most what the
-/// giver holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded.
+/// giver holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded; the
+/// receiver must lie on the clay's surface (a face neighbour under Tc/2, not an obstacle), so clay
+/// under Tc inside is not packed. It smooths coverage-weighted clay, which the threshold step sees
+/// only as voxels in or out.
 ///
-/// What it does not do: clay moves only into room, so a surface of full cells moves only where its
-/// partly filled cells let it. A sharp bump or terrace of full cells several voxels wide is a local
-/// minimum of the bond count (its edge voxels are more sheltered than the empty voxels beside them)
-/// and stays; coverage-weighted clay, deposits and clay under Tc smooth (docs/SCENES.md, "Actions",
-/// gives figures).
+/// What it does not do: a step of full cells one voxel high on a flat face is as sheltered on its
+/// two sides and stays; a voxel's clay goes at most 4 voxels a pass; a brush that crosses a block's
+/// edge rounds it (docs/SCENES.md gives figures).
 ///
-/// One pass visits the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose
-/// lower voxel has an even, then an odd coordinate along it), so the pairs of a sub-pass are
-/// disjoint; the shelters are recomputed from the masses before each sub-pass. Everything is
-/// integer and in a fixed order: the result does not depend on the thread count.
+/// The threshold step runs once a pass, on the shelters at the pass's start. The exchange visits
+/// the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose lower voxel has
+/// an even, then an odd coordinate along it), so the pairs of a sub-pass are disjoint; the shelters
+/// are recomputed from the masses before each sub-pass. Everything is integer and in a fixed order:
+/// the result does not depend on the thread count.
 #pragma once
 
 #include "vdbclay/Fwd.h"
@@ -53,7 +69,7 @@ constexpr int kSurfaceTensionMargin = 4;
 /// @a tool and that are neither obstacles of @a automaton nor inside one of @a solids. Only those
 /// voxels change (no margin); their shelters read two voxels beyond. Writes the changed voxels
 /// through Automaton::setMasses (nothing when nothing moved). Work: (the tool's bounds + 4)^3 x
-/// passes x 6 x 15.
+/// passes x 7 x 15, plus each surface voxel's 9^3 neighbourhood a pass.
 /// @throw Error if @a strength is outside (0, 1] or @a passes < 1; nothing is changed then.
 SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, int passes = 1,
                     const std::vector<ShapePtr>& solids = {});
