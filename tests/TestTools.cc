@@ -398,3 +398,42 @@ TEST_F(ToolsTest, ARemoveToolPushesNothingAndItsCellsAreSolid)
     for (int y = 1; y <= 15; ++y)
         EXPECT_EQ(acc.getValue(Coord(8, y, 8)), 0) << y;
 }
+
+TEST_F(ToolsTest, AnAddIntoFullClayIsAnOverloadTheGlobalLayerMovesOut)
+{
+    // A slab at Tc on a floor, global transport; a ball adding 3000 a voxel dips into its top: the
+    // clay it adds over Tc is moved by the layer out to the free surface, every unit accounted for,
+    // no cell left over Tc, the same clay on any thread count.
+    const char* json = R"({
+      "threshold": 1000, "rule": "prorata", "transport": "global",
+      "clay": [{"shape": "box", "min": [0,0,0], "max": [31,7,31], "mass": 1000}],
+      "tools": [{"shape": "sphere", "center": [16,10,16], "radius": 3, "action": "add", "mass": 3000,
+                 "path": [{"translate": [0,-2,0], "frames": 1}, {"translate": [0,0,0], "frames": 1}]}],
+      "obstacles": [{"shape": "box", "min": [-8,-3,-8], "max": [40,-1,40]}],
+      "settle": {"max_steps": 100000}
+    })";
+    uint64_t hash0 = 0;
+    for (const int threads : {1, 2, 3, 8}) {
+        std::vector<FrameReport> frames;
+        MassGridPtr out;
+        const RunSummary r = vdbclay_test::runSceneJson(json, &frames, &out, threads);
+        EXPECT_EQ(r.massInitial, int64_t(32 * 8 * 32) * 1000);
+        EXPECT_GT(r.massAdded, 0);
+        EXPECT_EQ(r.massFinal, r.massInitial + r.massAdded);
+        EXPECT_EQ(totalMass(*out), r.massFinal);
+        EXPECT_EQ(r.massDrift, 0);
+        EXPECT_TRUE(r.settled);
+        EXPECT_EQ(residualOverload(*out, 1000, nullptr), 0);
+        ASSERT_FALSE(frames.empty());
+        EXPECT_GT(frames[0].transport.massMoved, 0) << "the layer moved the added overload";
+        EXPECT_GT(r.transportSolves, 0u);
+        // The added clay ends at most Tc a voxel: the layer and the automaton took it out to room.
+        const ClayMetrics m = measureClay(*out, 1000, nullptr, 3);
+        EXPECT_LE(m.maxCell, 1000);
+        const uint64_t hash = contentHash(*out);
+        if (threads == 1)
+            hash0 = hash;
+        else
+            EXPECT_EQ(hash, hash0) << threads;
+    }
+}
