@@ -1,7 +1,7 @@
 // Surface tension (Smooth.h): convex surface voxels hand their clay to concave ones nearby (the
 // threshold step), then pairs of face neighbours inside a region exchange clay, from the less
 // sheltered voxel to the more sheltered one (the exchange step). The region's masses are copied into a dense
-// block (the region grown by one voxel, read once through accessors), the passes run on it, and the voxels
+// block (the region grown by two voxels, read once through accessors), the passes run on it, and the voxels
 // that changed are written back through Automaton::setMasses over their bounds.
 #include "vdbclay/Smooth.h"
 #include "vdbclay/Automaton.h"
@@ -34,7 +34,7 @@ inline int64_t weight(int dx, int dy, int dz)
 constexpr int64_t kTent[5] = {1, 2, 3, 2, 1};
 constexpr int kReach = 2;
 
-/// A dense copy of a box grown by one voxel (2D: in x and y only).
+/// A dense copy of a box grown by kReach voxels, the shelters' reach (2D: in x and y only).
 struct Block {
     Box inner, outer;
     int64_t nx = 0, ny = 0, nz = 0;
