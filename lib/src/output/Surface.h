@@ -78,8 +78,8 @@ openvdb::FloatGrid::Ptr fogToSdfByLeaves(const openvdb::FloatGrid& fog, float is
 openvdb::FloatGrid::Ptr narrowBandSdfFromDensity(const openvdb::FloatGrid& density, int radius,
                                                  float isoValue, float band, uint64_t* swept = nullptr);
 
-/// The tree a sweep runs over: a leaf at each of @a g's origins with its mask, values allocated, not
-/// set (the sweep's initialisation writes them), over @a background.
+/// The tree a sweep runs over: a leaf at each of @a g's origins with its mask, its values not
+/// allocated (sweepFogTree allocates and writes those of the leaves it needs), over @a background.
 std::shared_ptr<openvdb::FloatTree> sweepTreeOf(const GrownLeaves& g, float background);
 
 /// The fast sweeping method over @a tree, whose leaves and active voxels are the fog's and whose
@@ -88,8 +88,10 @@ std::shared_ptr<openvdb::FloatTree> sweepTreeOf(const GrownLeaves& g, float back
 /// background there). @a band 0: every voxel swept, fogToSdf's values bit for bit. @a band > 0: only
 /// the voxels within reach of the band (SurfaceSweep.cc), or everything where that cannot be told
 /// apart (after sweeping all when the band's sweep left no value of band or more), and the result
-/// clipped to the band as clipToNarrowBand does (not pruned). Returns the number of voxels the
-/// sweeps updated (each once per sweep), 0 if no sweep ran.
+/// clipped to the band as clipToNarrowBand does (not pruned); a leaf with no voxel next to the
+/// isosurface or within reach, all on one side, becomes an inactive tile of +-band (its values,
+/// allocated only where needed, are never written). Returns the number of voxels the sweeps updated
+/// (each once per sweep), 0 if no sweep ran.
 uint64_t sweepFogTree(openvdb::FloatTree& tree, const openvdb::FloatTree& source, float isoValue, float h,
                       float band, bool reachOnly = true);
 

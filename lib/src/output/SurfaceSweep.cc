@@ -230,7 +230,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     background.fill(source.background());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
-            leaves[i].values = manager.leaf(i).buffer().data();
+            leaves[i].values = nullptr; // set once the leaf is known to be needed (below)
             const LeafT* in = source.probeConstLeaf(manager.leaf(i).origin());
             input[i] = in ? in->buffer().data() : background.data();
         }
@@ -262,80 +262,120 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
     // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
     // from its input; one in a missing leaf through an accessor (the source's tile or background).
+    // First the masks alone (which voxels are next to the isosurface, which are swept), then the
+    // values, only in the leaves the sweeps need (all of them unless only the band's reach is swept).
+    const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
+                           Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
+    // Calls fn(i, value, nb) for each active voxel i of leaf li with its six face neighbours' fog values.
+    auto forEachActive = [&](size_t li, openvdb::tree::ValueAccessor<const FloatTree>& acc, auto&& fn) {
+        const std::array<int64_t, 6>& nbLeaf = neighbours[li];
+        const float* nbData[6];
+        for (int d = 0; d < 6; ++d)
+            nbData[d] = nbLeaf[d] >= 0 ? input[size_t(nbLeaf[d])] : nullptr;
+        const LeafT& in = manager.leaf(li);
+        const float* v = input[li];
+        for (auto it = in.getValueMask().beginOn(); it; ++it) {
+            const Index i = it.pos();
+            const int x = int(i >> (2 * LeafT::LOG2DIM)), y = int((i >> LeafT::LOG2DIM) & (kDim - 1)),
+                      z = int(i & (kDim - 1));
+            // The neighbour across face d at offset j of leaf nbData[d], or through the accessor.
+            auto across = [&](int d, Index j) {
+                return nbData[d] ? nbData[d][j] : acc.getValue(in.offsetToGlobalCoord(i) + dirs[d]);
+            };
+            float nb[6];
+            nb[0] = x > 0 ? v[i - kDim * kDim] : across(0, offsetOf(kDim - 1, y, z));
+            nb[1] = x < kDim - 1 ? v[i + kDim * kDim] : across(1, offsetOf(0, y, z));
+            nb[2] = y > 0 ? v[i - kDim] : across(2, offsetOf(x, kDim - 1, z));
+            nb[3] = y < kDim - 1 ? v[i + kDim] : across(3, offsetOf(x, 0, z));
+            nb[4] = z > 0 ? v[i - 1] : across(4, offsetOf(x, y, kDim - 1));
+            nb[5] = z < kDim - 1 ? v[i + 1] : across(5, offsetOf(x, y, 0));
+            fn(i, v[i], nb);
+        }
+    };
     std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         openvdb::tree::ValueAccessor<const FloatTree> acc(source);
-        const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
-                               Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
         uint64_t boundary = 0, sweeping = 0;
         for (size_t li = r.begin(); li != r.end(); ++li) {
             SweepLeaf& out = leaves[li];
             out.neighbour = neighbours[li];
-            const float* nbData[6];
-            for (int d = 0; d < 6; ++d)
-                nbData[d] = out.neighbour[d] >= 0 ? input[size_t(out.neighbour[d])] : nullptr;
-            const LeafT& in = manager.leaf(li);
-            const float* v = input[li];
             out.sweep.setOff();
             out.boundary.setOff();
-            for (Index i = 0; i < LeafT::SIZE; ++i) {
-                const float value = v[i];
-                if (!in.isValueOn(i)) {
-                    out.values[i] = value > isoValue ? -kMax : kMax;
-                    continue;
-                }
-                const int x = int(i >> (2 * LeafT::LOG2DIM)), y = int((i >> LeafT::LOG2DIM) & (kDim - 1)),
-                          z = int(i & (kDim - 1));
-                // The neighbour across face d at offset j of leaf nbData[d], or through the accessor.
-                auto across = [&](int d, Index j) {
-                    return nbData[d] ? nbData[d][j] : acc.getValue(in.offsetToGlobalCoord(i) + dirs[d]);
-                };
-                float nb[6];
-                nb[0] = x > 0 ? v[i - kDim * kDim] : across(0, offsetOf(kDim - 1, y, z));
-                nb[1] = x < kDim - 1 ? v[i + kDim * kDim] : across(1, offsetOf(0, y, z));
-                nb[2] = y > 0 ? v[i - kDim] : across(2, offsetOf(x, kDim - 1, z));
-                nb[3] = y < kDim - 1 ? v[i + kDim] : across(3, offsetOf(x, 0, z));
-                nb[4] = z > 0 ? v[i - 1] : across(4, offsetOf(x, y, kDim - 1));
-                nb[5] = z < kDim - 1 ? v[i + 1] : across(5, offsetOf(x, y, 0));
-                bool isBoundary = false;
-                out.values[i] = initValue(value, nb, isoValue, -h, isBoundary);
-                if (isBoundary) {
+            forEachActive(li, acc, [&](Index i, float value, const float nb[6]) {
+                // initValue's test: a face neighbour on the other side of the isovalue.
+                const bool less = value < isoValue;
+                bool any = false;
+                for (int d = 0; d < 6; ++d)
+                    any = any || (less ^ (nb[d] < isoValue));
+                if (any) {
                     out.boundary.setOn(i);
                     ++boundary;
                 } else {
                     out.sweep.setOn(i);
                     ++sweeping;
                 }
-            }
+            });
         }
         boundaryCount += boundary;
         sweepCount += sweeping;
+    });
+    const bool sweeps = boundaryCount.load() > 0 && sweepCount.load() > 0;
+    // The leaves whose values matter: with only the band's reach swept, a leaf with no voxel next to
+    // the isosurface and none within reach keeps +-FLT_MAX everywhere (read by its neighbours as a
+    // missing leaf is), and ends as inactive +-band by its side: it becomes a tile of that value and
+    // its values are never allocated (unless its voxels lie on both sides: then it is kept).
+    std::vector<char> needed(n, 1);
+    std::vector<char> insideTile(n, 0); // the side of a leaf that becomes a tile: 1 inside (-band)
+    if (sweeps && band > 0 && reachOnly) {
+        const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
+        std::vector<LeafT::NodeMaskType> reach(n), next(n);
+        for (size_t li = 0; li < n; ++li)
+            reach[li] = leaves[li].boundary;
+        for (int step = 0; step < steps; ++step) {
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t li = r.begin(); li != r.end(); ++li)
+                    next[li] = faceDilated(reach, leaves[li].neighbour, li);
+            });
+            reach.swap(next);
+        }
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t li = r.begin(); li != r.end(); ++li) {
+                SweepLeaf& leaf = leaves[li];
+                leaf.sweep &= reach[li];
+                if (!leaf.sweep.isOff() || !leaf.boundary.isOff()) continue;
+                const float* v = input[li];
+                const bool in0 = v[0] > isoValue;
+                bool oneSide = true;
+                for (Index i = 1; i < LeafT::SIZE && oneSide; ++i)
+                    oneSide = (v[i] > isoValue) == in0;
+                if (!oneSide) continue;
+                needed[li] = 0;
+                insideTile[li] = in0 ? 1 : 0;
+            }
+        });
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        openvdb::tree::ValueAccessor<const FloatTree> acc(source);
+        for (size_t li = r.begin(); li != r.end(); ++li) {
+            if (!needed[li]) continue;
+            LeafT& leaf = manager.leaf(li);
+            if (!leaf.buffer().isOutOfCore() && leaf.buffer().empty()) leaf.buffer().allocate();
+            float* values = leaf.buffer().data();
+            leaves[li].values = values;
+            const float* v = input[li];
+            for (Index i = 0; i < LeafT::SIZE; ++i)
+                values[i] = v[i] > isoValue ? -kMax : kMax; // inactive: by its side
+            forEachActive(li, acc, [&](Index i, float value, const float nb[6]) {
+                bool isBoundary = false;
+                values[i] = initValue(value, nb, isoValue, -h, isBoundary);
+            });
+        }
     });
 
     // fogToSdf sweeps only when it found voxels to sweep and voxels to sweep from.
     float tileValue = kMax;
     uint64_t swept = 0;
-    if (boundaryCount.load() > 0 && sweepCount.load() > 0) {
-        if (band > 0 && reachOnly) {
-            // Only the voxels within reach of the band: the boundary grown by that many face steps,
-            // a step at a time through the leaves' face neighbours (a value passes from voxel to
-            // voxel only through active ones, all in the fog's leaves).
-            const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
-            std::vector<LeafT::NodeMaskType> reach(n), next(n);
-            for (size_t li = 0; li < n; ++li)
-                reach[li] = leaves[li].boundary;
-            for (int step = 0; step < steps; ++step) {
-                tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-                    for (size_t li = r.begin(); li != r.end(); ++li)
-                        next[li] = faceDilated(reach, leaves[li].neighbour, li);
-                });
-                reach.swap(next);
-            }
-            tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
-                for (size_t li = r.begin(); li != r.end(); ++li)
-                    leaves[li].sweep &= reach[li];
-            });
-        }
+    if (sweeps) {
         for (const SweepLeaf& leaf : leaves)
             swept += leaf.sweep.countOn();
         // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
@@ -364,6 +404,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             tbb::blocked_range<size_t>(0, n), MinMax(),
             [&](const tbb::blocked_range<size_t>& r, MinMax m) {
                 for (size_t li = r.begin(); li != r.end(); ++li) {
+                    if (!leaves[li].values) continue;
                     const LeafT& leaf = manager.leaf(li);
                     for (auto it = leaf.getValueMask().beginOn(); it; ++it) {
                         const float v = leaves[li].values[it.pos()];
@@ -384,6 +425,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             return sweepFogTree(tree, source, isoValue, h, band, /*reachOnly=*/false);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t li = r.begin(); li != r.end(); ++li) {
+                if (!leaves[li].values) continue;
                 for (float* v = leaves[li].values; v != leaves[li].values + LeafT::SIZE; ++v) {
                     if (*v == -kMax) *v = e.lo;
                     if (*v == kMax) *v = e.hi;
@@ -398,6 +440,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t li = r.begin(); li != r.end(); ++li) {
                 float* v = leaves[li].values;
+                if (!v) continue;
                 LeafT::NodeMaskType& active = manager.leaf(li).getValueMask();
                 for (Index i = 0; i < LeafT::SIZE; ++i) {
                     if (!active.isOn(i)) {
@@ -421,6 +464,14 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     for (; it; ++it)
         it.setValue(tileValue);
     tree.root().setBackground(band > 0 ? band : tileValue, /*updateChildNodes=*/false);
+    // The leaves left without values: inactive tiles of +-band by their side (replacing the leaves).
+    std::vector<Coord> origins;
+    for (size_t li = 0; li < n; ++li)
+        if (!needed[li]) origins.push_back(manager.leaf(li).origin());
+    for (size_t k = 0, li = 0; li < n; ++li) {
+        if (needed[li]) continue;
+        tree.addTile(1, origins[k++], insideTile[li] ? -band : band, false);
+    }
     return swept;
 }
 
@@ -431,7 +482,6 @@ std::shared_ptr<FloatTree> sweepTreeOf(const GrownLeaves& g, float background)
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
             made[i] = new LeafT(openvdb::PartialCreate(), g.origins[i], 0.f, false);
-            made[i]->buffer().allocate();
             made[i]->setValueMask(g.masks[i]);
         }
     });
