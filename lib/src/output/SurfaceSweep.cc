@@ -41,6 +41,12 @@
 // in the full sweep; clipped to the band, they are what the full sweep gives. The clipping itself
 // (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestSurface.cc
 // checks the band against OpenVDB's fogToSdf, clipped alike, bit for bit.
+//
+// Memory. The masks come first (which voxels lie next to the isosurface, read from the fog alone;
+// which lie within reach), the values after, allocated only in the leaves holding such a voxel: a
+// leaf with none keeps +-FLT_MAX throughout (its neighbours read it as a missing leaf: the update
+// takes absolute values) and ends inactive at +-band by its side, so where its voxels all lie on
+// one side it becomes that tile (as pruning would make it) and its values never exist.
 #include "output/Surface.h"
 
 #include <openvdb/math/Math.h>
