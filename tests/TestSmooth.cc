@@ -118,8 +118,8 @@ std::unique_ptr<Automaton> terracedTop(bool terraced, int threads = 1)
     return std::make_unique<Automaton>(g, vdbclay_test::automatonOptions(Rule::Prorata, 1000, 3, threads));
 }
 
-/// Runs @a passes smooth() calls of @a strength with @a tool on @a a and checks what issue 38 asks
-/// of smoothing: the roughness over @a around (surfaceEnergy) loses at least half of its excess over
+/// Runs @a passes smooth() calls of @a strength with @a tool on @a a and checks what smoothing
+/// guarantees: the roughness over @a around (surfaceEnergy) loses at least half of its excess over
 /// @a reference's, the mass is exact, the volume within 1 %, no voxel over Tc, the second pass moves
 /// less than the first. Returns the clay's contentHash.
 uint64_t expectSmoothed(const char* what, Automaton& a, const Automaton& reference, const Shape& tool,
