@@ -322,7 +322,8 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                     for (slot.y() = layer.min().y(); backed[f] && slot.y() <= layer.max().y(); slot.y() += 8)
                         for (slot.z() = layer.min().z(); backed[f] && slot.z() <= layer.max().z();
                              slot.z() += 8) {
-                            if (acc.getValueDepth(slot) >= 0 && acc.getValueDepth(slot) < leafDepth) {
+                            const int depth = acc.getValueDepth(slot);
+                            if (depth >= 0 && depth < leafDepth) {
                                 backed[f] = acc.getValue(slot) != 0;
                                 continue;
                             }

@@ -471,13 +471,12 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         it.setValue(tileValue);
     tree.root().setBackground(band > 0 ? band : tileValue, /*updateChildNodes=*/false);
     // The leaves left without values: inactive tiles of +-band by their side (replacing the leaves).
-    std::vector<Coord> origins;
+    // Listed first: a tile replaces its leaf, which the leaf manager still points at.
+    std::vector<std::pair<Coord, float>> tiles;
     for (size_t li = 0; li < n; ++li)
-        if (!needed[li]) origins.push_back(manager.leaf(li).origin());
-    for (size_t k = 0, li = 0; li < n; ++li) {
-        if (needed[li]) continue;
-        tree.addTile(1, origins[k++], insideTile[li] ? -band : band, false);
-    }
+        if (!needed[li]) tiles.emplace_back(manager.leaf(li).origin(), insideTile[li] ? -band : band);
+    for (const auto& t : tiles)
+        tree.addTile(1, t.first, t.second, false);
     return swept;
 }
 
