@@ -20,8 +20,10 @@ struct PushReport {
     uint64_t voxelsTrapped = 0; ///< clay voxels inside a tool with no free voxel to go to
     int64_t massTrapped = 0;    ///< their clay, left where it was (conserved, reported)
     Box region;                 ///< voxels the push read or wrote (empty when nothing moved)
-    /// The largest tool contact this push saw: sqrt of the voxels one tool entered (3D), or their
-    /// number (2D), i.e. about the width of the contact. 0 when no tool entered clay. The compress
+    /// The largest tool contact this push saw, about the width of the contact: sqrt of the voxels one
+    /// tool entered (3D), or their number (2D), at most sqrt of the largest face of their bounds (3D)
+    /// or its longest side (2D), so a deep dip counts as wide as the tool. 0 when no tool entered
+    /// clay. The compress
     /// push limits its depth to it (unless the tool covers the clay); the global transport limits its
     /// reach to a multiple of it.
     double contactSize = 0;

@@ -116,13 +116,23 @@ PushReport push(Automaton& automaton, const std::vector<ShapePtr>& tools, const 
     };
     std::vector<Move> moves;
     const std::vector<Source> sources = pusher.sources(u, automaton.options().threads);
-    // Voxels each tool entered: the contact size (and the compress push's depth).
+    // The voxels each tool entered, and their bounds: the contact size (and the compress push's
+    // depth) is the contact's width, the square root of their count (3D; the count in 2D), at most
+    // that of the bounds' largest face (the longest side in 2D): a tool dipped deep enters many
+    // voxels over a contact no wider than itself.
     std::vector<uint64_t> entered(tools.size(), 0);
-    for (const Source& s : sources)
+    std::vector<openvdb::CoordBBox> enteredBounds(tools.size());
+    for (const Source& s : sources) {
         ++entered[s.tool];
+        enteredBounds[s.tool].expand(s.c);
+    }
     std::vector<int> depth(tools.size(), 1);
     for (size_t t = 0; t < tools.size(); ++t) {
-        const double size = is2D ? double(entered[t]) : std::sqrt(double(entered[t]));
+        const openvdb::Coord e = entered[t] > 0 ? enteredBounds[t].dim() : openvdb::Coord(0);
+        const double face = is2D ? double(std::max(e.x(), e.y()))
+                                 : std::sqrt(double(std::max({int64_t(e.x()) * e.y(), int64_t(e.y()) * e.z(),
+                                                              int64_t(e.x()) * e.z()})));
+        const double size = std::min(is2D ? double(entered[t]) : std::sqrt(double(entered[t])), face);
         report.contactSize = std::max(report.contactSize, size);
         depth[t] = std::max(1, int(std::lround(std::min(size, double(kMaxSearchLimit)))));
     }

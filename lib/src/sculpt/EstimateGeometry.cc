@@ -303,6 +303,14 @@ ToolSweep sweep(const ToolSpec& tool, uint64_t frames, int dims, bool countInsid
         out.all = unite(out.all, b);
         out.most = std::max(out.most, voxelsIn(b));
         out.inside = std::max(out.inside, inside);
+        if (!b.empty()) {
+            uint64_t side[3];
+            for (int a = 0; a < 3; ++a)
+                side[a] = uint64_t(int64_t(b.max[a]) - b.min[a] + 1);
+            out.face = std::max(
+                out.face, dims == 2 ? std::max(side[0], side[1])
+                                    : std::max({side[0] * side[1], side[1] * side[2], side[0] * side[2]}));
+        }
         out.slotsMost = std::max(out.slotsMost, nodesIn(unite(last, b), 3));
         last = b;
         if (!sampled) out.frames.push_back(b);

@@ -71,9 +71,12 @@ bool anyTouchingPair(std::vector<size_t> ids, const BoxOf& boxOf, const Pair& pa
 
 /// What sweep() finds of a tool's path.
 struct ToolSweep {
-    Box all;                 ///< the bounds over every frame
-    uint64_t most = 0;       ///< the most voxels its bounds hold at one frame
-    uint64_t inside = 0;     ///< the most voxels inside it at one frame (at most `most`)
+    Box all;             ///< the bounds over every frame
+    uint64_t most = 0;   ///< the most voxels its bounds hold at one frame
+    uint64_t inside = 0; ///< the most voxels inside it at one frame (at most `most`)
+    /// The largest face of its bounds at one frame, in voxels (3D; in 2D the longest side): a push's
+    /// contact is no wider (PushReport::contactSize)
+    uint64_t face = 0;
     uint64_t slotsMost = 0;  ///< the most leaf slots its bounds at two consecutive frames hold
     std::vector<Box> frames; ///< every frame's bounds in frame order (empty when frames were sampled)
 };

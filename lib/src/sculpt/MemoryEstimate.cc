@@ -32,7 +32,8 @@
 //
 // The global layer's domain (transport/Domain.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
 // touch clay runs the layer with reach r0 = frame_policy::layerReach(contact) (contact: sqrt of the
-// voxels a tool entered, 2D their number; at most those inside the tool at one frame) on the cells
+// voxels a tool entered, 2D their number; at most those inside the tool at one frame, and at most sqrt
+// of the largest face of its bounds at one pose, 2D the longest side) on the cells
 // over Tc within the push's region. Its cells are the full cells within `reach` face steps of those
 // seeds (an inner seed floods a margin of 2 x 2^k < reach) and their face neighbours; where a part the
 // reach cut has no room the reach doubles, so it ends below twice an over cell's distance to room
@@ -237,8 +238,9 @@ struct LayerBound {
     PushMode push = PushMode::Surface;
     int dims = 3;
     uint64_t toolInside = 0; ///< the most voxels inside a tool at one frame (a push enters no more)
-    double toolExtent = 0;   ///< the largest tool's diagonal
-    uint64_t maxSteps = 0;   ///< the scene's step budget per frame
+    double toolFace = 0;   ///< the largest face of a tool's bounds at one pose (2D: side; a contact's width)
+    double toolExtent = 0; ///< the largest tool's diagonal
+    uint64_t maxSteps = 0; ///< the scene's step budget per frame
     bool trySkipped = false; ///< the automaton's try never runs before the layer (FramePolicy.h)
     bool clayMoves = false;  ///< clay from a file or over Tc: it may overflow with no tool near
     bool covers = false;     ///< a tool's sweep spans a clay shape's box on two axes
@@ -258,7 +260,8 @@ LayerReach layerReach(const LayerBound& b)
     LayerReach r;
     if (b.clayMoves || b.covers || b.buried) return r;
     r.bounded = true;
-    const double contact = b.dims == 2 ? double(b.toolInside) : std::sqrt(double(b.toolInside));
+    const double contact = b.dims == 2 ? std::min(double(b.toolInside), b.toolFace)
+                                       : std::sqrt(std::min(double(b.toolInside), b.toolFace));
     const int64_t reach = frame_policy::layerReach(contact);
     const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
     if (b.push == PushMode::Compress) {
@@ -470,6 +473,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     std::vector<Box> toolBoxes;
     uint64_t toolInside = 0; // voxels inside the largest tool at one frame
     double toolExtent = 0;   // the largest tool's diagonal
+    double toolFace = 0;     // the largest face of a tool's bounds at one pose (2D: the longest side)
     for (const ToolSpec& t : scene.tools) {
         sweeps.push_back(sweep(t, scene.frames, dims, !scene.sweep, toolBudget));
         const ToolSweep& sw = sweeps.back();
@@ -484,6 +488,12 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             for (int a = 0; a < 3; ++a)
                 d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
             toolExtent = std::max(toolExtent, std::sqrt(d2));
+            // With Scene::sweep the pushes place the tool between the frames' poses too, where its
+            // bounds may be wider (a turning box): any pose's bounds are no wider than its diagonal.
+            const double side = std::ceil(std::sqrt(d2));
+            toolFace = std::max(toolFace, scene.sweep ? (dims == 2 ? side : side * side) : double(sw.face));
+        } else {
+            toolFace = std::max(toolFace, double(sw.face));
         }
     }
     // An add tool may put clay anywhere its sweep (grown by the voxel its coverage reaches) passes:
@@ -737,6 +747,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         lb.push = scene.push;
         lb.dims = dims;
         lb.toolInside = toolInside;
+        lb.toolFace = toolFace;
         lb.toolExtent = toolExtent;
         lb.maxSteps = scene.settle.maxSteps;
         // The try runs after a surface push on clay that is not saturated near it: clay whose shapes
