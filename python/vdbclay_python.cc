@@ -324,6 +324,8 @@ py::dict frameDict(const FrameReport& r)
     d["mass_added"] = r.massAdded;
     d["mass_removed"] = r.massRemoved;
     d["mass_smoothed"] = r.massSmoothed;
+    d["tension_boxes"] = r.tensionBoxes;
+    d["tension_voxels"] = r.tensionVoxels;
     d["settle"] = stepDict(r.settle);
     d["finished"] = r.finished;
     return d;

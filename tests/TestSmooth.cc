@@ -397,10 +397,11 @@ TEST_F(SmoothTest, ASmoothToolInASceneIsTheSameOnAnyThreadCount)
     }
 }
 
-TEST_F(SmoothTest, SurfaceTensionSmoothsAroundTheToolsOnlyAndKeepsMassExact)
+TEST_F(SmoothTest, SurfaceTensionSmoothsTheDentAndKeepsMassExact)
 {
     // A ball poked by a small sphere: with "surface_tension" the clay round the dent is smoother
-    // (a lower surfaceEnergy near the tool), the mass exact, the clay the same on any thread count.
+    // (a lower surfaceEnergy near the tool), the mass exact, the clay the same on any thread count
+    // (tests/TestSurfaceTension.cc: which surface it smooths, resuming, its work).
     const std::string body = R"("threshold": 1000, "rule": "prorata",
         "clay": [{"shape": "sphere", "center": [0,0,0], "radius": 12, "mass": 1000}],
         "tools": [{"shape": "sphere", "center": [0,15,0], "radius": 3.5, "path": [{"translate": [0,-1,0], "frames": 6}]}],

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace vdbclay {
 
@@ -36,6 +37,11 @@ struct ClayMeta {
     /// Clay that add tools deposited and remove tools took away in the frames run so far (a
     /// Sculptor resumes its counts from them). Stored only when not 0.
     int64_t massAdded = 0, massRemoved = 0;
+    /// A checkpoint written inside a frame of a scene with "surface_tension": where the frame's clay
+    /// has changed so far, one box per leaf slot (the bounds of its changed voxels, inside the slot),
+    /// in slot order; the frame smooths there once it settles. Stored only when not empty
+    /// (vdbclay_changed_clay: six integers a box, min then max).
+    std::vector<Box> changedClay;
     std::string version; ///< vdbclay version that wrote it (filled by writeClayFile)
 };
 

@@ -24,9 +24,15 @@ struct FrameReport {
     /// clay, its region and contact size joined to region and contactSize: the global layer seeds
     /// there). A resumed open frame is past it: empty.
     PushReport push;
-    int64_t massAdded = 0;    ///< clay the add tools deposited this frame
-    int64_t massRemoved = 0;  ///< clay the remove tools took away this frame
-    int64_t massSmoothed = 0; ///< clay the smooth tools moved this frame (Smooth.h)
+    int64_t massAdded = 0;   ///< clay the add tools deposited this frame
+    int64_t massRemoved = 0; ///< clay the remove tools took away this frame
+    /// Clay the smooth tools and the scene's surface tension moved this frame (Smooth.h).
+    int64_t massSmoothed = 0;
+    /// Scene "surface_tension": the boxes it smoothed at the frame's end, and the voxels it read
+    /// into them (its work: it follows the surface the frame changed, the whole surface in the
+    /// scene's first frame).
+    uint64_t tensionBoxes = 0;
+    uint64_t tensionVoxels = 0;
     /// Scene::transport global: what the global layer did right after the push (once per frame; a
     /// resumed open frame does not repeat it).
     GlobalTransportReport transport;

@@ -37,9 +37,12 @@
 ///
 /// The threshold step runs once a pass, on the shelters at the pass's start. The exchange visits
 /// the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose lower voxel has
-/// an even, then an odd coordinate along it), so the pairs of a sub-pass are disjoint; the shelters
-/// are recomputed from the masses before each sub-pass. Everything is integer and in a fixed order:
-/// the result does not depend on the thread count.
+/// an even, then an odd coordinate along it), so the pairs of a sub-pass are disjoint; each sub-pass
+/// reads the shelters of the masses at its start. Everything is integer and in a fixed order: the
+/// result does not depend on the thread count.
+///
+/// The scene's "surface_tension" runs smoothRegion over boxes that cover the surface a frame
+/// changed (the whole surface in the scene's first frame): lib/src/sculpt/SurfaceTension.h.
 #pragma once
 
 #include "vdbclay/Fwd.h"
@@ -58,18 +61,20 @@ struct SmoothReport {
     int64_t massMoved = 0; ///< clay moved from one voxel to another (each unit once)
     uint64_t voxels = 0;   ///< voxels whose mass changed
     Box region;            ///< the voxels changed (their bounds; empty when nothing moved)
+    uint64_t visited = 0;  ///< voxels read (the region grown by the shelters' reach): the work
 };
 
 /// Strength bounds: a tool's "strength" lies in (0, kMaxSmoothStrength].
 constexpr double kMaxSmoothStrength = 1.0;
-/// A scene's "surface_tension" acts on the tools' bounds grown by this many voxels (Scene.h).
+/// A scene's "surface_tension" smooths the voxels a frame changed grown by this many voxels (the
+/// threshold step's reach; lib/src/sculpt/SurfaceTension.h).
 constexpr int kSurfaceTensionMargin = 4;
 
 /// Runs @a passes passes of surface tension (file comment) on the voxels whose centre lies inside
 /// @a tool and that are neither obstacles of @a automaton nor inside one of @a solids. Only those
 /// voxels change (no margin); their shelters read two voxels beyond. Writes the changed voxels
 /// through Automaton::setMasses (nothing when nothing moved). Work: (the tool's bounds + 4)^3 x
-/// passes x 7 x 15, plus each surface voxel's 9^3 neighbourhood a pass.
+/// (15 + 7 x passes), plus a pass's givers' 9^3 neighbourhoods and 5^3 for each voxel changed.
 /// @throw Error if @a strength is outside (0, 1] or @a passes < 1; nothing is changed then.
 SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, int passes = 1,
                     const std::vector<ShapePtr>& solids = {});

@@ -84,6 +84,7 @@
 #include "automaton/AutomatonInternal.h"
 #include "automaton/BlockMasks.h"
 #include "automaton/Candidates.h"
+#include "automaton/ChangedClay.h"
 #include "automaton/Kernel.h"
 #include "automaton/LeafTable.h"
 #include "automaton/NoRoom.h"
@@ -143,6 +144,7 @@ struct Automaton::Impl {
     bool prune = true;             // automaton_internal::setPruneCandidates
     PassEngine engine;             // the pass on the automaton's threads
     PassSeconds passSeconds;       // this step's passes so far: StageSeconds::passBusy, passIdle
+    ChangedClay* changedClay = nullptr; // records where the clay changes (setChangedClay), or null
 
     std::vector<WorkItem> work; // the step's work list, reused between steps
 
@@ -430,6 +432,7 @@ struct Automaton::Impl {
         rep.seconds.grow = secondsSince(t0);
 
         t0 = Clock::now();
+        if (changedClay) recordChangedBlocks(phase);
         if (tot.sinkMissed) candidates.sinkMissed();
         candidates.record(work);
         rep.blocksVisited = tot.examined;
@@ -440,6 +443,33 @@ struct Automaton::Impl {
         rep.seconds.bookkeeping = secondsSince(t0);
         finishStep(rep, tot.updated);
         return rep;
+    }
+
+    /// Records the blocks this step changed (each item's changed mask) into changedClay.
+    void recordChangedBlocks(int phase)
+    {
+        const int32_t dz = is3D() ? 1 : 0;
+        for (const WorkItem& w : work)
+            for (uint64_t bits = w.changed; bits; bits &= bits - 1) {
+                const Origin o = blockOrigin(w.anchor, __builtin_ctzll(bits), phase, is3D());
+                changedClay->add(Box{{{o.x(), o.y(), o.z()}}, {{o.x() + 1, o.y() + 1, o.z() + dz}}});
+            }
+    }
+
+    /// Records the part of @a region in each of its leaves into changedClay (an edit's clay can
+    /// have changed anywhere in them).
+    void recordLeavesIn(const Box& region)
+    {
+        if (!changedClay || region.empty()) return;
+        const Coord lo(region.min[0] & ~7, region.min[1] & ~7, region.min[2] & ~7);
+        for (int64_t x = lo.x(); x <= region.max[0]; x += 8)
+            for (int64_t y = lo.y(); y <= region.max[1]; y += 8)
+                for (int64_t z = lo.z(); z <= region.max[2]; z += 8) {
+                    const Coord o{int32_t(x), int32_t(y), int32_t(z)};
+                    if (!tree().probeConstLeaf(o)) continue;
+                    changedClay->add(
+                        intersect(region, Box{{{o.x(), o.y(), o.z()}}, {{o.x() + 7, o.y() + 7, o.z() + 7}}}));
+                }
     }
 
     void finishStep(StepReport& rep, uint64_t updated)
@@ -538,6 +568,19 @@ void setPruneCandidates(Automaton& automaton, bool on)
 bool pruneCandidates(const Automaton& automaton)
 {
     return AutomatonAccess::impl(automaton).prune;
+}
+
+void setChangedClay(Automaton& automaton, ChangedClay* changed)
+{
+    AutomatonAccess::impl(automaton).changedClay = changed;
+}
+
+bool forgetWakesWhenSettled(Automaton& automaton)
+{
+    auto& im = AutomatonAccess::impl(automaton);
+    if (im.overload != 0) return false;
+    im.candidates.reset({});
+    return true;
 }
 
 } // namespace automaton_internal
@@ -667,9 +710,11 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     // The region's clay in leaves, before and after (fn may have made tiles): the scans see it all.
     densifyTiles(im.tree(), region);
     const Impl::Scan before = im.scanLeaves(&region, "edit");
+    im.recordLeavesIn(region); // the leaves fn may empty and delete
     fn(*im.massGrid);
     densifyTiles(im.tree(), region);
     const Impl::Scan after = im.scanLeaves(&region, "edit");
+    im.recordLeavesIn(region); // and those it made
     im.totalMass += after.mass - before.mass;
     im.overload += after.overload - before.overload;
     im.maxBound = std::max(im.maxBound, after.maxValue);
@@ -721,6 +766,7 @@ void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
                 acc.setValueOff(at, 0);
             mass += after - before;
             maxValue = std::max(maxValue, after);
+            if (im.changedClay && after != before) im.changedClay->addVoxel(at.x(), at.y(), at.z());
             if (!im.obstacleAt(oacc.get(), at))
                 overload += std::max<int64_t>(0, after - tc) - std::max<int64_t>(0, before - tc);
         }

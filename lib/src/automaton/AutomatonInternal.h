@@ -15,6 +15,17 @@ namespace automaton_internal {
 void setPruneCandidates(Automaton& automaton, bool on);
 bool pruneCandidates(const Automaton& automaton);
 
+class ChangedClay;
+/// While @a changed is not null, @a automaton records into it where its clay changes: each block a
+/// step changes, each cell setMasses() changes, the part of an edit()'s region in each of its leaves
+/// (ChangedClay.h). @a changed must outlive the attachment; null detaches.
+void setChangedClay(Automaton& automaton, ChangedClay* changed);
+
+/// When no cell of @a automaton is over Tc, no block can change before the next edit: forgets the
+/// blocks that edits and steps woke, so the next steps examine none of them (as an automaton built
+/// from the same clay, a resumed one, would not). Changes no clay. Returns whether it forgot.
+bool forgetWakesWhenSettled(Automaton& automaton);
+
 /// Reaches Automaton's state for the functions above (the friend of Automaton).
 struct AutomatonAccess;
 

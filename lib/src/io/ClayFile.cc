@@ -33,6 +33,7 @@
 #include <climits>
 #include <cmath>
 #include <ostream>
+#include <sstream>
 #include <vector>
 
 #ifndef VDBCLAY_VERSION
@@ -109,6 +110,13 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     if (meta.massAdded != 0) clayMeta.insertMeta(kMetaMassAdded, openvdb::Int64Metadata(meta.massAdded));
     if (meta.massRemoved != 0)
         clayMeta.insertMeta(kMetaMassRemoved, openvdb::Int64Metadata(meta.massRemoved));
+    if (!meta.changedClay.empty()) {
+        std::string boxes;
+        for (const Box& b : meta.changedClay)
+            for (const int32_t v : {b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]})
+                boxes += (boxes.empty() ? "" : " ") + std::to_string(v);
+        clayMeta.insertMeta(kMetaChangedClay, openvdb::StringMetadata(boxes));
+    }
     clayMeta.insertMeta(kMetaDimensions, openvdb::Int32Metadata(meta.dimensions));
     // Every value, tiles included (the background is 0): the leaves' values in parallel, then the
     // tiles above them.
@@ -263,6 +271,33 @@ ClayFile readClayFile(const std::string& path, const std::string& gridName)
     if (readMeta<int64_t, openvdb::Int64Metadata>(g, kMetaMassRemoved, i64, path, "int64")) {
         if (i64 < 0) throw Error(path + ": invalid vdbclay metadata: " + kMetaMassRemoved + " is negative");
         m.massRemoved = i64;
+        any = true;
+    }
+    if (readMeta<std::string, openvdb::StringMetadata>(g, kMetaChangedClay, str, path, "string")) {
+        // Six integers a box, each box inside one leaf slot.
+        std::istringstream in(str);
+        std::vector<int64_t> v;
+        for (int64_t x = 0; in >> x;)
+            v.push_back(x);
+        const bool whole = in.eof() && v.size() % 6 == 0;
+        for (size_t i = 0; whole && i < v.size(); i += 6) {
+            Box b;
+            bool ok = true;
+            for (int a = 0; a < 3; ++a) {
+                ok = ok && v[i + size_t(a)] >= INT32_MIN && v[i + 3 + size_t(a)] <= INT32_MAX &&
+                     v[i + size_t(a)] <= v[i + 3 + size_t(a)] &&
+                     (v[i + size_t(a)] >> 3) == (v[i + 3 + size_t(a)] >> 3);
+                b.min[size_t(a)] = int32_t(v[i + size_t(a)]);
+                b.max[size_t(a)] = int32_t(v[i + 3 + size_t(a)]);
+            }
+            if (!ok)
+                throw Error(path + ": invalid vdbclay metadata: " + kMetaChangedClay +
+                            " holds a box outside one leaf slot");
+            m.changedClay.push_back(b);
+        }
+        if (!whole)
+            throw Error(path + ": invalid vdbclay metadata: " + kMetaChangedClay +
+                        " is not boxes of six integers");
         any = true;
     }
     if (readMeta<int32_t, openvdb::Int32Metadata>(g, kMetaDimensions, i32, path, "int32")) {

@@ -19,6 +19,7 @@ constexpr const char* kMetaVersion = "vdbclay_version";
 constexpr const char* kMetaUp = "vdbclay_up";
 constexpr const char* kMetaMassAdded = "vdbclay_mass_added";     ///< int64, only when > 0
 constexpr const char* kMetaMassRemoved = "vdbclay_mass_removed"; ///< int64, only when > 0
+constexpr const char* kMetaChangedClay = "vdbclay_changed_clay"; ///< string, only when not empty
 constexpr const char* kMetaMaxMass = "vdbclay_max_mass";         ///< the largest cell, int64
 
 } // namespace io_internal

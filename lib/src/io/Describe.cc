@@ -100,8 +100,13 @@ std::string describeVdb(const std::string& path)
     auto printMeta = [&s](const openvdb::MetaMap& meta, const char* indent) {
         for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
             if (it->first == openvdb::GridBase::META_GRID_NAME) continue;
+            std::string value = it->second->str();
+            if (it->first == kMetaChangedClay) { // six integers a box: their count, not thousands of them
+                const size_t numbers = size_t(std::count(value.begin(), value.end(), ' ')) + !value.empty();
+                value = std::to_string(numbers / 6) + " boxes";
+            }
             s << indent << printableText(it->first) << " (" << printableText(it->second->typeName())
-              << ") = " << printableText(it->second->str()) << "\n";
+              << ") = " << printableText(value) << "\n";
         }
     };
     if (fileMeta && fileMeta->metaCount() > 0) {

@@ -88,6 +88,7 @@
 #include "core/InputFile.h"
 #include "sculpt/EstimateGeometry.h"
 #include "sculpt/MemoryEstimate.h"
+#include "sculpt/SurfaceTension.h"
 #include "sculpt/FramePolicy.h"
 #include "transport/SolverTuning.h"
 #include "core/TreeBytes.h"
@@ -703,25 +704,32 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     for (const ToolSweep& sw : sweeps)
         sources = std::min(sources + sw.inside, e.toolVoxels);
     e.pushBytes = std::min(sources, clayVoxels) * kPushBytesPerSource;
-    // Surface tension (Smooth.cc) copies a smooth tool's bounds grown by two voxels, or with the
-    // scene's "surface_tension" every tool's bounds grown by kSurfaceTensionMargin + 2, into dense
-    // arrays (kSmoothBytesPerVoxel), one at a time; a frame's bounds hold at most sw.most voxels.
+    // Surface tension (Smooth.cc) copies a smooth tool's bounds grown by two voxels into dense arrays
+    // (kSmoothBytesPerVoxel), one at a time; a frame's bounds hold at most sw.most voxels. The scene's
+    // "surface_tension" smooths one box at a time (sculpt/SurfaceTension.h: at most
+    // tensionBlockVoxels), and holds where the frame's clay changed: per slot of the whole surface
+    // in the first frame (the clay's leaves and about as many tile slots beside them, as the output's
+    // sweep below) or of a later frame's change (the clay's leaves and the tools' slots at most),
+    // kChangedClayBytesPerSlot.
     {
-        uint64_t most = 0, all = 0;
+        uint64_t most = 0;
         auto grownCube = [&](uint64_t voxels, double by) {
             const double side = (dims == 2 ? std::sqrt(double(voxels)) : std::cbrt(double(voxels))) + 2 * by;
             const double v = dims == 2 ? side * side : side * side * side;
             return v >= 1.8e19 ? UINT64_MAX : uint64_t(std::ceil(v));
         };
-        for (size_t t = 0; t < sweeps.size(); ++t) {
-            all = all > UINT64_MAX - sweeps[t].most ? UINT64_MAX : all + sweeps[t].most;
+        for (size_t t = 0; t < sweeps.size(); ++t)
             if (scene.tools[t].action == ToolAction::Smooth)
                 most = std::max(most, grownCube(sweeps[t].most, 2));
+        if (scene.surfaceTension > 0) most = std::max(most, sculpt_internal::tensionBlockVoxels(dims));
+        uint64_t bytes = most > UINT64_MAX / kSmoothBytesPerVoxel ? UINT64_MAX : most * kSmoothBytesPerVoxel;
+        if (scene.surfaceTension > 0) {
+            const uint64_t slots =
+                e.clayLeavesGrown > UINT64_MAX / 4 ? UINT64_MAX : 2 * e.clayLeavesGrown + e.toolSlots;
+            const uint64_t journal =
+                slots > UINT64_MAX / kChangedClayBytesPerSlot ? UINT64_MAX : slots * kChangedClayBytesPerSlot;
+            bytes = bytes > UINT64_MAX - journal ? UINT64_MAX : bytes + journal;
         }
-        if (scene.surfaceTension > 0 && all > 0)
-            most = std::max(most, grownCube(all, kSurfaceTensionMargin + 2));
-        const uint64_t bytes =
-            most > UINT64_MAX / kSmoothBytesPerVoxel ? UINT64_MAX : most * kSmoothBytesPerVoxel;
         e.pushBytes = e.pushBytes > UINT64_MAX - bytes ? UINT64_MAX : e.pushBytes + bytes;
     }
     for (size_t t = 0; t < sweeps.size(); ++t) {

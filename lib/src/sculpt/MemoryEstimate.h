@@ -53,6 +53,10 @@ constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2
 /// shelter, the separable pass's scratch and the fills (3 x 8), obstacle and member flags (2), and
 /// the changed cells written back (16).
 constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + 16;
+/// Per slot of a frame's changed clay (automaton/ChangedClay.h, an entry of 36 bytes): the journal grown
+/// to twice its compacted entries, the copy tensionBoxes() sorts (sculpt/SurfaceTension.h) and a box
+/// per entry at most (24).
+constexpr uint64_t kChangedClayBytesPerSlot = 3 * 36 + 24;
 /// Per leaf of the surface level set writing a .vdb builds (output/SurfaceFog.cc, SurfaceSweep.cc),
 /// besides the leaf itself: the grown fog's origin, masks and source (12 + 2 x 64 + 8), its index (a
 /// hash node, ~32), the leaf made (8); the sweep's per-leaf record (184), input (8), key (12), face

@@ -11,10 +11,12 @@
 // Scene::sweep), then with the global transport the automaton's try (settleBounded) and, if that did
 // not end the frame, the layer (transportGlobally, its arrays kept from frame to frame and freed after
 // the last one), then the automaton settles the rest within the scene's step budget
-// (settleOpenFrame). A stop request ends a frame only after a step from which a checkpoint resumes
-// exactly (checkpointMeta: the frame's steps so far; the push, the try and the layer are never
-// repeated). Every stage is deterministic and thread-count independent, so a run's clay and hashes
-// are the same on any number of threads and across a checkpoint.
+// (settleOpenFrame), and last the scene's surface tension smooths the surface the frame changed, the
+// whole surface in the scene's first frame (endFrame; SurfaceTension.h: the automaton records the
+// frame's changes into changedClay, which a checkpoint inside a frame carries). A stop request ends a frame
+// only after a step from which a checkpoint resumes exactly (checkpointMeta: the frame's steps so far; the
+// push, the try and the layer are never repeated). Every stage is deterministic and thread-count independent,
+// so a run's clay and hashes are the same on any number of threads and across a checkpoint.
 //
 // The tools' cells. While clay settles, the voxels a tool occupies are obstacles (otherwise clay
 // would flow back into the tool that just pushed it out). Only the tool voxels the automaton can read
@@ -52,6 +54,7 @@
 #include "core/ParallelFor.h"
 #include "shapes/Rasterize.h"
 #include "sculpt/FramePolicy.h"
+#include "sculpt/SurfaceTension.h"
 
 #include <openvdb/openvdb.h>
 
@@ -211,6 +214,9 @@ struct Sculptor::Impl {
     /// file's counts included): checkpointMeta() records them.
     int64_t massAdded = 0, massRemoved = 0;
     int64_t massSmoothed = 0; ///< clay the smooth tools moved (this Sculptor's frames)
+    /// With the scene's surface tension: where the open frame's clay has changed (the automaton
+    /// records into it; emptied when a frame opens, a checkpoint's read back).
+    automaton_internal::ChangedClay changedClay;
 
     std::vector<ShapePtr> toolsAt(uint64_t f) const
     {
@@ -259,6 +265,29 @@ struct Sculptor::Impl {
         // Uniform leaves back to tiles, so memory and the walks of later frames follow the surface.
         automaton->collapseUniformLeaves();
         if (frame >= scene.frames) transportWorkspace.release();
+    }
+
+    /// Ends the open frame: the scene's surface tension over the surface the frame changed (the whole
+    /// surface in the scene's first frame; sculpt/SurfaceTension.h), then finishFrame().
+    void endFrame(FrameReport& rep)
+    {
+        if (scene.surfaceTension > 0) {
+            if (rep.frame == 1) sculpt_internal::addWholeSurface(*mass, scene.dimensions, changedClay);
+            const std::vector<Box> boxes =
+                sculpt_internal::tensionBoxes(changedClay.entries(), scene.dimensions, kSurfaceTensionMargin);
+            // Solid tools as placed now are never entered (their cells are obstacles near the clay).
+            const sculpt_internal::TensionReport t =
+                sculpt_internal::smoothBoxes(*automaton, boxes, scene.surfaceTension, placed);
+            massSmoothed += t.massMoved;
+            rep.massSmoothed += t.massMoved;
+            rep.tensionBoxes = t.boxes;
+            rep.tensionVoxels = t.visited;
+            // The smoothing woke every block it touched (the whole surface in the first frame), but
+            // it made no cell overloaded: with none over Tc, the next frame's steps need examine
+            // none of them.
+            automaton_internal::forgetWakesWhenSettled(*automaton);
+        }
+        finishFrame();
     }
 
     /// The voxels placeTools(@a tools) would edit: the tools' bounds (2D: only z = 0).
@@ -534,12 +563,6 @@ struct Sculptor::Impl {
                 if (scene.tools[i].action != ToolAction::Smooth) continue;
                 massSmoothed += smooth(*automaton, *sub[i], scene.tools[i].strength, 1, solids).massMoved;
             }
-            // The scene's surface tension, once a frame, around every tool (not inside a solid one).
-            if (k == substeps && scene.surfaceTension > 0) {
-                Box near = clay_internal::grownBy(regionOf(sub), kSurfaceTensionMargin);
-                if (scene.dimensions == 2) near.min[2] = near.max[2] = 0;
-                massSmoothed += smoothRegion(*automaton, near, scene.surfaceTension, 1, solids).massMoved;
-            }
             total.voxelsPushed += r.voxelsPushed;
             total.massMoved += r.massMoved;
             total.voxelsTrapped = r.voxelsTrapped; // clay inside the tools as they end
@@ -691,6 +714,15 @@ Sculptor::Sculptor(const Scene& scene, int threads) : mImpl(std::make_unique<Imp
     // The automaton's obstacles: the static ones, plus the tools' voxels (placeTools).
     im.automaton = std::make_unique<Automaton>(im.mass, opt, im.obstacles->deepCopy());
     if (steps) im.automaton->setStepCount(steps);
+    if (scene.surfaceTension > 0) {
+        // An open frame's changes so far (its checkpoint's), then everything the automaton changes.
+        if (im.open) {
+            for (const Box& b : im.startMeta.changedClay)
+                im.changedClay.push(automaton_internal::ChangedClay::Entry{
+                    {{b.min[0] >> 3, b.min[1] >> 3, b.min[2] >> 3}}, b});
+        }
+        automaton_internal::setChangedClay(*im.automaton, &im.changedClay);
+    }
     // An open frame's tools are where its push left them; that push is not repeated.
     if (!scene.tools.empty()) im.placeTools(im.solid(im.toolsAt(im.open ? im.frame + 1 : im.frame)));
 }
@@ -780,6 +812,10 @@ ClayMeta Sculptor::checkpointMeta() const
     m.up = im.scene.up;
     m.massAdded = im.massAdded;
     m.massRemoved = im.massRemoved;
+    if (im.open && im.scene.surfaceTension > 0) {
+        for (const automaton_internal::ChangedClay::Entry& e : im.changedClay.compacted())
+            m.changedClay.push_back(e.voxels);
+    }
     return m;
 }
 
@@ -802,6 +838,7 @@ FrameReport Sculptor::runFrame()
         // The push, the global transport's try and its layer run once, when the frame opens: a
         // frame resumed from a checkpoint (im.open) is past them and goes straight on settling.
         const int64_t added0 = im.massAdded, removed0 = im.massRemoved, smoothed0 = im.massSmoothed;
+        im.changedClay.clear();
         if (!im.scene.tools.empty()) rep.push = im.pushTools(rep.frame);
         rep.massSmoothed = im.massSmoothed - smoothed0;
         rep.massAdded = im.massAdded - added0;
@@ -817,7 +854,7 @@ FrameReport Sculptor::runFrame()
             rep.settle = im.settleBounded(rep.finished, frame_policy::tryNear(go));
             rep.trySteps = rep.settle.steps;
             if (rep.finished) {
-                im.finishFrame();
+                im.endFrame(rep);
                 return rep;
             }
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
@@ -830,7 +867,7 @@ FrameReport Sculptor::runFrame()
     rep.settle += rest; // after the try, if any
     rep.settle.reason = rest.reason;
     if (rep.finished) {
-        im.finishFrame();
+        im.endFrame(rep);
     } else {
         im.stopped = true;
     }

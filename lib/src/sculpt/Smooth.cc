@@ -2,7 +2,11 @@
 // threshold step), then pairs of face neighbours inside a region exchange clay, from the less
 // sheltered voxel to the more sheltered one (the exchange step). The region's masses are copied into a dense
 // block (the region grown by two voxels, read once through accessors), the passes run on it, and the voxels
-// that changed are written back through Automaton::setMasses over their bounds.
+// that changed are written back through Automaton::setMasses over their bounds. The shelters and the
+// surface marks are computed over the block once; after each step (the threshold step, each exchange
+// sub-pass) only the neighbourhoods of the voxels it changed are brought up to date (refresh), which
+// gives exactly what recomputing them over the block would: the work of a pass follows the block once
+// and the clay that moves, not the block seven times over.
 #include "vdbclay/Smooth.h"
 #include "vdbclay/Automaton.h"
 
@@ -142,7 +146,7 @@ constexpr int kSwapReach = 4;
 /// each to the most sheltered voxel under Tc/2 on the surface within kSwapReach of it, more concave
 /// than a flat face, of its connected part, not yet chosen, and strictly more sheltered than the
 /// giver. Each pair keeps one voxel at or over Tc/2, so the volume is kept exactly.
-int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g)
+int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::vector<int64_t>& changed)
 {
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
@@ -191,6 +195,8 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g)
                 }
         if (best < 0) continue;
         role[size_t(best)] = 0;
+        changed.push_back(p);
+        changed.push_back(best);
         int64_t& from = b.mass[size_t(p)];
         int64_t& to = b.mass[size_t(best)];
         const int64_t t = std::min(from, tc - to);
@@ -201,25 +207,74 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g)
     return moved;
 }
 
-/// Marks (@a open) the voxels with a face neighbour under Tc/2 that is not an obstacle: the clay's
-/// surface, the only voxels the exchange step fills, so clay under Tc inside is not packed.
-void surface(const Block& b, int64_t tc, std::vector<char>& open)
+/// Whether the voxel at index @a k (coordinates @a c in the block) has a face neighbour under Tc/2
+/// that is not an obstacle: a voxel of the clay's surface, the only voxels the exchange step fills,
+/// so clay under Tc inside is not packed.
+bool opensOnto(const Block& b, int64_t tc, int64_t k, const int64_t c[3])
 {
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
+    for (int axis = 0; axis < (b.is2D ? 2 : 3); ++axis)
+        for (const int d : {-1, 1}) {
+            if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
+            const size_t q = size_t(k + d * stride[axis]);
+            if (!b.obstacle[q] && 2 * b.mass[q] < tc) return true;
+        }
+    return false;
+}
+
+/// Marks (@a open) the voxels of the clay's surface (opensOnto).
+void surface(const Block& b, int64_t tc, std::vector<char>& open)
+{
     open.assign(b.mass.size(), 0);
     for (int64_t x = 0; x < b.nx; ++x)
         for (int64_t y = 0; y < b.ny; ++y)
             for (int64_t z = 0; z < b.nz; ++z) {
                 const int64_t c[3] = {x, y, z};
                 const int64_t k = (x * b.ny + y) * b.nz + z;
-                for (int axis = 0; axis < (b.is2D ? 2 : 3) && !open[size_t(k)]; ++axis)
-                    for (const int d : {-1, 1}) {
-                        if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
-                        const size_t q = size_t(k + d * stride[axis]);
-                        if (!b.obstacle[q] && 2 * b.mass[q] < tc) open[size_t(k)] = 1;
-                    }
+                open[size_t(k)] = opensOnto(b, tc, k, c);
             }
+}
+
+/// After voxels @a changed (block indices, a voxel possibly listed twice) changed their mass: brings
+/// the shelters @a g (computed from the fills @a fill) and the surface marks @a open up to date, as
+/// shelters() and surface() over the whole block would give. A voxel's fill enters its
+/// neighbours' shelters linearly, so a change of fill adds its tent weight times the change to each
+/// of its 5^3 neighbours (5^2 in 2D); a voxel's mark reads its face neighbours' masses. The work
+/// follows the voxels changed, not the block.
+void refresh(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<int64_t>& fill,
+             std::vector<char>& open, std::vector<int64_t>& changed)
+{
+    const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
+    const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
+    const int rz = b.is2D ? 0 : kReach;
+    for (const int64_t k : changed) {
+        const int64_t c[3] = {k / stride[0], (k / stride[1]) % b.ny, k % b.nz};
+        const int64_t f = std::min(b.mass[size_t(k)], tc);
+        const int64_t df = f - fill[size_t(k)];
+        fill[size_t(k)] = f;
+        if (df != 0) {
+            for (int dx = -kReach; dx <= kReach; ++dx)
+                for (int dy = -kReach; dy <= kReach; ++dy)
+                    for (int dz = -rz; dz <= rz; ++dz) {
+                        if (!dx && !dy && !dz) continue;
+                        const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
+                        if (x < 0 || y < 0 || z < 0 || x >= b.nx || y >= b.ny || z >= b.nz) continue;
+                        const int64_t w =
+                            kTent[dx + kReach] * kTent[dy + kReach] * (b.is2D ? 1 : kTent[dz + kReach]);
+                        g[size_t(k + dx * stride[0] + dy * stride[1] + dz * stride[2])] += w * df;
+                    }
+        }
+        for (int axis = 0; axis < (b.is2D ? 2 : 3); ++axis)
+            for (const int d : {-1, 1}) {
+                if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
+                int64_t n[3] = {c[0], c[1], c[2]};
+                n[axis] += d;
+                const int64_t q = k + d * stride[axis];
+                open[size_t(q)] = opensOnto(b, tc, q, n);
+            }
+    }
+    changed.clear();
 }
 
 SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
@@ -234,13 +289,18 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
     const int64_t divisor =
         2 * (b.is2D ? kTent[kReach] * kTent[kReach + 1] : kTent[kReach] * kTent[kReach] * kTent[kReach + 1]);
     label(b);
+    // The shelters and the surface marks once; then each step's changes update them (refresh), so
+    // each sub-pass reads them as computed from the masses at its start.
+    shelters(b, tc, g, tmp);
+    surface(b, tc, open);
+    std::vector<int64_t> fill(b.mass.size()), changed;
+    for (size_t k = 0; k < fill.size(); ++k)
+        fill[k] = b.obstacle[k] ? tc / 2 : std::min(b.mass[k], tc);
     for (int pass = 0; pass < passes; ++pass) {
-        shelters(b, tc, g, tmp);
-        swapSurface(b, tc, g);
+        swapSurface(b, tc, g, changed);
+        refresh(b, tc, g, fill, open, changed);
         for (int axis = 0; axis < axes; ++axis)
             for (int parity = 0; parity < 2; ++parity) {
-                shelters(b, tc, g, tmp);
-                surface(b, tc, open);
                 const int64_t step = axis == 0 ? b.ny * b.nz : axis == 1 ? b.nz : 1;
                 for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
                     for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
@@ -260,10 +320,14 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                             if (t <= 0) continue;
                             b.mass[from] -= t;
                             b.mass[to] += t;
+                            changed.push_back(int64_t(from));
+                            changed.push_back(int64_t(to));
                         }
+                refresh(b, tc, g, fill, open, changed);
             }
     }
     SmoothReport r;
+    r.visited = b.mass.size();
     std::vector<Automaton::CellMass> cells;
     for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
         for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
