@@ -134,9 +134,14 @@ inline float initValue(float value, const float nb[6], float isoValue, float h, 
 struct SweepLeaf {
     float* values;
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
-    LeafT::NodeMaskType boundary;     // active and next to the isosurface
     std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
-    LeafT::NodeMaskType changed[2];   // voxels a sweep changed, by the sweep's parity
+    /// The voxels each sweep changed, by the sweep's parity. Before the sweeps, changed[1] holds the
+    /// voxels next to the isosurface (active), which count as changed before the first sweep (below).
+    LeafT::NodeMaskType changed[2];
+    LeafT::NodeMaskType& boundary() { return changed[1]; }
+    const LeafT::NodeMaskType& boundary() const { return changed[1]; }
+    /// The voxels changed in the sweep before and in this one so far.
+    LeafT::NodeMaskType recent() const { return changed[0] | changed[1]; }
 };
 
 /// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only).
@@ -189,17 +194,14 @@ LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
 
 /// Sweep @a index (0..7) with signs (sx, sy, sz) over every leaf, in the order described at the top,
 /// updating only the voxels a face neighbour of which changed since their last update (see the top).
-/// @a recent holds, per leaf, the voxels changed in the sweep before and in this one so far.
-void sweepOnce(std::vector<SweepLeaf>& leaves, std::vector<LeafT::NodeMaskType>& recent,
-               const std::vector<std::pair<int64_t, size_t>>& order, const std::vector<size_t>& sliceStart,
-               int index, int sx, int sy, int sz, float h, float sqrt2h, bool reverse)
+void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64_t, size_t>>& order,
+               const std::vector<size_t>& sliceStart, int index, int sx, int sy, int sz, float h,
+               float sqrt2h, bool reverse)
 {
-    const int now = index & 1, before = now ^ 1;
+    const int now = index & 1;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t li = r.begin(); li != r.end(); ++li) {
+        for (size_t li = r.begin(); li != r.end(); ++li)
             leaves[li].changed[now].setOff(); // the sweep two before: read by none from here on
-            recent[li] = leaves[li].changed[before];
-        }
     });
     const size_t slices = sliceStart.size() - 1;
     for (size_t s = 0; s < slices; ++s) {
@@ -207,18 +209,27 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, std::vector<LeafT::NodeMaskType>&
         tbb::parallel_for(
             tbb::blocked_range<size_t>(sliceStart[slice], sliceStart[slice + 1]),
             [&](const tbb::blocked_range<size_t>& r) {
+                // A leaf's recent changes and its face neighbours' (index 1 + f; -1: none), for faceDilated.
+                std::vector<LeafT::NodeMaskType> recent(7);
+                std::array<int64_t, 6> across;
+                for (int f = 0; f < 6; ++f)
+                    across[size_t(f)] = 1 + f;
                 for (size_t k = r.begin(); k != r.end(); ++k) {
-                    const size_t li = order[k].second;
-                    SweepLeaf& leaf = leaves[li];
+                    SweepLeaf& leaf = leaves[order[k].second];
                     if (leaf.sweep.isOff()) continue;
                     // The voxels next to a recent change: in this leaf or across a face (the leaves across
                     // a face lie in other slices, done or not yet begun; this leaf's own changes in this
                     // sweep are added as they happen, in `pending`).
-                    bool anyRecent = !recent[li].isOff();
-                    for (int f = 0; f < 6 && !anyRecent; ++f)
-                        anyRecent = leaf.neighbour[f] >= 0 && !recent[size_t(leaf.neighbour[f])].isOff();
+                    recent[0] = leaf.recent();
+                    bool anyRecent = !recent[0].isOff();
+                    for (int f = 0; f < 6; ++f) {
+                        const int64_t nbLeaf = leaf.neighbour[size_t(f)];
+                        recent[size_t(1 + f)] =
+                            nbLeaf >= 0 ? leaves[size_t(nbLeaf)].recent() : LeafT::NodeMaskType();
+                        anyRecent = anyRecent || !recent[size_t(1 + f)].isOff();
+                    }
                     if (!anyRecent) continue; // no voxel of it can change
-                    const LeafT::NodeMaskType next = faceDilated(recent, leaf.neighbour, li);
+                    const LeafT::NodeMaskType next = faceDilated(recent, across, 0);
                     LeafT::NodeMaskType pending;
                     LeafT::NodeMaskType& changed = leaf.changed[now];
                     float* v = leaf.values;
@@ -258,7 +269,6 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, std::vector<LeafT::NodeMaskType>&
                             }
                         }
                     }
-                    recent[li] = leaf.changed[0] | leaf.changed[1];
                 }
             });
     }
@@ -348,7 +358,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             SweepLeaf& out = leaves[li];
             out.neighbour = neighbours[li];
             out.sweep.setOff();
-            out.boundary.setOff();
+            out.boundary().setOff();
             forEachOn(li, manager.leaf(li).getValueMask(), acc, [&](Index i, float value, const float nb[6]) {
                 // initValue's test: a face neighbour on the other side of the isovalue.
                 const bool less = value < isoValue;
@@ -356,7 +366,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
                 for (int d = 0; d < 6; ++d)
                     any = any || (less ^ (nb[d] < isoValue));
                 if (any) {
-                    out.boundary.setOn(i);
+                    out.boundary().setOn(i);
                     ++boundary;
                 } else {
                     out.sweep.setOn(i);
@@ -378,7 +388,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
         std::vector<LeafT::NodeMaskType> reach(n), next(n);
         for (size_t li = 0; li < n; ++li)
-            reach[li] = leaves[li].boundary;
+            reach[li] = leaves[li].boundary();
         for (int step = 0; step < steps; ++step) {
             tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
                 for (size_t li = r.begin(); li != r.end(); ++li)
@@ -390,7 +400,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             for (size_t li = r.begin(); li != r.end(); ++li) {
                 SweepLeaf& leaf = leaves[li];
                 leaf.sweep &= reach[li];
-                if (!leaf.sweep.isOff() || !leaf.boundary.isOff()) continue;
+                if (!leaf.sweep.isOff() || !leaf.boundary().isOff()) continue;
                 const float* v = input[li];
                 const bool in0 = v[0] > isoValue;
                 bool oneSide = true;
@@ -414,7 +424,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             // By its side: what initValue gives every voxel but those next to the isosurface.
             for (Index i = 0; i < LeafT::SIZE; ++i)
                 values[i] = v[i] > isoValue ? -kMax : kMax;
-            forEachOn(li, leaves[li].boundary, acc, [&](Index i, float value, const float nb[6]) {
+            forEachOn(li, leaves[li].boundary(), acc, [&](Index i, float value, const float nb[6]) {
                 bool isBoundary = false;
                 values[i] = initValue(value, nb, isoValue, -h, isBoundary);
             });
@@ -430,13 +440,9 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
         const float sqrt2h = openvdb::math::Sqrt(2.f) * h;
         const int signs[4][3] = {{1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}};
-        // Before the first sweep the only finite values are those next to the isosurface: as if a sweep
-        // before it had changed them (an update whose neighbours are all +-FLT_MAX changes nothing).
-        std::vector<LeafT::NodeMaskType> recent(n);
-        for (SweepLeaf& leaf : leaves) {
-            leaf.changed[0].setOff();
-            leaf.changed[1] = leaf.boundary;
-        }
+        // Before the first sweep the only finite values are those next to the isosurface (changed[1]): as
+        // if a sweep before it had changed them (an update whose neighbours are all +-FLT_MAX changes
+        // nothing).
         int index = 0;
         for (const auto& s : signs) {
             std::vector<std::pair<int64_t, size_t>> order(n);
@@ -450,8 +456,8 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
                 if (i == 0 || order[i].first != order[i - 1].first) sliceStart.push_back(i);
             }
             sliceStart.push_back(n);
-            sweepOnce(leaves, recent, order, sliceStart, index++, s[0], s[1], s[2], h, sqrt2h, false);
-            sweepOnce(leaves, recent, order, sliceStart, index++, -s[0], -s[1], -s[2], h, sqrt2h, true);
+            sweepOnce(leaves, order, sliceStart, index++, s[0], s[1], s[2], h, sqrt2h, false);
+            sweepOnce(leaves, order, sliceStart, index++, -s[0], -s[1], -s[2], h, sqrt2h, true);
         }
         // Finalisation: active voxels still at +-FLT_MAX take the extreme finite active values.
         struct MinMax {
