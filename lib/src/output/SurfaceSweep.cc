@@ -209,7 +209,8 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
         tbb::parallel_for(
             tbb::blocked_range<size_t>(sliceStart[slice], sliceStart[slice + 1]),
             [&](const tbb::blocked_range<size_t>& r) {
-                // A leaf's recent changes and its face neighbours' (index 1 + f; -1: none), for faceDilated.
+                // A leaf's recent changes and its face neighbours' (index 1 + f, empty where there is no
+                // leaf), for faceDilated.
                 std::vector<LeafT::NodeMaskType> recent(7);
                 std::array<int64_t, 6> across;
                 for (int f = 0; f < 6; ++f)
