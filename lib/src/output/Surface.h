@@ -54,12 +54,6 @@ struct GrownLeaves {
 bool boxGrowable(const openvdb::FloatGrid& density, int radius);
 /// The leaves surfaceFog(density, radius) has, without building them (requires boxGrowable).
 GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius);
-/// The leaves of @a seeds (distinct origins, their active masks and sources) with their active voxels
-/// grown by a box of @a radius voxels (0 < radius < 8): bit for bit the leaves and masks that radius
-/// iterations of OpenVDB's 26-neighbour dilation (IGNORE_TILES) give to a tree holding those leaves.
-/// The seeds come first, in their order (sources kept), then the new leaves holding a grown voxel
-/// (source null).
-GrownLeaves growByBox(GrownLeaves seeds, int radius);
 
 /// A deep copy of @a density with its active voxels grown by @a radius voxels in every direction
 /// (a box: radius iterations of the 26-neighbour dilation), bit for bit what deepCopy() and

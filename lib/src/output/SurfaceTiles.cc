@@ -9,9 +9,9 @@
 // side's tiles within their dilation), and every voxel the band depends on lies within one slot of
 // them. The sweep runs over the density's active voxels and every voxel of those tile slots (as in the
 // voxelized density, whose tile voxels are all active clay), grown by the box as the density's fog is
-// grown (surfaceFog: growByBox on flat leaf masks), reading each leaf's fog values from the density: a leaf
-// over a tile reads the tile's value. The voxels of the deeper tiles are never swept: where their value is
-// over the isovalue they are inside, so the result holds them as inactive tiles of -band (the voxelized
+// grown (surfaceFog), reading each leaf's fog values from the density: a leaf over a tile reads the
+// tile's value. The voxels of the deeper tiles are never swept: where their value is over
+// the isovalue they are inside, so the result holds them as inactive tiles of -band (the voxelized
 // density's clipped values there); elsewhere the background (+band) says outside. The band's values
 // are those of the voxelized density's, bit for bit (tests/TestSurface.cc), at the cost of the
 // clay's surface rather than its volume.
@@ -104,30 +104,18 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromTiledDensity(const openvdb::FloatGrid& 
     // The sweep's voxels: the density's active voxels and every voxel of the tile slots near the
     // isosurface (as in the voxelized density, whose tiles' voxels are all active), grown by the box
     // as surfaceFog grows the density (26-neighbour dilation, radius times).
-    GrownLeaves seeds;
-    for (auto it = density.tree().cbeginLeaf(); it; ++it) {
-        seeds.origins.push_back(it->origin());
-        seeds.masks.push_back(it->getValueMask());
-    }
-    LeafT::NodeMaskType full;
-    full.setOn();
-    for (const Coord& key : tileSlotsNearIsosurface(density, isoValue)) { // tile slots: no leaf there
-        seeds.origins.push_back(Coord(key.x() * kDim, key.y() * kDim, key.z() * kDim));
-        seeds.masks.push_back(full);
-    }
-    seeds.source.assign(seeds.origins.size(), nullptr); // sweepFogTree reads the density itself
-    GrownLeaves g = growByBox(std::move(seeds), radius);
-    { // the density's leaves with no active voxel, which OpenVDB's dilation leaves empty: none swept
-        size_t kept = 0;
-        for (size_t i = 0; i < g.origins.size(); ++i) {
-            if (g.masks[i].isOff()) continue;
-            g.origins[kept] = g.origins[i];
-            g.masks[kept] = g.masks[i];
-            ++kept;
-        }
-        g.origins.resize(kept);
-        g.masks.resize(kept);
-        g.source.resize(kept);
+    openvdb::MaskTree topology(false);
+    for (auto it = density.tree().cbeginLeaf(); it; ++it)
+        topology.touchLeaf(it->origin())->setValueMask(it->getValueMask());
+    for (const Coord& key : tileSlotsNearIsosurface(density, isoValue))
+        topology.touchLeaf(Coord(key.x() * kDim, key.y() * kDim, key.z() * kDim))->setValuesOn();
+    openvdb::tools::dilateActiveValues(topology, radius, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    GrownLeaves g;
+    for (auto it = topology.cbeginLeaf(); it; ++it) {
+        if (it->isEmpty()) continue;
+        g.origins.push_back(it->origin());
+        g.masks.push_back(it->getValueMask());
     }
     std::shared_ptr<FloatTree> tree = sweepTreeOf(g, density.tree().background());
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
