@@ -315,7 +315,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     for (size_t i = 0; i < n; ++i)
         keys[i] = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
                         manager.leaf(i).origin().z() >> 3);
-    const std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
+    std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
 
     // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
     // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
@@ -431,6 +431,10 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             });
         }
     });
+    // The fog's values and the neighbour table are read no more (each leaf keeps its own neighbours):
+    // freed before the sweeps, while the values are at their largest.
+    std::vector<std::array<int64_t, 6>>().swap(neighbours);
+    std::vector<const float*>().swap(input);
 
     // fogToSdf sweeps only when it found voxels to sweep and voxels to sweep from.
     float tileValue = kMax;
