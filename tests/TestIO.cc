@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "TempDirTest.h"
+#include "output/Surface.h"
 
 #include <png.h>
 
@@ -315,6 +316,85 @@ TEST_F(IOTest, SurfaceLiesWhereCellsAreHalfFull)
     EXPECT_NEAR(sacc.getValue(Coord(10, 10, 1)), 0.5f, 0.02f);
     EXPECT_NEAR(sacc.getValue(Coord(10, 10, -1)), 0.5f, 0.02f);
     EXPECT_EQ(readClayFile(path).meta.dimensions, 2);
+}
+
+TEST_F(IOTest, TheSurfaceIsStoredAsHalfFloatsAndReadsBackWithinTheirPrecision)
+{
+    // A ball of full cells (voxel size 0.5): the surface in the file is the one computed, each value
+    // rounded to a half float; density and mass stay exact.
+    auto g = openvdb::Int32Grid::create(0);
+    auto acc = g->getAccessor();
+    for (int x = -12; x <= 12; ++x)
+        for (int y = -12; y <= 12; ++y)
+            for (int z = -12; z <= 12; ++z)
+                if (x * x + y * y + z * z <= 140) acc.setValueOn(Coord(x, y, z), 700 + (x & 3) * 100);
+    const std::string path = file("half.vdb");
+    writeClayFile(path, *g, sampleMeta());
+    EXPECT_TRUE(contains(describeVdb(path), "is_saved_as_half_float (bool) = true")) << describeVdb(path);
+    EXPECT_EQ(contentHash(*readClayFile(path).mass), contentHash(*g));
+    auto surface = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "surface"));
+    auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "density"));
+    ASSERT_TRUE(surface && density);
+    EXPECT_TRUE(surface->saveFloatAsHalf());
+    EXPECT_FALSE(density->saveFloatAsHalf());
+    EXPECT_EQ(surface->getGridClass(), openvdb::GRID_LEVEL_SET);
+    EXPECT_EQ(surface->background(), 1.5f); // 3 voxels of 0.5
+    const auto exact = io_internal::surfaceLevelSet(*io_internal::densityGrid(*g, 1000, 0.5), 0.5);
+    EXPECT_EQ(surface->activeVoxelCount(), exact->activeVoxelCount());
+    EXPECT_GT(surface->activeVoxelCount(), 1000u);
+    auto e = exact->getConstAccessor();
+    size_t differ = 0;
+    for (auto it = surface->cbeginValueOn(); it; ++it) {
+        const float want = e.getValue(it.getCoord());
+        EXPECT_TRUE(e.isValueOn(it.getCoord()));
+        EXPECT_LE(std::abs(*it - want), std::abs(want) * 0x1p-11f + 0x1p-25f) << it.getCoord();
+        EXPECT_EQ(*it < 0, want < 0) << it.getCoord();
+        differ += *it != want;
+    }
+    EXPECT_GT(differ, 0u); // rounded: this test sees half floats
+    for (auto it = density->cbeginValueOn(); it; ++it)
+        EXPECT_EQ(*it, float(double(g->tree().getValue(it.getCoord())) / 1000.0));
+
+    // Voxel sizes whose band would leave the half floats' range keep 32-bit floats.
+    for (double vs : {1e-4, 1e5}) {
+        ClayMeta meta = sampleMeta();
+        meta.voxelSize = vs;
+        writeClayFile(path, *g, meta);
+        surface = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "surface"));
+        EXPECT_FALSE(surface->saveFloatAsHalf()) << vs;
+        EXPECT_EQ(surface->background(), float(3 * vs)) << vs;
+    }
+}
+
+TEST_F(IOTest, HalfFloatGridsOfAnyCompressionPassTheLayoutCheck)
+{
+    // OpenVDB writes no block at all for a node with no value to store as half floats (HalfWriter);
+    // the check before OpenVDB reads a file follows it. A leaf, an inactive tile (a node with no active
+    // value) and an active tile, under every compression.
+    auto ls = openvdb::FloatGrid::create(3.f);
+    ls->setName("ls");
+    ls->setGridClass(openvdb::GRID_LEVEL_SET);
+    ls->tree().setValue(Coord(1, 2, 3), 0.5f);
+    ls->tree().addTile(1, Coord(64, 0, 0), -3.f, false);
+    ls->tree().addTile(1, Coord(128, 0, 0), 1.25f, true);
+    ls->setSaveFloatAsHalf(true);
+    const std::string path = file("half.vdb");
+    using namespace openvdb::io;
+    for (uint32_t c :
+         std::vector<uint32_t>{COMPRESS_NONE, COMPRESS_ZIP, COMPRESS_BLOSC, COMPRESS_ACTIVE_MASK,
+                               COMPRESS_ZIP | COMPRESS_ACTIVE_MASK, COMPRESS_BLOSC | COMPRESS_ACTIVE_MASK}) {
+        File out(path);
+        out.setCompression(c);
+        out.write({ls});
+        std::string text;
+        EXPECT_NO_THROW(text = describeVdb(path)) << c;
+        EXPECT_TRUE(contains(text, "active voxels: 513")) << c << ": " << text;
+        auto back = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "ls"));
+        ASSERT_TRUE(back) << c;
+        EXPECT_EQ(back->tree().getValue(Coord(1, 2, 3)), 0.5f) << c;
+        EXPECT_EQ(back->tree().getValue(Coord(70, 1, 1)), -3.f) << c;
+        EXPECT_EQ(back->tree().getValue(Coord(130, 1, 1)), 1.25f) << c;
+    }
 }
 
 TEST_F(IOTest, WriteIntoMissingDirectoryThrowsAndLeavesNothing)

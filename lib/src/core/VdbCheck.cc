@@ -438,6 +438,7 @@ private:
         if (metadata == 5) mIn.skip(mValue.size, what + "' second inactive value");
         if (metadata == 3 || metadata == 4 || metadata == 5) mIn.skip(maskBytes, what + "' selection mask");
         const uint32_t stored = (mCompression & kActiveMask) && metadata != 6 ? active : count;
+        if (mHalf && stored == 0) return; // HalfWriter/HalfReader: no values, no block at all
         const uint64_t bytes = uint64_t(stored) * (mHalf ? mValue.halfSize : mValue.size);
         if (mCompression & (kBlosc | kZip)) {
             block(what, bytes, (mCompression & kBlosc) != 0);

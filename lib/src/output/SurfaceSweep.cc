@@ -16,6 +16,16 @@
 //   go by their own diagonal key (leaf coordinates, same signs), leaves of one key in parallel (they
 //   share no face), and inside a leaf the voxels in nested loops running along the sweep's signs.
 //   The Godunov update is OpenVDB's, expression for expression (three cases, same tests).
+// - Updates that cannot change a value are skipped. A voxel's update reads only its own value and its
+//   six face neighbours', and only its own update changes its value; updated again with none of those
+//   neighbours changed since, it gives the same candidate and changes nothing. So each sweep updates
+//   only the voxels one of whose face neighbours changed in the sweep before or in this one (a change
+//   two sweeps back came before the voxel's update in the sweep between): each leaf records the voxels
+//   each sweep changed (by the sweep's parity), a leaf none of whose voxels and face neighbours' voxels
+//   changed is passed over whole, and inside a leaf the changes of this sweep are followed as they
+//   happen. Before the first sweep only the voxels next to the isosurface hold finite values (an update
+//   reading only +-FLT_MAX returns early), so they count as the changes before it. Every value is the
+//   one the full sweep computes; after the first sweeps most of the band holds still and costs a test.
 // - Finalisation (MinMaxKernel, PruneMinMaxFltKernel): every value left at +-FLT_MAX (voxels
 //   active or not, tiles, the background) takes the largest / smallest finite active value, as
 //   OpenVDB's pass leaves them (checked bit for bit by tests/TestSurface.cc).
@@ -124,8 +134,14 @@ inline float initValue(float value, const float nb[6], float isoValue, float h, 
 struct SweepLeaf {
     float* values;
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
-    LeafT::NodeMaskType boundary;     // active and next to the isosurface
     std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
+    /// The voxels each sweep changed, by the sweep's parity. Before the sweeps, changed[1] holds the
+    /// voxels next to the isosurface (active), which count as changed before the first sweep (below).
+    LeafT::NodeMaskType changed[2];
+    LeafT::NodeMaskType& boundary() { return changed[1]; }
+    const LeafT::NodeMaskType& boundary() const { return changed[1]; }
+    /// The voxels changed in the sweep before and in this one so far.
+    LeafT::NodeMaskType recent() const { return changed[0] | changed[1]; }
 };
 
 /// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only).
@@ -176,20 +192,47 @@ LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
     return out;
 }
 
-/// One sweep with signs (sx, sy, sz) over every leaf, in the order described at the top.
+/// Sweep @a index (0..7) with signs (sx, sy, sz) over every leaf, in the order described at the top,
+/// updating only the voxels a face neighbour of which changed since their last update (see the top).
 void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64_t, size_t>>& order,
-               const std::vector<size_t>& sliceStart, int sx, int sy, int sz, float h, float sqrt2h,
-               bool reverse)
+               const std::vector<size_t>& sliceStart, int index, int sx, int sy, int sz, float h,
+               float sqrt2h, bool reverse)
 {
+    const int now = index & 1;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t li = r.begin(); li != r.end(); ++li)
+            leaves[li].changed[now].setOff(); // the sweep two before: read by none from here on
+    });
     const size_t slices = sliceStart.size() - 1;
     for (size_t s = 0; s < slices; ++s) {
         const size_t slice = reverse ? slices - 1 - s : s;
         tbb::parallel_for(
             tbb::blocked_range<size_t>(sliceStart[slice], sliceStart[slice + 1]),
             [&](const tbb::blocked_range<size_t>& r) {
+                // A leaf's recent changes and its face neighbours' (index 1 + f, empty where there is no
+                // leaf), for faceDilated.
+                std::vector<LeafT::NodeMaskType> recent(7);
+                std::array<int64_t, 6> across;
+                for (int f = 0; f < 6; ++f)
+                    across[size_t(f)] = 1 + f;
                 for (size_t k = r.begin(); k != r.end(); ++k) {
                     SweepLeaf& leaf = leaves[order[k].second];
                     if (leaf.sweep.isOff()) continue;
+                    // The voxels next to a recent change: in this leaf or across a face (the leaves across
+                    // a face lie in other slices, done or not yet begun; this leaf's own changes in this
+                    // sweep are added as they happen, in `pending`).
+                    recent[0] = leaf.recent();
+                    bool anyRecent = !recent[0].isOff();
+                    for (int f = 0; f < 6; ++f) {
+                        const int64_t nbLeaf = leaf.neighbour[size_t(f)];
+                        recent[size_t(1 + f)] =
+                            nbLeaf >= 0 ? leaves[size_t(nbLeaf)].recent() : LeafT::NodeMaskType();
+                        anyRecent = anyRecent || !recent[size_t(1 + f)].isOff();
+                    }
+                    if (!anyRecent) continue; // no voxel of it can change
+                    const LeafT::NodeMaskType next = faceDilated(recent, across, 0);
+                    LeafT::NodeMaskType pending;
+                    LeafT::NodeMaskType& changed = leaf.changed[now];
                     float* v = leaf.values;
                     const float* nb[6]; // -x, +x, -y, +y, -z, +z (null: no leaf)
                     for (int f = 0; f < 6; ++f)
@@ -205,7 +248,7 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                             for (int c = 0; c < kDim; ++c) {
                                 const int z = sz > 0 ? c : kDim - 1 - c;
                                 const Index i = offsetOf(x, y, z);
-                                if (!leaf.sweep.isOn(i)) continue;
+                                if (!leaf.sweep.isOn(i) || !(next.isOn(i) || pending.isOn(i))) continue;
                                 const float vx0 =
                                     x > 0 ? v[i - kDim * kDim] : at(nb[0], offsetOf(kDim - 1, y, z));
                                 const float vx1 =
@@ -214,7 +257,16 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                                 const float vy1 = y < kDim - 1 ? v[i + kDim] : at(nb[3], offsetOf(x, 0, z));
                                 const float vz0 = z > 0 ? v[i - 1] : at(nb[4], offsetOf(x, y, kDim - 1));
                                 const float vz1 = z < kDim - 1 ? v[i + 1] : at(nb[5], offsetOf(x, y, 0));
+                                const float old = v[i];
                                 updateVoxel(v[i], vx0, vx1, vy0, vy1, vz0, vz1, h, sqrt2h);
+                                if (v[i] == old) continue;
+                                changed.setOn(i);
+                                if (x > 0) pending.setOn(i - kDim * kDim);
+                                if (x < kDim - 1) pending.setOn(i + kDim * kDim);
+                                if (y > 0) pending.setOn(i - kDim);
+                                if (y < kDim - 1) pending.setOn(i + kDim);
+                                if (z > 0) pending.setOn(i - 1);
+                                if (z < kDim - 1) pending.setOn(i + 1);
                             }
                         }
                     }
@@ -263,7 +315,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     for (size_t i = 0; i < n; ++i)
         keys[i] = Coord(manager.leaf(i).origin().x() >> 3, manager.leaf(i).origin().y() >> 3,
                         manager.leaf(i).origin().z() >> 3);
-    const std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
+    std::vector<std::array<int64_t, 6>> neighbours = leafFaceNeighbours(keys);
 
     // Initialisation, leaf by leaf in parallel (each task writes its own leaf's values only, and
     // reads the fog's from the source). A face neighbour in this leaf or a neighbouring one is read
@@ -272,15 +324,16 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
     // values, only in the leaves the sweeps need (all of them unless only the band's reach is swept).
     const Coord dirs[6] = {Coord(-1, 0, 0), Coord(1, 0, 0),  Coord(0, -1, 0),
                            Coord(0, 1, 0),  Coord(0, 0, -1), Coord(0, 0, 1)};
-    // Calls fn(i, value, nb) for each active voxel i of leaf li with its six face neighbours' fog values.
-    auto forEachActive = [&](size_t li, openvdb::tree::ValueAccessor<const FloatTree>& acc, auto&& fn) {
+    // Calls fn(i, value, nb) for each voxel i of @a mask in leaf li with its six face neighbours' fog values.
+    auto forEachOn = [&](size_t li, const LeafT::NodeMaskType& mask,
+                         openvdb::tree::ValueAccessor<const FloatTree>& acc, auto&& fn) {
         const std::array<int64_t, 6>& nbLeaf = neighbours[li];
         const float* nbData[6];
         for (int d = 0; d < 6; ++d)
             nbData[d] = nbLeaf[d] >= 0 ? input[size_t(nbLeaf[d])] : nullptr;
         const LeafT& in = manager.leaf(li);
         const float* v = input[li];
-        for (auto it = in.getValueMask().beginOn(); it; ++it) {
+        for (auto it = mask.beginOn(); it; ++it) {
             const Index i = it.pos();
             const int x = int(i >> (2 * LeafT::LOG2DIM)), y = int((i >> LeafT::LOG2DIM) & (kDim - 1)),
                       z = int(i & (kDim - 1));
@@ -306,15 +359,15 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             SweepLeaf& out = leaves[li];
             out.neighbour = neighbours[li];
             out.sweep.setOff();
-            out.boundary.setOff();
-            forEachActive(li, acc, [&](Index i, float value, const float nb[6]) {
+            out.boundary().setOff();
+            forEachOn(li, manager.leaf(li).getValueMask(), acc, [&](Index i, float value, const float nb[6]) {
                 // initValue's test: a face neighbour on the other side of the isovalue.
                 const bool less = value < isoValue;
                 bool any = false;
                 for (int d = 0; d < 6; ++d)
                     any = any || (less ^ (nb[d] < isoValue));
                 if (any) {
-                    out.boundary.setOn(i);
+                    out.boundary().setOn(i);
                     ++boundary;
                 } else {
                     out.sweep.setOn(i);
@@ -336,7 +389,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         const int steps = int(std::ceil(double(band) * std::sqrt(3.0) / double(h)));
         std::vector<LeafT::NodeMaskType> reach(n), next(n);
         for (size_t li = 0; li < n; ++li)
-            reach[li] = leaves[li].boundary;
+            reach[li] = leaves[li].boundary();
         for (int step = 0; step < steps; ++step) {
             tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
                 for (size_t li = r.begin(); li != r.end(); ++li)
@@ -348,7 +401,7 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             for (size_t li = r.begin(); li != r.end(); ++li) {
                 SweepLeaf& leaf = leaves[li];
                 leaf.sweep &= reach[li];
-                if (!leaf.sweep.isOff() || !leaf.boundary.isOff()) continue;
+                if (!leaf.sweep.isOff() || !leaf.boundary().isOff()) continue;
                 const float* v = input[li];
                 const bool in0 = v[0] > isoValue;
                 bool oneSide = true;
@@ -369,14 +422,19 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             float* values = leaf.buffer().data();
             leaves[li].values = values;
             const float* v = input[li];
+            // By its side: what initValue gives every voxel but those next to the isosurface.
             for (Index i = 0; i < LeafT::SIZE; ++i)
-                values[i] = v[i] > isoValue ? -kMax : kMax; // inactive: by its side
-            forEachActive(li, acc, [&](Index i, float value, const float nb[6]) {
+                values[i] = v[i] > isoValue ? -kMax : kMax;
+            forEachOn(li, leaves[li].boundary(), acc, [&](Index i, float value, const float nb[6]) {
                 bool isBoundary = false;
                 values[i] = initValue(value, nb, isoValue, -h, isBoundary);
             });
         }
     });
+    // The fog's values and the neighbour table are read no more (each leaf keeps its own neighbours):
+    // freed before the sweeps, while the values are at their largest.
+    std::vector<std::array<int64_t, 6>>().swap(neighbours);
+    std::vector<const float*>().swap(input);
 
     // fogToSdf sweeps only when it found voxels to sweep and voxels to sweep from.
     float tileValue = kMax;
@@ -387,6 +445,10 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
         const float sqrt2h = openvdb::math::Sqrt(2.f) * h;
         const int signs[4][3] = {{1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}};
+        // Before the first sweep the only finite values are those next to the isosurface (changed[1]): as
+        // if a sweep before it had changed them (an update whose neighbours are all +-FLT_MAX changes
+        // nothing).
+        int index = 0;
         for (const auto& s : signs) {
             std::vector<std::pair<int64_t, size_t>> order(n);
             for (size_t i = 0; i < n; ++i) {
@@ -399,8 +461,8 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
                 if (i == 0 || order[i].first != order[i - 1].first) sliceStart.push_back(i);
             }
             sliceStart.push_back(n);
-            sweepOnce(leaves, order, sliceStart, s[0], s[1], s[2], h, sqrt2h, false);
-            sweepOnce(leaves, order, sliceStart, -s[0], -s[1], -s[2], h, sqrt2h, true);
+            sweepOnce(leaves, order, sliceStart, index++, s[0], s[1], s[2], h, sqrt2h, false);
+            sweepOnce(leaves, order, sliceStart, index++, -s[0], -s[1], -s[2], h, sqrt2h, true);
         }
         // Finalisation: active voxels still at +-FLT_MAX take the extreme finite active values.
         struct MinMax {
