@@ -216,6 +216,23 @@ TEST_F(TilesTest, TilesOverTcAreVoxelizedAndBadTilesRefused)
     EXPECT_THROW(Automaton(inactive, options(Rule::Prorata, 1)), Error);
 }
 
+TEST_F(TilesTest, TheContentHashOfTilesAnywhereIsThatOfTheirVoxels)
+{
+    // Tiles of 8^3 and 128^3 on both sides of zero on every axis, of several values: the hash's sums
+    // over tiles (in AVX-512 where the CPU has it) against the voxel-by-voxel sums over leaves.
+    auto g = openvdb::Int32Grid::create(0);
+    g->tree().fill(CoordBBox(Coord(-128, -128, -128), Coord(-1, -1, -1)), kTc, true);
+    g->tree().fill(CoordBBox(Coord(-24, 0, -8), Coord(15, 23, 7)), 7, true);
+    g->tree().fill(CoordBBox(Coord(8, -16, 128), Coord(23, -1, 255)), kTc + 3, true);
+    g->tree().fill(CoordBBox(Coord(1 << 20, -(1 << 20), 0), Coord((1 << 20) + 7, -(1 << 20) + 7, 7)), 1,
+                   true);
+    ASSERT_GE(tileCount(g->tree()), 4u);
+    auto dense = voxelized(*g);
+    ASSERT_EQ(tileCount(dense->tree()), 0u);
+    EXPECT_EQ(contentHash(*g), contentHash(*dense));
+    EXPECT_EQ(clayVoxelCount(*g), clayVoxelCount(*dense));
+}
+
 TEST_F(TilesTest, MetricsReadTilesAsTheirVoxels)
 {
     auto grid = tiledLump();

@@ -23,12 +23,25 @@ bool cpuHasKernelAvx2()
     }();
     return has;
 }
+
+bool cpuHasAvx512dq()
+{
+    static const bool has = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq");
+    }();
+    return has;
+}
 #else
 bool cpuHasAvx2()
 {
     return false;
 }
 bool cpuHasKernelAvx2()
+{
+    return false;
+}
+bool cpuHasAvx512dq()
 {
     return false;
 }

