@@ -568,6 +568,15 @@ void printSummary(const vdbclay::RunSummary& s, const vdbclay::Scene& scene, dou
                     (unsigned long long)s.transportIterations, (long long)s.transportMassMoved,
                     s.framesTransportNoRoom ? " (some clay walled in with no room)" : "");
     }
+    if (scene.surfaceTension > 0 || s.massSmoothed) {
+        std::printf("smoothing: %lld clay moved", (long long)s.massSmoothed);
+        if (scene.surfaceTension > 0) {
+            std::printf(" (surface tension %s, %llu boxes, %llu voxels read)",
+                        fmtSeconds(s.tensionSeconds).c_str(), (unsigned long long)s.tensionBoxes,
+                        (unsigned long long)s.tensionVoxels);
+        }
+        std::printf("\n");
+    }
     std::printf(
         "clay %llu voxels, %llu interior (mean density %.4f, heterogeneity CV %.4f), compaction %.4f\n",
         (unsigned long long)s.metrics.clayVoxels, (unsigned long long)s.metrics.interiorCells,

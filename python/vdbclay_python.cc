@@ -326,6 +326,7 @@ py::dict frameDict(const FrameReport& r)
     d["mass_smoothed"] = r.massSmoothed;
     d["tension_boxes"] = r.tensionBoxes;
     d["tension_voxels"] = r.tensionVoxels;
+    d["tension_seconds"] = r.tensionSeconds;
     d["settle"] = stepDict(r.settle);
     d["finished"] = r.finished;
     return d;

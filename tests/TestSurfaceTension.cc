@@ -175,15 +175,20 @@ TEST_F(SurfaceTensionTest, LaterFramesSmoothWhereTheToolChangedTheClayOnly)
     Sculptor sc(s, 2);
     sc.run(1);
     auto after1 = sc.mass()->deepCopy();
-    uint64_t later = 0;
+    uint64_t later = 0, boxes = 0;
     int64_t smoothed = 0;
     const RunSummary r = sc.run(0, [&](const FrameReport& f) {
         later += f.tensionVoxels;
+        boxes += f.tensionBoxes;
         smoothed += f.massSmoothed;
     });
     EXPECT_EQ(r.massDrift, 0);
     EXPECT_GT(later, 0u);
     EXPECT_GT(smoothed, 0);
+    // The run's summary (the --stats file's mass_smoothed, tension_boxes, tension_voxels) sums its frames.
+    EXPECT_EQ(r.massSmoothed, smoothed);
+    EXPECT_EQ(r.tensionBoxes, boxes);
+    EXPECT_EQ(r.tensionVoxels, later);
     auto now = sc.mass()->getConstAccessor();
     auto then = after1->getConstAccessor();
     const Box& b = kBumpBottom;

@@ -90,10 +90,10 @@ struct Scene {
     /// "sweep": the push acts on the volume each tool sweeps between two frames (the move split into
     /// sub-steps of at most a quarter voxel), so clay never passes through a thin or fast tool.
     bool sweep = false;
-    /// "surface_tension": in [0, 1], 0 (the default) off. Each frame, after the tools act and before
-    /// the clay settles, surface tension (Smooth.h) of this strength runs over the voxels near the
-    /// tools (their bounds grown by kSurfaceTensionMargin), so a frame costs what the surface the
-    /// tools change costs, not the model.
+    /// "surface_tension": in [0, 1], 0 (the default) off. Each frame, once the clay has settled, one
+    /// pass of surface tension (Smooth.h) of this strength runs over the surface: the whole surface in
+    /// the scene's first frame, then the clay the frame changed grown by kSurfaceTensionMargin, so a
+    /// later frame costs what the surface it changes costs, not the model (sculpt/SurfaceTension.h).
     double surfaceTension = 0;
     uint64_t frames = 0; ///< frames to run (default: the longest tool path)
     std::string start;   ///< a previous output .vdb to continue from (resolved path), or empty

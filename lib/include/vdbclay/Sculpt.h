@@ -33,6 +33,7 @@ struct FrameReport {
     /// scene's first frame).
     uint64_t tensionBoxes = 0;
     uint64_t tensionVoxels = 0;
+    double tensionSeconds = 0; ///< the scene's surface tension's wall time this frame (part of seconds)
     /// Scene::transport global: what the global layer did right after the push (once per frame; a
     /// resumed open frame does not repeat it).
     GlobalTransportReport transport;
@@ -73,6 +74,12 @@ struct RunSummary {
     uint64_t transportSolves = 0, transportIterations = 0;
     int64_t transportMassMoved = 0;
     uint64_t framesTransportNoRoom = 0; ///< frames whose global layer found walled-in clay
+    /// Clay the smooth tools and the scene's surface tension moved (FrameReport::massSmoothed, summed).
+    int64_t massSmoothed = 0;
+    /// The scene's surface tension (FrameReport's figures, summed): of pushSeconds, its wall time; the
+    /// boxes it smoothed and the voxels it read into them.
+    double tensionSeconds = 0;
+    uint64_t tensionBoxes = 0, tensionVoxels = 0;
     StageSeconds stages;
     /// The final clay measured by measureClay() with the automaton's obstacles (tools included).
     ClayMetrics metrics;

@@ -62,6 +62,10 @@ std::string runReportJson(const RunReport& r, int indent)
     j["mass_final"] = s.massFinal;
     j["mass_added"] = s.massAdded;
     j["mass_removed"] = s.massRemoved;
+    j["mass_smoothed"] = s.massSmoothed;
+    j["tension_seconds"] = s.tensionSeconds;
+    j["tension_boxes"] = s.tensionBoxes;
+    j["tension_voxels"] = s.tensionVoxels;
     j["residual_overload"] = s.residualOverload;
     j["settled"] = s.settled;
     j["frames_unsettled"] = s.framesUnsettled;

@@ -272,6 +272,7 @@ struct Sculptor::Impl {
     void endFrame(FrameReport& rep)
     {
         if (scene.surfaceTension > 0) {
+            const auto t0 = std::chrono::steady_clock::now();
             if (rep.frame == 1) sculpt_internal::addWholeSurface(*mass, scene.dimensions, changedClay);
             const std::vector<Box> boxes =
                 sculpt_internal::tensionBoxes(changedClay.entries(), scene.dimensions, kSurfaceTensionMargin);
@@ -282,6 +283,7 @@ struct Sculptor::Impl {
             rep.massSmoothed += t.massMoved;
             rep.tensionBoxes = t.boxes;
             rep.tensionVoxels = t.visited;
+            rep.tensionSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             // The smoothing woke every block it touched (the whole surface in the first frame), but
             // it made no cell overloaded: with none over Tc, the next frame's steps need examine
             // none of them.
@@ -910,6 +912,10 @@ RunSummary Sculptor::run(uint64_t maxFrames, const std::function<void(const Fram
         s.transportIterations += r.transport.iterations;
         s.transportMassMoved += r.transport.massMoved;
         if (r.transport.noRoom) ++s.framesTransportNoRoom;
+        s.massSmoothed += r.massSmoothed;
+        s.tensionSeconds += r.tensionSeconds;
+        s.tensionBoxes += r.tensionBoxes;
+        s.tensionVoxels += r.tensionVoxels;
         if (onFrame) onFrame(r);
         if (!r.finished) break; // stopped() is set
     }
