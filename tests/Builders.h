@@ -62,6 +62,14 @@ inline vdbclay::Scene loadTestScene(const std::string& relative)
     return vdbclay::loadScene(sceneFile(relative));
 }
 
+/// The scene data/scenes/test/@a name, run with @a rule.
+inline vdbclay::Scene testSceneWithRule(const std::string& name, vdbclay::Rule rule)
+{
+    vdbclay::Scene s = loadTestScene("test/" + name);
+    s.rule.rule = rule;
+    return s;
+}
+
 /// Runs @a scene to its end on @a threads threads; @a frames collects every frame's report, the
 /// final clay goes to @a out.
 inline vdbclay::RunSummary runScene(const vdbclay::Scene& scene,

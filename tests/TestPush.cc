@@ -27,6 +27,7 @@ using vdbclay_test::expectError;
 using vdbclay_test::kAllRules;
 using vdbclay_test::loadTestScene;
 using vdbclay_test::runScene;
+using vdbclay_test::testSceneWithRule;
 
 namespace {
 
@@ -34,14 +35,6 @@ class PushTest : public ::testing::Test {
 protected:
     static void SetUpTestSuite() { openvdb::initialize(); }
 };
-
-/// The scene data/scenes/test/@a name, run with @a rule.
-Scene withRule(const std::string& name, Rule rule)
-{
-    Scene s = loadTestScene("test/" + name);
-    s.rule.rule = rule;
-    return s;
-}
 
 /// @a value in every voxel of @a box, as the push tests' clay (a grid named "mass").
 openvdb::Int32Grid::Ptr clayBox(const CoordBBox& box, int32_t value)
@@ -92,7 +85,7 @@ TEST_F(PushTest, ToolsThroughThinSheetsAndManyVoxelsPerFrame)
     for (const Rule rule : kAllRules) {
         const char* name = ruleName(rule);
         MassGridPtr clay;
-        RunSummary s = runScene(withRule("sphere-through-sheet.json", rule), nullptr, &clay);
+        RunSummary s = runScene(testSceneWithRule("sphere-through-sheet.json", rule), nullptr, &clay);
         EXPECT_EQ(s.massDrift, 0) << name;
         EXPECT_TRUE(s.settled) << name;
         auto acc = clay->getConstAccessor();
@@ -101,12 +94,12 @@ TEST_F(PushTest, ToolsThroughThinSheetsAndManyVoxelsPerFrame)
                 EXPECT_EQ(acc.getValue(Coord(x, 0, z)), 0) << name << " " << x << "," << z;
 
         const MassGridPtr before = makeClay(*makeBox({{0, 0, 0}}, {{15, 0, 15}}), 100, 3);
-        s = runScene(withRule("box-jumps-over-sheet.json", rule), nullptr, &clay);
+        s = runScene(testSceneWithRule("box-jumps-over-sheet.json", rule), nullptr, &clay);
         EXPECT_EQ(contentHash(*clay), contentHash(*before)) << name << ": the jump went through the sheet";
         EXPECT_EQ(s.steps, 0u) << name;
 
         std::vector<FrameReport> frames;
-        s = runScene(withRule("box-into-cube-6-per-frame.json", rule), &frames, &clay);
+        s = runScene(testSceneWithRule("box-into-cube-6-per-frame.json", rule), &frames, &clay);
         ASSERT_EQ(frames.size(), 2u);
         for (const FrameReport& f : frames) {
             EXPECT_EQ(f.push.voxelsPushed, 384u) << name;

@@ -33,6 +33,7 @@ using vdbclay_test::kAllRules;
 using vdbclay_test::loadTestScene;
 using vdbclay_test::runScene;
 using vdbclay_test::runSceneJson;
+using vdbclay_test::testSceneWithRule;
 
 namespace {
 
@@ -40,14 +41,6 @@ class SculptorTest : public ::testing::Test {
 protected:
     static void SetUpTestSuite() { openvdb::initialize(); }
 };
-
-/// The scene data/scenes/test/@a name, run with @a rule.
-Scene withRule(const std::string& name, Rule rule)
-{
-    Scene s = loadTestScene("test/" + name);
-    s.rule.rule = rule;
-    return s;
-}
 
 } // namespace
 
@@ -106,7 +99,7 @@ TEST_F(SculptorTest, IncompressibleLimitEveryRuleSettles)
         for (const Case& k : cases) {
             std::vector<FrameReport> frames;
             MassGridPtr clay;
-            const RunSummary s = runScene(withRule(k.scene, rule), &frames, &clay);
+            const RunSummary s = runScene(testSceneWithRule(k.scene, rule), &frames, &clay);
             const std::string what = std::string(ruleName(rule)) + " " + k.scene;
             EXPECT_EQ(s.massDrift, 0) << what;
             EXPECT_TRUE(s.settled) << what;
@@ -126,7 +119,7 @@ TEST_F(SculptorTest, IncompressibleLimitEveryRuleSettles)
 TEST_F(SculptorTest, IncompressibleLimitWithTcOne)
 {
     for (const Rule rule : kAllRules) {
-        const RunSummary s = runScene(withRule("incompressible-cube-tc1.json", rule));
+        const RunSummary s = runScene(testSceneWithRule("incompressible-cube-tc1.json", rule));
         EXPECT_EQ(s.massDrift, 0) << ruleName(rule);
         EXPECT_TRUE(s.settled) << ruleName(rule);
         EXPECT_EQ(s.metrics.maxCell, 1) << ruleName(rule);
@@ -151,7 +144,7 @@ TEST_F(SculptorTest, ClayTrappedBetweenToolAndObstacleIsConservedAndReported)
     for (const Rule rule : kAllRules) {
         const char* name = ruleName(rule);
         std::vector<FrameReport> frames;
-        const RunSummary s = runScene(withRule("trapped-piston2d.json", rule), &frames);
+        const RunSummary s = runScene(testSceneWithRule("trapped-piston2d.json", rule), &frames);
         ASSERT_EQ(frames.size(), 4u) << name;
         EXPECT_EQ(frames[0].settle.reason, StopReason::NoRoom) << name;
         EXPECT_EQ(frames[0].settle.steps, 8192u) << name;
@@ -181,7 +174,7 @@ TEST_F(SculptorTest, TwoPlatesClosingToOneVoxel)
     for (const Rule rule : kAllRules) {
         const char* name = ruleName(rule);
         MassGridPtr clay;
-        const RunSummary s = runScene(withRule("two-plates-one-voxel.json", rule), nullptr, &clay);
+        const RunSummary s = runScene(testSceneWithRule("two-plates-one-voxel.json", rule), nullptr, &clay);
         EXPECT_EQ(s.massDrift, 0) << name;
         EXPECT_TRUE(s.settled) << name;
         EXPECT_EQ(s.residualOverload, 0) << name;
