@@ -4,8 +4,11 @@
 // metrics read them as their voxels.
 #include <vdbclay/Automaton.h>
 #include <vdbclay/Metrics.h>
+#include <vdbclay/Scene.h>
+#include <vdbclay/Sculpt.h>
 #include <vdbclay/Shapes.h>
 
+#include "Builders.h"
 #include "automaton/Tiles.h"
 #include "shapes/Voxels.h"
 
@@ -150,6 +153,60 @@ TEST_F(TilesTest, CollapsedLeavesKeepTheClayAndTheRunGoesOnIdentically)
     EXPECT_EQ(g->tree().leafCount(), 1u);
     EXPECT_EQ(tileCount(g->tree()), 1u); // one 128^3 tile
     EXPECT_EQ(totalMass(*g), int64_t(kTc) * 128 * 128 * 128 + kTc + 5);
+}
+
+TEST_F(TilesTest, AFramesCollapseOfTheRegionsItWroteLeavesTheTreeOfTheWholeWalk)
+{
+    // After every frame (the Sculptor collapses only what the frame wrote: edits, setMasses, densify,
+    // the steps' changed blocks), a collapse of the whole tree finds nothing more to do: the same
+    // tree, node for node. Scenes with steps (the paper's push), the global layer at Tc on tiles, add
+    // and remove tools, smoothing and the scene's surface tension.
+    std::vector<Scene> scenes;
+    scenes.push_back(parseScene(R"({"dimensions": 3, "threshold": 1000, "rule": "prorata", "seed": 1,
+        "push": "compress", "transport": "global",
+        "clay": [{"shape": "sphere", "center": [40, 40, 40], "radius": 40, "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [40, 86, 40], "radius": 6,
+                   "path": [{"translate": [0, -9, 0], "frames": 1}, {"translate": [2, 0, 0], "frames": 5}]}]})",
+                                "stroke.json", ""));
+    for (const char* name :
+         {"test/sphere-through-sheet.json", "studies/add-bead.json", "studies/remove-hole.json",
+          "studies/smooth-bumps.json", "studies/surface-tension.json"})
+        scenes.push_back(vdbclay_test::loadTestScene(name));
+    uint64_t tilesSeen = 0;
+    for (Scene& scene : scenes) {
+        if (scene.frames > 6) scene.frames = 6;
+        Sculptor sc(scene, 2);
+        sc.run(0, [&](const FrameReport& f) {
+            auto whole = sc.mass()->deepCopy();
+            const auto nodes = whole->tree().nodeCount();
+            const uint64_t tiles = tileCount(whole->tree());
+            EXPECT_EQ(automaton_internal::collapseUniformLeaves(whole->tree(), scene.rule.threshold), 0u)
+                << scene.source << ", frame " << f.frame;
+            EXPECT_EQ(whole->tree().nodeCount(), nodes) << scene.source << ", frame " << f.frame;
+            EXPECT_EQ(tileCount(whole->tree()), tiles) << scene.source << ", frame " << f.frame;
+            tilesSeen += tiles;
+        });
+    }
+    EXPECT_GT(tilesSeen, 0u); // clay held as tiles between frames: the check is not vacuous
+
+    // A leaf that steps alone make uniform, among 511 that stay mixed (one cell under Tc in each):
+    // Tc everywhere but one cell over and one under, in one block. The collapse after the steps finds
+    // it (the steps' changed blocks are recorded).
+    auto g = openvdb::Int32Grid::create(0);
+    g->tree().fill(CoordBBox(Coord(0, 0, 0), Coord(63, 63, 63)), kTc, true);
+    g->tree().voxelizeActiveTiles();
+    for (int x = 0; x < 64; x += 8)
+        for (int y = 0; y < 64; y += 8)
+            for (int z = 0; z < 64; z += 8)
+                if (x + y + z > 0) g->tree().setValueOn(Coord(x + 7, y + 7, z + 7), kTc - 1);
+    g->tree().setValueOn(Coord(2, 2, 2), kTc + 1);
+    g->tree().setValueOn(Coord(3, 2, 2), kTc - 1);
+    Automaton a(g, options(Rule::Prorata, 1));
+    EXPECT_EQ(a.collapseUniformLeaves(), 0u);
+    a.settle(100, 0);
+    ASSERT_EQ(a.residualOverload(), 0);
+    EXPECT_EQ(a.collapseUniformLeaves(), 1u);
+    EXPECT_EQ(g->tree().leafCount(), 511u);
 }
 
 TEST_F(TilesTest, EditsAndDensifyTurnOnlyTheRegionsTilesIntoLeaves)

@@ -200,7 +200,10 @@ public:
     void densify(const Box& region);
     /// Collapses every leaf whose voxels all hold one value of at most Tc (all holding clay, or all
     /// empty) into a tile, and nodes of equal tiles into larger tiles: the clay is unchanged, the
-    /// memory follows its surface. A Sculptor calls it after each frame. Returns the leaves removed.
+    /// memory follows its surface. A Sculptor calls it after each frame. It examines only the nodes
+    /// that meet what was written since the last call (edits, setMasses, densify, the steps' changed
+    /// blocks), so its cost follows the frame's clay, not the model; the tree it leaves is the one a
+    /// walk of every node leaves. Returns the leaves removed.
     uint64_t collapseUniformLeaves();
     /// Lets @a fn change obstacles inside @a region (inclusive), e.g. to make a tool's voxels
     /// obstacles while clay settles around it. Creates an empty obstacle grid if there was none.

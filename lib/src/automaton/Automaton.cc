@@ -145,10 +145,31 @@ struct Automaton::Impl {
     PassEngine engine;             // the pass on the automaton's threads
     PassSeconds passSeconds;       // this step's passes so far: StageSeconds::passBusy, passIdle
     ChangedClay* changedClay = nullptr; // records where the clay changes (setChangedClay), or null
+    /// Where a node may have become uniform since the last collapseUniformLeaves(), which examines
+    /// only these (collapseUniformLeavesIn): the regions of edits, setMasses, densify and
+    /// editObstacles, and the bounds of the blocks each step changed; or the whole tree
+    /// (collapseAll) after a resync or a voxelization, and once the steps' work lists read for their
+    /// bounds hold more items than the tree held leaves at the last collapse (the whole walk then
+    /// costs less than reading more of them: a step's bounds cost at most a walk of its list).
+    std::vector<Box> written;
+    bool collapseAll = true;
+    uint64_t boundedItems = 0, leavesAtCollapse = 0;
 
     std::vector<WorkItem> work; // the step's work list, reused between steps
 
     bool is3D() const { return opts.dimensions == 3; }
+    /// Adds @a region to `written`; many regions (a frame of many edits) become their bounds.
+    void noteWritten(const Box& region)
+    {
+        if (collapseAll || region.empty()) return;
+        written.push_back(region);
+        if (written.size() > 64) {
+            Box all = written.front();
+            for (const Box& b : written)
+                all = unite(all, b);
+            written.assign(1, all);
+        }
+    }
     /// The threads a pass may use: the Automaton's arena's, or (threads = 0) the caller's arena's.
     int passLanes() const
     {
@@ -303,6 +324,8 @@ struct Automaton::Impl {
         quietSteps = 0;
         clearLeafTable();
         candidates.reset(std::move(hot));
+        collapseAll = true;
+        written.clear();
     }
 
     /// Forgets the leaf table (a leaf may appear or vanish, or the obstacles change); the candidates
@@ -386,6 +409,7 @@ struct Automaton::Impl {
             // them): with cells this large the clay is held in leaves alone.
             tree().voxelizeActiveTiles();
             clearLeafTable();
+            collapseAll = true;
         }
         auto t0 = Clock::now();
         double buildSeconds = 0; // counted in the repartition, as the accessor fetches it replaces
@@ -433,6 +457,13 @@ struct Automaton::Impl {
 
         t0 = Clock::now();
         if (changedClay) recordChangedBlocks(phase);
+        if (tot.updated > 0 && !collapseAll) {
+            boundedItems += work.size();
+            if (boundedItems > leavesAtCollapse)
+                collapseAll = true;
+            else
+                noteWritten(changedBounds(phase));
+        }
         if (tot.sinkMissed) candidates.sinkMissed();
         candidates.record(work);
         rep.blocksVisited = tot.examined;
@@ -443,6 +474,24 @@ struct Automaton::Impl {
         rep.seconds.bookkeeping = secondsSince(t0);
         finishStep(rep, tot.updated);
         return rep;
+    }
+
+    /// The bounds of the blocks this step changed (empty if none): an anchor's blocks lie within one
+    /// voxel below it and seven above.
+    Box changedBounds(int phase) const
+    {
+        int32_t lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+        for (const WorkItem& w : work) {
+            if (!w.changed) continue;
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::min(lo[a], w.anchor[a]);
+                hi[a] = std::max(hi[a], w.anchor[a]);
+            }
+        }
+        if (lo[0] > hi[0]) return Box();
+        const int32_t dz = is3D() ? 1 : 0;
+        return Box{{{lo[0] - phase, lo[1] - phase, lo[2] - dz * phase}},
+                   {{hi[0] + 7, hi[1] + 7, hi[2] + dz * 7}}};
     }
 
     /// Records the blocks this step changed (each item's changed mask) into changedClay.
@@ -502,6 +551,7 @@ struct Automaton::Impl {
                 if (tree().probeLeaf(o) || (tilesOnly && tree().getValue(o) == 0)) continue;
                 tree().touchLeaf(o);
                 clearLeafTable(); // the pass below must see the new leaf
+                noteWritten(Box{{{o.x(), o.y(), o.z()}}, {{o.x() + 7, o.y() + 7, o.z() + 7}}});
                 ++created;
             }
         };
@@ -708,6 +758,7 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
     Impl& im = *mImpl;
     im.clearLeafTable(); // leaves or obstacles may change (even if fn or a check throws)
     // The region's clay in leaves, before and after (fn may have made tiles): the scans see it all.
+    im.noteWritten(region);
     densifyTiles(im.tree(), region);
     const Impl::Scan before = im.scanLeaves(&region, "edit");
     im.recordLeavesIn(region); // the leaves fn may empty and delete
@@ -723,13 +774,24 @@ void Automaton::edit(const Box& region, const std::function<void(MassGrid&)>& fn
 
 void Automaton::densify(const Box& region)
 {
-    if (densifyTiles(mImpl->tree(), region) > 0) mImpl->clearLeafTable();
+    if (densifyTiles(mImpl->tree(), region) > 0) {
+        mImpl->clearLeafTable();
+        mImpl->noteWritten(region);
+    }
 }
 
 uint64_t Automaton::collapseUniformLeaves()
 {
-    const uint64_t removed = automaton_internal::collapseUniformLeaves(mImpl->tree(), mImpl->rule.threshold);
-    mImpl->clearLeafTable();
+    Impl& im = *mImpl;
+    const uint64_t removed =
+        im.collapseAll
+            ? automaton_internal::collapseUniformLeaves(im.tree(), im.rule.threshold)
+            : automaton_internal::collapseUniformLeavesIn(im.tree(), im.rule.threshold, im.written);
+    im.collapseAll = false;
+    im.written.clear();
+    im.boundedItems = 0;
+    im.leavesAtCollapse = im.tree().leafCount();
+    im.clearLeafTable();
     return removed;
 }
 
@@ -750,6 +812,7 @@ void Automaton::setMasses(const Box& region, const std::vector<CellMass>& cells)
     }
     if (cells.empty()) return;
     im.clearLeafTable(); // leaves may appear or vanish
+    im.noteWritten(region);
     const int64_t tc = im.rule.threshold;
     const ObsTree* ot = im.obsTree();
     std::unique_ptr<openvdb::tree::ValueAccessor<const ObsTree, false>> oacc;
@@ -787,6 +850,7 @@ void Automaton::editObstacles(const Box& region, const std::function<void(Obstac
         im.obsGrid->setName("obstacles");
     }
     // The overload counts only cells that are not obstacles: re-derive it over the region.
+    im.noteWritten(region); // its scans set the leaves' states
     const Impl::Scan before = im.scanLeaves(&region, "editObstacles");
     fn(*im.obsGrid);
     const Impl::Scan after = im.scanLeaves(&region, "editObstacles");

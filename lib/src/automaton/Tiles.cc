@@ -155,5 +155,61 @@ uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc)
     return removed;
 }
 
+uint64_t collapseUniformLeavesIn(MassTree& tree, int64_t tc, const std::vector<Box>& regions)
+{
+    using Root = MassTree::RootNodeType;
+    using Upper = Root::ChildNodeType;
+    using Lower = Upper::ChildNodeType;
+    using Leaf = MassTree::LeafNodeType;
+    // The leaf slots the regions hold, counted with their overlaps: more than the tree's leaves,
+    // and the whole walk costs less.
+    uint64_t slots = 0;
+    for (const Box& r : regions) {
+        if (r.empty()) continue;
+        uint64_t n = 1;
+        for (int a = 0; a < 3 && n <= tree.leafCount(); ++a)
+            n *= uint64_t((int64_t(r.max[size_t(a)]) >> 3) - (int64_t(r.min[size_t(a)]) >> 3) + 1);
+        slots += n;
+        if (slots > tree.leafCount()) return collapseUniformLeaves(tree, tc);
+    }
+    auto fits = [tc](int32_t v, bool on) { return int64_t(v) <= tc && on == (v != 0) && v >= 0; };
+    // The origins of the nodes of one level (DIM voxels wide) meeting the regions, each once, in the
+    // order of their coordinates.
+    auto origins = [&](int64_t dim) {
+        std::vector<Coord> out;
+        for (const Box& r : regions) {
+            if (r.empty()) continue;
+            const int64_t mask = ~(dim - 1);
+            for (int64_t x = int64_t(r.min[0]) & mask; x <= r.max[0]; x += dim)
+                for (int64_t y = int64_t(r.min[1]) & mask; y <= r.max[1]; y += dim)
+                    for (int64_t z = int64_t(r.min[2]) & mask; z <= r.max[2]; z += dim)
+                        out.emplace_back(int32_t(x), int32_t(y), int32_t(z));
+        }
+        std::sort(out.begin(), out.end());
+        out.erase(std::unique(out.begin(), out.end()), out.end());
+        return out;
+    };
+    // Each node of one level that meets the regions and holds one value and state that fits becomes a
+    // tile of its parent (its origins taken before any tile is added, as the whole walk does).
+    auto collapse = [&](auto* /*level's node type*/ tag, openvdb::Index level) {
+        using NodeT = std::remove_pointer_t<decltype(tag)>;
+        std::vector<std::pair<Coord, int32_t>> todo; // origin, value
+        for (const Coord& o : origins(int64_t(NodeT::DIM))) {
+            const NodeT* n = tree.template probeConstNode<NodeT>(o);
+            int32_t v = 0;
+            bool on = false;
+            if (n && n->isConstant(v, on, 0) && fits(v, on)) todo.emplace_back(o, v);
+        }
+        for (const auto& c : todo)
+            tree.addTile(level, c.first, c.second, c.second != 0);
+        return uint64_t(todo.size());
+    };
+    const uint64_t removed = collapse(static_cast<Leaf*>(nullptr), 1);
+    collapse(static_cast<Lower*>(nullptr), 2);
+    collapse(static_cast<Upper*>(nullptr), 3);
+    tree.root().eraseBackgroundTiles();
+    return removed;
+}
+
 } // namespace automaton_internal
 } // namespace vdbclay

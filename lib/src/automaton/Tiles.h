@@ -13,7 +13,10 @@
 // densifyTiles turns the tiles that meet a box into leaves (an edit, a push: code that walks the
 // leaves of a box then sees every voxel of it); collapseUniformLeaves turns leaves whose voxels are
 // all equal back into tiles, and nodes of equal tiles into larger tiles (after a frame). Both are
-// serial and deterministic: the tree they leave depends only on its values.
+// serial and deterministic: the tree they leave depends only on its values. collapseUniformLeavesIn
+// does the same over the nodes that meet a list of regions alone: after a collapse no node is left
+// uniform, so only a node written since (inside the regions its writers record: the Automaton keeps
+// that list) can have become so, and the tree it leaves is the one the whole walk leaves.
 #pragma once
 
 #include "automaton/LeafTable.h"
@@ -22,6 +25,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace vdbclay {
 namespace automaton_internal {
@@ -50,6 +54,13 @@ uint64_t densifyTiles(MassTree& tree, const Box& region);
 /// its parent, as Tree::prune(0) does but never making a tile over @a tc. The clay is unchanged.
 /// Returns the leaves removed.
 uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc);
+
+/// collapseUniformLeaves() over the leaves and internal nodes that meet @a regions alone (each node
+/// examined once, lowest level first, as the whole walk does). The same tree as the whole walk when
+/// every node outside the regions is as the last collapse of the whole tree left it (directly, or
+/// through collapses of the regions written since). Regions holding more leaf slots than the tree
+/// holds leaves: the whole walk.
+uint64_t collapseUniformLeavesIn(MassTree& tree, int64_t tc, const std::vector<Box>& regions);
 
 } // namespace automaton_internal
 } // namespace vdbclay
