@@ -3,8 +3,6 @@
 #include "transport/Routing.h"
 #include "transport/Chunks.h"
 
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <climits>
 #include <cmath>
@@ -13,10 +11,6 @@ namespace vdbclay {
 namespace transport_internal {
 
 namespace {
-
-/// Up to this many cells are sorted by the serial radix sort, more by a parallel comparison sort when
-/// threaded (the same sequence either way).
-constexpr size_t kRadixMax = size_t(1) << 20;
 
 /// The lower neighbours are gathered for this many cells of the order at a time (bounded memory).
 constexpr size_t kBlock = size_t(1) << 16;
@@ -31,10 +25,7 @@ void route(Automaton& automaton, const Cells& cells, const std::vector<double>& 
     selectIndices(cells.size(), serial, arrays.counts, order,
                   [&](size_t i) { return cells.kind[i] == kUnknown; });
     const HigherPotential higher{p, cells.at};
-    if (serial || order.size() < kRadixMax)
-        sortByPotential(order, higher, sort);
-    else
-        tbb::parallel_sort(order.begin(), order.end(), higher);
+    sortByPotential(order, higher, sort, serial);
     std::vector<int64_t>& cur = arrays.cur;
     cur.assign(cells.m0.begin(), cells.m0.end());
     // Each cell's lower neighbours and drops depend on p and the kinds only, not on what the
