@@ -10,7 +10,8 @@
 // Determinism. The order is a strict total order: the radix sort (threaded, in parallel by fixed
 // blocks: RadixSort.h) gives one sequence. Each cell's lower neighbours and drops depend on p
 // and the kinds only, so they are gathered in parallel, a block of the order at a time; the integer
-// split is serial, in that order.
+// split is serial, in that order. Both read the cells at random (the order is p's, not the cells'):
+// they prefetch what the cells a few places ahead read, so the misses overlap.
 #pragma once
 
 #include "transport/Domain.h"
