@@ -8,14 +8,20 @@
 #include <vdbclay/Shapes.h>
 #include <vdbclay/Transport.h>
 
+#include "transport/RadixSort.h"    // the routing's order, sorted on any thread count
 #include "transport/SolverTuning.h" // the solver's tuning, varied here
 
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <numeric>
+#include <random>
 #include <string>
 #include <unistd.h>
 
@@ -643,6 +649,35 @@ TEST_F(TransportTest, ALargeSolveRoutesInBlocksIdenticallyOnAnyThreadCount)
         const uint64_t h = contentHash(*g);
         if (threads == 1) first = h;
         EXPECT_EQ(h, first) << threads << " threads";
+    }
+}
+
+TEST_F(TransportTest, TheRoutingsOrderIsOneSequenceOnAnyThreadCount)
+{
+    // Over 2 x kSortBlock cells the threaded radix sort runs by blocks in parallel: the order is a
+    // comparison sort's on 1, 2, 3 and 8 threads, ties of p (a few values, -0 and +0 among them)
+    // by coordinate.
+    using namespace transport_internal;
+    const size_t n = 3 * kSortBlock + 1234;
+    std::vector<double> p(n);
+    std::vector<CellCoord> at(n);
+    std::mt19937 rng(7);
+    const double values[] = {-0.0, 0.0, 1.5, -2.25, 1e-300};
+    for (size_t i = 0; i < n; ++i) {
+        p[i] = i % 3 == 0 ? values[rng() % 5] : std::ldexp(double(rng()) - 2147483648.0, -20);
+        at[i] = CellCoord{int32_t(i % 97) - 40, int32_t(i / 97 % 89), int32_t(i / (97 * 89))};
+    }
+    const HigherPotential higher{p, at};
+    std::vector<int32_t> expected(n);
+    std::iota(expected.begin(), expected.end(), 0);
+    std::sort(expected.begin(), expected.end(), higher);
+    for (int threads : {1, 2, 3, 8}) {
+        std::vector<int32_t> order(n);
+        std::iota(order.begin(), order.end(), 0);
+        RadixScratch scratch;
+        tbb::task_arena arena(threads);
+        arena.execute([&] { sortByPotential(order, higher, scratch, threads == 1); });
+        EXPECT_EQ(order, expected) << threads << " threads";
     }
 }
 

@@ -64,10 +64,11 @@ constexpr uint64_t kChangedClayBytesPerSlot = 3 * 36 + 24;
 constexpr uint64_t kOutputScratchPerLeaf = 12 + 2 * 64 + 8 + 32 + 8 + 248 + 8 + 12 + 48 + 2 * 64 + 16;
 /// Scene::transport global: per cell of the layer's domain (transport/Domain.h: the workspace's arrays): its
 /// coordinates (twice, 24 bytes), mass, distance and current mass (24), kinds and flags (10), six
-/// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, diagonal,
-/// right-hand side and inverse (40), six work vectors (48), the routing's lists and sort (~60) and
-/// MIC(0)'s rows (24): ~336 bytes at their size, held at the capacity the largest frame grew them to;
-/// the multigrid preconditioner of large solves (~88 bytes over every level); and its index (4 bytes).
+/// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, right-hand side
+/// and inverse (32) and the diagonal (a face count, 1), six work vectors (48), the routing's lists and
+/// sort (~60) and MIC(0)'s rows (24): ~329 bytes at their size, held at the capacity the largest frame
+/// grew them to; the multigrid preconditioner of large solves (~89 bytes over every level); and its
+/// index (4 bytes).
 /// Measured beside the dense index: ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown
 /// (the 512-wide compress stroke's first frame).
 constexpr uint64_t kTransportBytesPerCell = 512;

@@ -33,22 +33,22 @@ void Laplacian::assemble(const Cells& cells, int32_t threshold, bool serial)
     // Every entry written: a neighbour's row is row's (-1 for a Dirichlet or frozen cell, and the
     // cells' nb holds -1 past their faces); the diagonal counts the faces to non-frozen cells.
     nb.resize(n * 6);
-    diag.resize(n);
+    faces.resize(n);
     b.resize(n);
     forChunks(n, serial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k) {
             const size_t i = size_t(rowCell[k]);
-            int faces = 0;
+            uint8_t count = 0;
             for (int d = 0; d < 6; ++d) {
                 const int32_t j = cells.nb[i * 6 + size_t(d)];
                 int32_t r = -1;
                 if (j >= 0) {
-                    faces += cells.kind[size_t(j)] != kFrozen ? 1 : 0;
+                    count += cells.kind[size_t(j)] != kFrozen ? 1 : 0;
                     r = row[size_t(j)];
                 }
                 nb[k * 6 + size_t(d)] = r;
             }
-            diag[k] = double(faces);
+            faces[k] = count;
             b[k] = double(cells.m0[i] - threshold);
         }
     });
@@ -57,7 +57,7 @@ void Laplacian::assemble(const Cells& cells, int32_t threshold, bool serial)
 void Laplacian::release()
 {
     std::vector<int32_t>().swap(nb);
-    std::vector<double>().swap(diag);
+    std::vector<uint8_t>().swap(faces);
     std::vector<double>().swap(b);
 }
 

@@ -5,7 +5,7 @@
 namespace vdbclay {
 namespace transport_internal {
 
-void Mic0::factor(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag)
+void Mic0::factor(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces)
 {
     mN = n;
     mRows.resize(n * 6);
@@ -20,13 +20,14 @@ void Mic0::factor(size_t n, const std::vector<int32_t>& nb, const std::vector<do
         upper[k] = uint8_t((nb[k * 6 + 1] >= 0) + (nb[k * 6 + 3] >= 0) + (nb[k * 6 + 5] >= 0));
     constexpr double tau = 0.97, safety = 0.25;
     for (size_t k = 0; k < n; ++k) {
-        double e = diag[k];
+        const double diag = double(faces[k]);
+        double e = diag;
         for (int d = 0; d < 6; d += 2) {
             const int32_t j = nb[k * 6 + size_t(d)];
             if (j < 0) continue;
             e -= (1.0 + tau * double(upper[size_t(j)] - 1)) / piv[size_t(j)];
         }
-        if (e < safety * diag[k]) e = diag[k];
+        if (e < safety * diag) e = diag;
         piv[k] = e;
         mInv[k] = 1.0 / e;
     }

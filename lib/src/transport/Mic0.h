@@ -21,8 +21,8 @@ namespace transport_internal {
 class Mic0 final : public Preconditioner {
 public:
     /// Factors the matrix of @a n rows given by @a nb (6 per row, the neighbour row or -1; off-diagonals
-    /// -1) and @a diag, its rows in coordinate order.
-    void factor(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag);
+    /// -1) and @a faces (the diagonal), its rows in coordinate order.
+    void factor(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces);
     /// @a out = (D + L)^-T D (D + L)^-1 @a in. @a out gets n + 1 entries, the last -0 (the backward
     /// solve's sentinel).
     void apply(const std::vector<double>& in, std::vector<double>& out) override;

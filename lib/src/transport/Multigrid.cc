@@ -2,6 +2,7 @@
 
 #include "transport/Multigrid.h"
 #include "transport/Chunks.h"
+#include "transport/Laplacian.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,14 +12,14 @@
 namespace vdbclay {
 namespace transport_internal {
 
-void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
                       const std::vector<CellCoord>& coord, bool serial)
 {
     mSerial = serial;
     mUsed = 1;
     if (mLevels.empty()) mLevels.emplace_back();
     Level& f = mLevels.front();
-    setMatrix(f, n, nb, diag, true);
+    setMatrix(f, n, nb, faces, true);
     f.block.assign(coord.begin(), coord.end());
     while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
     }
@@ -30,7 +31,7 @@ void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vecto
         colour(mLevels[li], mLevels[li].block);
 }
 
-void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
                        const std::vector<CellCoord>& coord, const std::vector<int32_t>& oldRow, bool serial)
 {
     mSerial = serial;
@@ -42,7 +43,7 @@ void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vect
         for (size_t k = lo; k < hi; ++k)
             agg[k] = oldRow[k] >= 0 ? f.agg[size_t(oldRow[k])] : -1;
     });
-    setMatrix(f, n, nb, diag, false);
+    setMatrix(f, n, nb, faces, false);
     colour(f, coord);
     f.agg.swap(agg);
     c.memberStart.assign(c.n + 1, 0);
@@ -67,19 +68,21 @@ void Multigrid::apply(const std::vector<double>& in, std::vector<double>& out)
     f.x[f.n] = -0.0; // the sentinel of the finest level's missing faces
 }
 
-void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
-                          bool csr)
+void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb,
+                          const std::vector<uint8_t>& faces, bool csr)
 {
     f.n = n;
     f.nb6.resize(n * 6);
     f.diag.resize(n);
+    f.faces.resize(n);
     forChunks(n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k) {
             for (int d = 0; d < 6; ++d) {
                 const int32_t j = nb[k * 6 + size_t(d)];
                 f.nb6[k * 6 + size_t(d)] = j >= 0 ? j : int32_t(n);
             }
-            f.diag[k] = diag[k];
+            f.faces[k] = faces[k];
+            f.diag[k] = double(faces[k]);
         }
     });
     if (!csr) {
@@ -298,7 +301,7 @@ inline double Multigrid::residual0(const Level& l, size_t k, double own)
 {
     const int32_t* nb = &l.nb6[k * 6];
     const double* x = l.x.data();
-    double s = l.rhs[k] - l.diag[k] * own;
+    double s = l.rhs[k] - double(l.faces[k]) * own;
     s += x[nb[0]];
     s += x[nb[1]];
     s += x[nb[2]];
@@ -329,7 +332,8 @@ void Multigrid::halfSweep(Level& l, int c, bool fromZero)
             // residual after the half-sweep) for the restriction.
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
-                l.x[k] = 0.0 + l.invDiag[k] * (finest ? residual0(l, k, 0.0) : residual(l, k, 0.0));
+                l.x[k] = 0.0 + (finest ? kInverseFaces[l.faces[k]] * residual0(l, k, 0.0)
+                                       : l.invDiag[k] * residual(l, k, 0.0));
                 l.t[k] = 0.0;
             }
             return;
@@ -337,7 +341,7 @@ void Multigrid::halfSweep(Level& l, int c, bool fromZero)
         if (finest) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
-                l.x[k] += l.invDiag[k] * residual0(l, k, l.x[k]);
+                l.x[k] += kInverseFaces[l.faces[k]] * residual0(l, k, l.x[k]);
             }
             return;
         }
@@ -383,14 +387,14 @@ void Multigrid::cycle(size_t li)
     // row's x and t is written here before it is read: no zero fill.)
     {
         const std::vector<int32_t>& red = l.colour[0];
+        const bool finest = li == 0;
         forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(red[q]);
-                l.x[k] = l.invDiag[k] * l.rhs[k];
+                l.x[k] = (finest ? kInverseFaces[l.faces[k]] : l.invDiag[k]) * l.rhs[k];
             }
         });
         halfSweep(l, 1, true);
-        const bool finest = li == 0;
         forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(red[q]);

@@ -15,8 +15,10 @@
 // count. The coarsening and the dense factor are serial.
 //
 // Data. It works on row arrays alone (6 neighbour rows per row, the diagonal, each row's cell), no
-// grids: the caller (PoissonSolver) numbers the cells. The levels' arrays are kept from one
-// build to the next (no fresh pages each frame); nothing of an earlier build is read.
+// grids: the caller (PoissonSolver) numbers the cells. The finest level's smoothing reads its diagonal
+// as face counts (Laplacian.h), a byte a row: the values of its double diagonal and inverse. The levels'
+// arrays are kept from one build to the next (no fresh pages each frame); nothing of an earlier build is
+// read.
 #pragma once
 
 #include "transport/CellCoord.h"
@@ -39,10 +41,10 @@ public:
     static constexpr int kCoarseSweeps = 8;
     static constexpr double kOmega = 0.8, kAlpha = 1.5;
 
-    /// Builds the hierarchy of a matrix. @a nb: 6 per row, the neighbour row or -1; @a diag: the
-    /// diagonal; @a coord: the rows' cells. The levels' arrays of an earlier build are reused (their
-    /// capacity kept: no fresh pages each frame); nothing of the earlier build is read.
-    void build(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+    /// Builds the hierarchy of a matrix. @a nb: 6 per row, the neighbour row or -1; @a faces: the
+    /// diagonal (Laplacian::faces); @a coord: the rows' cells. The levels' arrays of an earlier build are
+    /// reused (their capacity kept: no fresh pages each frame); nothing of the earlier build is read.
+    void build(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
                const std::vector<CellCoord>& coord, bool serial);
 
     /// Re-targets the hierarchy to a new finest matrix (the next active-set round: rows join and
@@ -52,7 +54,7 @@ public:
     /// an off-diagonal, a leaving one removes a row, no diagonal changes); the V-cycle stays a
     /// fixed symmetric preconditioner, so conjugate gradients stay correct, and every operation is
     /// still in fixed chunks and row order. Needs levels() >= 2.
-    void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+    void rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
                 const std::vector<CellCoord>& coord, const std::vector<int32_t>& oldRow, bool serial);
 
     /// out = M^-1 in (one V-cycle).
@@ -79,12 +81,14 @@ private:
         /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
         /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
         std::vector<int32_t> nb6;
+        /// The finest level's diagonal as face counts (the smoothing's compact copy of diag, invDiag).
+        std::vector<uint8_t> faces;
         bool dense = false;
     };
 
     /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
-    /// @a diag: its fixed-width rows, and the CSR rows when @a csr (only coarsen() reads them).
-    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<double>& diag,
+    /// @a faces: its fixed-width rows, and the CSR rows when @a csr (only coarsen() reads them).
+    void setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
                    bool csr);
     void setCsr(Level& f, size_t n, const std::vector<int32_t>& nb);
     /// Splits the rows by the parity of their cell (or block) coordinates: rows of one colour are
@@ -100,8 +104,9 @@ private:
     /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels), with @a own
     /// as x_k.
     static double residual(const Level& l, size_t k, double own);
-    /// residual() on the finest level, through its fixed-width rows: the same additions in the same
-    /// order (a missing face adds x[n] = -0, which leaves every sum unchanged, a zero's sign too).
+    /// residual() on the finest level, through its fixed-width rows and face counts: the same
+    /// operations in the same order (a missing face adds x[n] = -0, which leaves every sum unchanged,
+    /// a zero's sign too).
     static double residual0(const Level& l, size_t k, double own);
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l);

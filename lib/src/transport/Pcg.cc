@@ -15,7 +15,7 @@ void PcgVectors::release()
         std::vector<double>().swap(*w);
 }
 
-uint64_t conjugateGradients(size_t n, const int32_t* rows, const std::vector<double>& diag,
+uint64_t conjugateGradients(size_t n, const int32_t* rows, const std::vector<uint8_t>& faces,
                             const std::vector<double>& b, Preconditioner& m, double tolerance, bool serial,
                             PcgVectors& v)
 {
@@ -30,7 +30,7 @@ uint64_t conjugateGradients(size_t n, const int32_t* rows, const std::vector<dou
     // too: the same values as a loop over the present faces).
     auto rowOfA = [&](const std::vector<double>& w, size_t k) {
         const int32_t* row = rows + k * 6;
-        double s = diag[k] * w[k];
+        double s = double(faces[k]) * w[k];
         s -= w[size_t(row[0])];
         s -= w[size_t(row[1])];
         s -= w[size_t(row[2])];

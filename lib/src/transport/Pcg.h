@@ -29,9 +29,9 @@ struct PcgVectors {
 
 /// Solves A x = b by conjugate gradients preconditioned by @a m, from the first n entries of @a v.x
 /// (the warm start; the solution on return), until the residual is at most @a tolerance times |b|
-/// (or 20,000 iterations, or a breakdown). A's row k: @a diag[k] x_k minus x over @a rows[6k, 6k + 6)
+/// (or 20,000 iterations, or a breakdown). A's row k: @a faces[k] x_k minus x over @a rows[6k, 6k + 6)
 /// (n: a missing face). Returns the iterations.
-uint64_t conjugateGradients(size_t n, const int32_t* rows, const std::vector<double>& diag,
+uint64_t conjugateGradients(size_t n, const int32_t* rows, const std::vector<uint8_t>& faces,
                             const std::vector<double>& b, Preconditioner& m, double tolerance, bool serial,
                             PcgVectors& v);
 

@@ -40,7 +40,7 @@ void PoissonSolver::setUp(GlobalTransportReport& rep)
     mMg = nullptr;
     if (n == 0) return;
     if (!multigrid) {
-        mB.mic.factor(n, lap.nb, lap.diag);
+        mB.mic.factor(n, lap.nb, lap.faces);
         return;
     }
     // The hierarchy of the call's first multigrid round serves the later rounds (rebind) while they
@@ -60,10 +60,10 @@ void PoissonSolver::setUp(GlobalTransportReport& rep)
         return oldRow[k] >= 0 ? 1.0 : 0.0;
     });
     if (reusable && kept >= double(n - n / 20) && kept > 0) {
-        mg.rebind(n, lap.nb, lap.diag, coord, oldRow, mSerial);
+        mg.rebind(n, lap.nb, lap.faces, coord, oldRow, mSerial);
         ++rep.multigridReused;
     } else {
-        mg.build(n, lap.nb, lap.diag, coord, mSerial);
+        mg.build(n, lap.nb, lap.faces, coord, mSerial);
         mMgBuilt = true;
     }
     mB.mgRow.swap(lap.row); // the next set-up writes the Laplacian's rows afresh
@@ -88,7 +88,7 @@ void PoissonSolver::solve(std::vector<double>& p, double tolerance, bool same, G
         for (size_t k = lo; k < hi; ++k)
             x[k] = p[size_t(lap.rowCell[k])];
     });
-    rep.iterations += conjugateGradients(n, rows, lap.diag, lap.b, m, tolerance, mSerial, mB.pcg);
+    rep.iterations += conjugateGradients(n, rows, lap.faces, lap.b, m, tolerance, mSerial, mB.pcg);
     forChunks(n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k)
             p[size_t(lap.rowCell[k])] = x[k];

@@ -1,6 +1,10 @@
 // The global transport's sorts of cell lists (RadixSort.h: the design).
 
 #include "transport/RadixSort.h"
+#include "transport/Chunks.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cstring>
@@ -13,12 +17,73 @@ namespace {
 /// The radix sorts' digits: six of 11 bits (the last one of 9).
 constexpr int kBits = 11, kDigits = 6;
 constexpr uint64_t kMask = (uint64_t(1) << kBits) - 1;
+constexpr size_t kBuckets = size_t(kMask) + 1;
+
+/// Runs @a fn(block, begin, end) over the fixed blocks of kSortBlock entries of [0, n), in parallel.
+template <typename Fn> void forBlocks(size_t n, const Fn& fn)
+{
+    const size_t blocks = (n + kSortBlock - 1) / kSortBlock;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks, 1), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t b = r.begin(); b != r.end(); ++b)
+            fn(b, b * kSortBlock, std::min(n, (b + 1) * kSortBlock));
+    });
+}
+
+/// radixSort() by blocks, in parallel: per digit, each block's counts (count[block * kBuckets +
+/// digit value]), then each value's place for each block, in (value, block) order, then the
+/// blocks scattered.
+void radixSortBlocks(std::vector<int32_t>& order, RadixScratch& s)
+{
+    const size_t n = order.size(), blocks = (n + kSortBlock - 1) / kSortBlock;
+    std::vector<uint64_t>& key = s.key;
+    std::vector<uint64_t>& keyTmp = s.keyTmp;
+    std::vector<int32_t>& tmp = s.tmp;
+    keyTmp.resize(n);
+    tmp.resize(n);
+    std::vector<size_t>& count = s.count;
+    count.resize(blocks * kBuckets);
+    for (int d = 0; d < kDigits; ++d) {
+        const int shift = kBits * d;
+        forBlocks(n, [&](size_t b, size_t lo, size_t hi) {
+            size_t* c = &count[b * kBuckets];
+            std::fill(c, c + kBuckets, size_t(0));
+            for (size_t u = lo; u < hi; ++u)
+                ++c[(key[u] >> shift) & kMask];
+        });
+        const size_t first = (key[0] >> shift) & kMask;
+        size_t same = 0;
+        for (size_t b = 0; b < blocks; ++b)
+            same += count[b * kBuckets + first];
+        if (same == n) continue; // one digit for all: the order stands
+        size_t sum = 0;
+        for (size_t v = 0; v < kBuckets; ++v)
+            for (size_t b = 0; b < blocks; ++b) {
+                const size_t k = count[b * kBuckets + v];
+                count[b * kBuckets + v] = sum;
+                sum += k;
+            }
+        forBlocks(n, [&](size_t b, size_t lo, size_t hi) {
+            size_t* c = &count[b * kBuckets];
+            for (size_t u = lo; u < hi; ++u) {
+                const size_t at = c[(key[u] >> shift) & kMask]++;
+                keyTmp[at] = key[u];
+                tmp[at] = order[u];
+            }
+        });
+        key.swap(keyTmp);
+        order.swap(tmp);
+    }
+}
 
 } // namespace
 
-void radixSort(std::vector<int32_t>& order, RadixScratch& s)
+void radixSort(std::vector<int32_t>& order, RadixScratch& s, bool serial)
 {
     const size_t n = order.size();
+    if (!serial && n >= 2 * kSortBlock) {
+        radixSortBlocks(order, s);
+        return;
+    }
     std::vector<uint64_t>& key = s.key;
     std::vector<uint64_t>& keyTmp = s.keyTmp;
     std::vector<int32_t>& tmp = s.tmp;
@@ -73,26 +138,28 @@ void sortByCoord(std::vector<int32_t>& order, size_t from, const std::vector<Cel
         key[u] = uint64_t(int64_t(c.x) - lo.x) << 42 | uint64_t(int64_t(c.y) - lo.y) << 21 |
                  uint64_t(int64_t(c.z) - lo.z);
     }
-    radixSort(part, s);
+    radixSort(part, s, true); // MIC(0)'s rows: under SolverTuning::multigridMin
     std::copy(part.begin(), part.end(), order.begin() + std::ptrdiff_t(from));
 }
 
-void sortByPotential(std::vector<int32_t>& order, const HigherPotential& higher, RadixScratch& s)
+void sortByPotential(std::vector<int32_t>& order, const HigherPotential& higher, RadixScratch& s, bool serial)
 {
     const size_t n = order.size();
     if (n < 2) return;
     std::vector<uint64_t>& key = s.key;
     key.resize(n);
-    for (size_t u = 0; u < n; ++u) {
-        // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
-        // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
-        const double v = higher.p[size_t(order[u])] + 0.0;
-        uint64_t b;
-        std::memcpy(&b, &v, sizeof b);
-        b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
-        key[u] = ~b;
-    }
-    radixSort(order, s);
+    forChunks(n, serial, [&](size_t lo, size_t hi) {
+        for (size_t u = lo; u < hi; ++u) {
+            // +0.0 makes -0 into +0 (they compare equal); the bits then order as the doubles once a
+            // negative's are all flipped and a positive's sign bit is set; complemented: decreasing p.
+            const double v = higher.p[size_t(order[u])] + 0.0;
+            uint64_t b;
+            std::memcpy(&b, &v, sizeof b);
+            b = (b >> 63) ? ~b : b | (uint64_t(1) << 63);
+            key[u] = ~b;
+        }
+    });
+    radixSort(order, s, serial);
     for (size_t u = 0; u < n;) {
         size_t e = u + 1;
         while (e < n && key[e] == key[u])

@@ -3,8 +3,6 @@
 #include "transport/Routing.h"
 #include "transport/Chunks.h"
 
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <climits>
 #include <cmath>
@@ -14,12 +12,18 @@ namespace transport_internal {
 
 namespace {
 
-/// Up to this many cells are sorted by the serial radix sort, more by a parallel comparison sort when
-/// threaded (the same sequence either way).
-constexpr size_t kRadixMax = size_t(1) << 20;
-
 /// The lower neighbours are gathered for this many cells of the order at a time (bounded memory).
 constexpr size_t kBlock = size_t(1) << 16;
+
+/// The order visits the cells at random: the gather and the split prefetch what a cell this many
+/// places ahead reads (the gather: its faces and p, then, half as far ahead, its neighbours' p and
+/// kinds; the split: its mass and its lower neighbours'), so the misses overlap. Reads only.
+constexpr size_t kAhead = 16;
+
+inline void prefetch(const void* at)
+{
+    __builtin_prefetch(at);
+}
 
 } // namespace
 
@@ -31,10 +35,7 @@ void route(Automaton& automaton, const Cells& cells, const std::vector<double>& 
     selectIndices(cells.size(), serial, arrays.counts, order,
                   [&](size_t i) { return cells.kind[i] == kUnknown; });
     const HigherPotential higher{p, cells.at};
-    if (serial || order.size() < kRadixMax)
-        sortByPotential(order, higher, sort);
-    else
-        tbb::parallel_sort(order.begin(), order.end(), higher);
+    sortByPotential(order, higher, sort, serial);
     std::vector<int64_t>& cur = arrays.cur;
     cur.assign(cells.m0.begin(), cells.m0.end());
     // Each cell's lower neighbours and drops depend on p and the kinds only, not on what the
@@ -53,6 +54,21 @@ void route(Automaton& automaton, const Cells& cells, const std::vector<double>& 
         const size_t t1 = std::min(order.size(), t0 + kBlock);
         forChunks(t1 - t0, serial, [&](size_t lo, size_t hi) {
             for (size_t u = lo; u < hi; ++u) {
+                if (u + kAhead < hi) {
+                    const size_t a = size_t(order[t0 + u + kAhead]);
+                    prefetch(&cells.nb[a * 6]);
+                    prefetch(&cells.nb[a * 6 + 5]);
+                    prefetch(&p[a]);
+                }
+                if (u + kAhead / 2 < hi) {
+                    const size_t a = size_t(order[t0 + u + kAhead / 2]);
+                    for (int d = 0; d < dirs; ++d) {
+                        const int32_t j = cells.nb[a * 6 + size_t(d)];
+                        if (j < 0) continue;
+                        prefetch(&cells.kind[size_t(j)]);
+                        prefetch(&p[size_t(j)]);
+                    }
+                }
                 const size_t i = size_t(order[t0 + u]);
                 const double pi = p[i];
                 double W = 0;
@@ -74,6 +90,12 @@ void route(Automaton& automaton, const Cells& cells, const std::vector<double>& 
             }
         });
         for (size_t u = 0; u < t1 - t0; ++u) {
+            if (u + kAhead < t1 - t0) {
+                const size_t a = u + kAhead;
+                prefetch(&cur[size_t(order[t0 + a])]);
+                for (uint8_t k = 0; k < outN[a]; ++k)
+                    prefetch(&cur[size_t(outJ[a * 6 + k])]);
+            }
             const size_t i = size_t(order[t0 + u]);
             const int64_t x = cur[i] - tc;
             if (x <= 0) continue;

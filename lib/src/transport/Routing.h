@@ -7,10 +7,11 @@
 // cells are written through Automaton::setMasses() (their bounding box is woken as by an edit of it;
 // only the cells are read).
 //
-// Determinism. The order is a strict total order: the radix sort (or, threaded and over 2^20 cells, a
-// parallel comparison sort) gives one sequence. Each cell's lower neighbours and drops depend on p
+// Determinism. The order is a strict total order: the radix sort (threaded, in parallel by fixed
+// blocks: RadixSort.h) gives one sequence. Each cell's lower neighbours and drops depend on p
 // and the kinds only, so they are gathered in parallel, a block of the order at a time; the integer
-// split is serial, in that order.
+// split is serial, in that order. Both read the cells at random (the order is p's, not the cells'):
+// they prefetch what the cells a few places ahead read, so the misses overlap.
 #pragma once
 
 #include "transport/Domain.h"

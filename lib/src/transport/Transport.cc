@@ -77,6 +77,7 @@ namespace transport_internal {
 
 /// The layer's arrays, kept from one call to the next by a GlobalTransportWorkspace.
 struct Workspace {
+    std::vector<CellCoord> seeds; ///< the over cells
     DomainArrays domain;
     PoissonArrays poisson;
     ActiveSetArrays activeSet;
@@ -106,7 +107,8 @@ GlobalTransportReport run(Automaton& automaton, const GlobalTransportOptions& op
     if (automaton.residualOverload() == 0) return rep;
     const bool serial = options.threads == 1;
     Domain domain(automaton, ws.domain, tuning.reachFromContact);
-    std::vector<CellCoord> seeds;
+    std::vector<CellCoord>& seeds = ws.seeds;
+    seeds.clear();
     rep.overloadBefore = domain.seeds(options.seedRegion, seeds);
     rep.overloadAfter = automaton.residualOverload();
     if (seeds.empty()) return rep;
