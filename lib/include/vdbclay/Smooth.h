@@ -2,38 +2,44 @@
 /// @brief Surface tension: clay moves along its surface from convex places to concave ones, with
 ///        integer masses conserved exactly (a "smooth" tool; docs/SCENES.md).
 ///
-/// The model. Each voxel's fill is its clay clamped to [0, Tc] (an obstacle voxel counts as half
-/// full: clay meets walls and tools at about a right angle). A voxel's shelter G is the sum of the
-/// fills of its 5^3 neighbourhood (5^2 in 2D) weighted by the tent (1 2 3 2 1) along each axis, its
-/// own fill left out: high in a hollow, low on a bump, a measure of the surface's curvature two
-/// voxels wide. A pass has two steps, each a descent of the weighted count of broken bonds.
+/// The model. The shelters read the clay's solid shape: a voxel holding at least Tc/2 is full (Tc),
+/// one holding less empty, an obstacle half full (clay meets walls and tools at about a right
+/// angle). A voxel's shelter G is the sum of these fills over its 5^3 neighbourhood (5^2 in 2D)
+/// weighted by the tent (1 2 3 2 1) along each axis, its own left out: high in a hollow, low on a
+/// bump, a measure of the surface's curvature two voxels wide. Clay under Tc/2 (a film on a face,
+/// coverage-weighted clay outside the solid shape) shelters nothing, so it neither gathers into
+/// lumps nor makes the face under it look concave. A pass has two steps, each a descent of the
+/// weighted count of broken bonds.
 ///
-/// The threshold step moves whole voxels of the surface (a volume-keeping threshold dynamics, as
-/// Merriman, Bence and Osher's scheme with the volume held): the surface's voxels holding at least
-/// Tc/2 (and at most Tc) that are more convex than a flat face (G below a flat face's inner
-/// voxel's), least sheltered first, each give their clay to the most sheltered voxel under Tc/2
-/// within 4 voxels along each axis that lies on the surface, is more concave than a flat face (G
-/// above a flat face's outer voxel's), is strictly more sheltered than the giver, is of the same
-/// connected part of the region (face neighbours; obstacles, solids and the region's edge part
-/// them) and has not received yet this step. The receiver takes min(giver's clay, Tc - its clay),
-/// so one of the two ends at or over Tc/2 and the other under it: the volume (voxels at or over
-/// Tc/2) is kept exactly, and bumps and terraces of full cells move into the creases beside them.
-/// The step does not depend on the strength.
+/// The threshold step moves whole voxels of the surface (a threshold dynamics after Merriman, Bence
+/// and Osher, the volume held): the surface's voxels holding at least Tc/2 (and at most Tc) that
+/// are more convex than a flat face (G below a flat face's inner voxel's), least sheltered first,
+/// then the surface's voxels under Tc/2 holding clay that are more convex than a flat face (G below
+/// a flat face's outer voxel's), least sheltered first, each give their clay to the most sheltered
+/// voxel under Tc/2 within 4 voxels along each axis that lies on the surface, is more concave than
+/// a flat face (G above a flat face's outer voxel's), is of the same connected part of the region
+/// (face neighbours; obstacles, solids and the region's edge part them), has not received yet this
+/// step, and is more sheltered than the giver once the giver's own fill is taken out of its
+/// shelter (a move that only rolls a bump or a step over its own foot is not made). The receiver
+/// takes min(giver's clay, Tc - its clay). A giver holding at least Tc/2 leaves one of the two at
+/// or over Tc/2 and the other under it, so the volume (voxels at or over Tc/2) is kept; a film's
+/// clay fills the creases near it. Bumps and terraces of full cells move into the creases beside
+/// them. The step does not depend on the strength.
 ///
 /// The exchange step then lets clay flow between face neighbours from the less sheltered to the
 /// more sheltered voxel: a voxel on a convex bump gives, a voxel in a concave crease receives, and
-/// a flat surface, whose full voxels have no room and whose empty voxels have no clay, does not
-/// move. A pair moves
+/// a flat surface does not move. A pair moves
 ///   t = floor(strength x (G(to) - G(from)) / (2 x the face weight)),
-/// (face weight 18 in 3D, 6 in 2D: strength 1 evens the two voxels' shelters), at most what the
-/// giver holds and the room (Tc - mass) the receiver has left, so no voxel is made overloaded; the
-/// receiver must lie on the clay's surface (a face neighbour under Tc/2, not an obstacle), so clay
-/// under Tc inside is not packed. It smooths coverage-weighted clay, which the threshold step sees
-/// only as voxels in or out.
+/// (face weight 18 in 3D, 6 in 2D), at most what the giver holds and the room (Tc - mass) the
+/// receiver has left, so no voxel is made overloaded; the receiver must lie on the clay's surface
+/// (a face neighbour under Tc/2, not an obstacle), so clay under Tc inside is not packed. The solid
+/// shape grows only where it is concave and shrinks only where it is convex: a receiver under Tc/2
+/// that is not more concave than a flat face stays under Tc/2, a giver at or over Tc/2 that is not
+/// more convex than a flat face stays at or over it.
 ///
 /// What it does not do: a step of full cells one voxel high on a flat face is as sheltered on its
-/// two sides and stays; a voxel's clay goes at most 4 voxels a pass; a brush that crosses a block's
-/// edge rounds it (docs/SCENES.md gives figures).
+/// two sides and stays; a voxel's clay goes at most 4 voxels a pass; a film under Tc/2 on a flat
+/// face stays where it is (docs/SCENES.md gives figures).
 ///
 /// The threshold step runs once a pass, on the shelters at the pass's start. The exchange visits
 /// the pairs along x, then y, then z (3D), each axis in two sub-passes (pairs whose lower voxel has

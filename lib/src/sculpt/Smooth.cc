@@ -1,6 +1,7 @@
 // Surface tension (Smooth.h): convex surface voxels hand their clay to concave ones nearby (the
 // threshold step), then pairs of face neighbours inside a region exchange clay, from the less
-// sheltered voxel to the more sheltered one (the exchange step). The region's masses are copied into a dense
+// sheltered voxel to the more sheltered one (the exchange step). Both read the shelters of the
+// clay's solid shape (its voxels at or over Tc/2). The region's masses are copied into a dense
 // block (the region grown by two voxels, read once through accessors), the passes run on it, and the voxels
 // that changed are written back through Automaton::setMasses over their bounds. The shelters and the
 // surface marks are computed over the block once; after each step (the threshold step, each exchange
@@ -15,6 +16,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <memory>
 #include <string>
 
@@ -70,16 +72,26 @@ struct Block {
     }
 };
 
-/// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills of its neighbourhood,
-/// its own left out; a fill is the clay clamped to [0, Tc], Tc for an obstacle. Separable: a pass
-/// along each axis, voxels beyond the outer box empty.
+/// A voxel's fill as the shelters read it: the clay's solid shape, Tc for a voxel holding at least
+/// Tc/2 and 0 for one holding less (a film of clay under Tc/2 on a face does not shelter its
+/// neighbours, so it neither gathers into lumps nor makes the face look concave), Tc/2 for an
+/// obstacle.
+inline int64_t fillOf(const Block& b, int64_t tc, size_t k)
+{
+    if (b.obstacle[k]) return tc / 2;
+    return 2 * b.mass[k] >= tc ? tc : 0;
+}
+
+/// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills (fillOf) of its
+/// neighbourhood, its own left out. Separable: a pass along each axis, voxels beyond the outer box
+/// empty.
 void shelters(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<int64_t>& tmp)
 {
     const size_t n = b.mass.size();
     g.resize(n);
     tmp.resize(n);
     for (size_t k = 0; k < n; ++k)
-        g[k] = b.obstacle[k] ? tc / 2 : std::min(b.mass[k], tc);
+        g[k] = fillOf(b, tc, k);
     const std::vector<int64_t> fill = g;
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
@@ -134,31 +146,43 @@ void label(Block& b)
     }
 }
 
+/// The shelters of the voxels on either side of a flat face of the clay (the tent's half-sums: 1+2+3
+/// inside, 1+2 outside, the other axes' 9 each, the voxel's own 3^dims left out). A voxel of the
+/// clay with a lower shelter than @a in is more convex than a flat face; a voxel outside the clay
+/// with a higher one than @a out is more concave, one with a lower one more convex.
+struct FlatFace {
+    int64_t in = 0, out = 0;
+};
+FlatFace flatFace(const Block& b, int64_t tc)
+{
+    const int64_t across = b.is2D ? 9 : 81, self = b.is2D ? 9 : 27;
+    return FlatFace{tc * (across * 6 - self), tc * across * 3};
+}
+
 /// How far (voxels, along each axis) a surface voxel's clay may go in one threshold step: far enough
 /// to reach from a bump's or terrace's convex edge to the crease at its foot. Measured (TestSmooth,
-/// 8 passes): reach 2 takes 70.6 % of the full-cell bumps' excess roughness and 54.3 % of the
-/// terraced top's, reach 4 71.7 % and 58.6 %; a match over the whole connected part (any reach)
-/// 71.8 % and 62.3 %, but it carries clay across the whole region in one step.
+/// 8 passes): reach 2 takes 70.9 % of the full-cell bumps' excess roughness and 54.9 % of the
+/// terraced top's, reach 4 71.8 % and 60.6 %; a match over the whole connected part (any reach)
+/// 71.8 % and 65.3 %, but it carries clay across the whole region in one step.
 constexpr int kSwapReach = 4;
 
-/// The volume-keeping threshold step (file comment): the least sheltered voxels of the clay's surface
-/// (holding at least Tc/2, at most Tc, more convex than a flat face) give their clay, in that order,
-/// each to the most sheltered voxel under Tc/2 on the surface within kSwapReach of it, more concave
-/// than a flat face, of its connected part, not yet chosen, and strictly more sheltered than the
-/// giver. Each pair keeps one voxel at or over Tc/2, so the volume is kept exactly.
+/// The threshold step (file comment): the voxels of the clay's surface holding at least Tc/2 (and at
+/// most Tc) that are more convex than a flat face give their clay, least sheltered first, then the
+/// voxels of its surface under Tc/2 holding clay that are more convex than a flat face, least
+/// sheltered first; each gives to the most sheltered voxel under Tc/2 on the surface within
+/// kSwapReach of it, more concave than a flat face, of its connected part, not yet chosen, and more
+/// sheltered without the giver's own fill than the giver. A pair whose giver holds at least Tc/2
+/// keeps one voxel at or over Tc/2, so it keeps the volume.
 int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::vector<int64_t>& changed)
 {
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
     const int axes = b.is2D ? 2 : 3;
     auto solid = [&](size_t k) { return b.obstacle[k] || 2 * b.mass[k] >= tc; };
-    // 1: a giver, 2: a taker, 0: neither (or already paired).
-    std::vector<char> role(b.mass.size(), 0);
-    // The shelters of the voxels on either side of a flat face (the tent's half-sums: 1+2+3 inside,
-    // 1+2 outside, the other axes' 9 each, the voxel's own 3^dims left out): only a voxel more convex
-    // than a flat face gives and only one more concave receives, so a flat face keeps its voxels.
-    const int64_t across = b.is2D ? 9 : 81, self = b.is2D ? 9 : 27;
-    const int64_t flatIn = tc * (across * 6 - self), flatOut = tc * across * 3;
+    std::vector<char> taker(b.mass.size(), 0);
+    // Only a voxel more convex than a flat face gives and only one more concave receives, so a flat
+    // face keeps its voxels, and a film on it stays where it is.
+    const FlatFace flat = flatFace(b, tc);
     std::vector<int64_t> givers;
     for (size_t k = 0; k < b.member.size(); ++k) {
         if (!b.member[k]) continue;
@@ -171,11 +195,16 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
                 if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
                 if (solid(size_t(int64_t(k) + d * stride[axis])) != in) edge = true;
             }
-        if (!edge || (in ? g[k] >= flatIn : g[k] <= flatOut)) continue;
-        role[k] = in ? 1 : 2;
-        if (in) givers.push_back(int64_t(k));
+        if (!edge) continue;
+        if (in ? g[k] < flat.in : g[k] < flat.out && b.mass[k] > 0)
+            givers.push_back(int64_t(k));
+        else if (!in && g[k] > flat.out)
+            taker[k] = 1;
     }
+    // Whole voxels first, then the film's clay into the creases they leave.
     std::sort(givers.begin(), givers.end(), [&](int64_t x, int64_t y) {
+        const bool inX = solid(size_t(x)), inY = solid(size_t(y));
+        if (inX != inY) return inX;
         return g[size_t(x)] != g[size_t(y)] ? g[size_t(x)] < g[size_t(y)] : x < y;
     });
     const int rz = b.is2D ? 0 : kSwapReach;
@@ -189,12 +218,17 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
                     const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
                     if (x < 0 || y < 0 || z < 0 || x >= b.nx || y >= b.ny || z >= b.nz) continue;
                     const int64_t q = p + dx * stride[0] + dy * stride[1] + dz * stride[2];
-                    if (role[size_t(q)] != 2 || b.part[size_t(q)] != b.part[size_t(p)]) continue;
-                    if (g[size_t(q)] <= g[size_t(p)]) continue;
+                    if (!taker[size_t(q)] || b.part[size_t(q)] != b.part[size_t(p)]) continue;
+                    // The giver's own fill leaves the taker's shelter with it: a move that only
+                    // rolls a bump or a step over its own foot gains nothing and is not made.
+                    int64_t own = 0;
+                    if (std::abs(dx) <= kReach && std::abs(dy) <= kReach && std::abs(dz) <= kReach)
+                        own = kTent[dx + kReach] * kTent[dy + kReach] * (b.is2D ? 1 : kTent[dz + kReach]);
+                    if (g[size_t(q)] - own * fillOf(b, tc, size_t(p)) <= g[size_t(p)]) continue;
                     if (best < 0 || g[size_t(q)] > g[size_t(best)]) best = q;
                 }
         if (best < 0) continue;
-        role[size_t(best)] = 0;
+        taker[size_t(best)] = 0;
         changed.push_back(p);
         changed.push_back(best);
         int64_t& from = b.mass[size_t(p)];
@@ -250,7 +284,7 @@ void refresh(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<in
     const int rz = b.is2D ? 0 : kReach;
     for (const int64_t k : changed) {
         const int64_t c[3] = {k / stride[0], (k / stride[1]) % b.ny, k % b.nz};
-        const int64_t f = std::min(b.mass[size_t(k)], tc);
+        const int64_t f = fillOf(b, tc, size_t(k));
         const int64_t df = f - fill[size_t(k)];
         fill[size_t(k)] = f;
         if (df != 0) {
@@ -285,6 +319,7 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
     std::vector<char> open;
     const Box& in = b.inner;
     const int axes = b.is2D ? 2 : 3;
+    const FlatFace flat = flatFace(b, tc);
     // Twice a face neighbour's weight: strength 1 evens the shelters of a pair in one exchange.
     const int64_t divisor =
         2 * (b.is2D ? kTent[kReach] * kTent[kReach + 1] : kTent[kReach] * kTent[kReach] * kTent[kReach + 1]);
@@ -295,7 +330,7 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
     surface(b, tc, open);
     std::vector<int64_t> fill(b.mass.size()), changed;
     for (size_t k = 0; k < fill.size(); ++k)
-        fill[k] = b.obstacle[k] ? tc / 2 : std::min(b.mass[k], tc);
+        fill[k] = fillOf(b, tc, k);
     for (int pass = 0; pass < passes; ++pass) {
         swapSurface(b, tc, g, changed);
         refresh(b, tc, g, fill, open, changed);
@@ -317,6 +352,13 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                                 int64_t(std::floor(strength * double(std::llabs(d)) / double(divisor)));
                             t = std::min(t, b.mass[from]);
                             t = std::min(t, std::max<int64_t>(0, tc - b.mass[to]));
+                            // The solid shape grows only where it is concave and shrinks only
+                            // where it is convex: a film under Tc/2 does not gather into voxels
+                            // over it on a flat face, nor does a flat face thin below it.
+                            if (2 * b.mass[to] < tc && g[to] <= flat.out)
+                                t = std::min(t, (tc - 1) / 2 - b.mass[to]);
+                            if (2 * b.mass[from] >= tc && g[from] >= flat.in)
+                                t = std::min(t, b.mass[from] - (tc + 1) / 2);
                             if (t <= 0) continue;
                             b.mass[from] -= t;
                             b.mass[to] += t;
