@@ -265,7 +265,7 @@ void readPly(const std::string& path, const std::string& data, Mesh& mesh)
         if (e == std::string::npos) e = data.size();
         out = data.substr(pos, e - pos);
         if (!out.empty() && out.back() == '\r') out.pop_back();
-        pos = e + 1;
+        pos = std::min(e + 1, data.size()); // the last line may have no newline
         ++line;
         return true;
     };
