@@ -124,43 +124,56 @@ uint64_t densifyTiles(MassTree& tree, const Box& region)
     return made;
 }
 
-uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc)
+namespace {
+
+/// Turns each of @a nodes (of one level) that holds one value and state a tile may hold (at most Tc,
+/// active exactly when nonzero) into a tile of its parent at @a level. The nodes are all read before
+/// any tile is added.
+template <typename NodeT>
+uint64_t collapseConstantNodes(MassTree& tree, int64_t tc, const std::vector<const NodeT*>& nodes,
+                               openvdb::Index level)
 {
-    using Root = MassTree::RootNodeType;
-    using Upper = Root::ChildNodeType;
+    std::vector<std::pair<Coord, int32_t>> todo; // origin, value
+    for (const NodeT* n : nodes) {
+        int32_t v = 0;
+        bool on = false;
+        if (n->isConstant(v, on, 0) && int64_t(v) <= tc && on == (v != 0) && v >= 0)
+            todo.emplace_back(n->origin(), v);
+    }
+    for (const auto& c : todo)
+        tree.addTile(level, c.first, c.second, c.second != 0);
+    return uint64_t(todo.size());
+}
+
+/// Collapses the leaves, then the lower, then the upper internal nodes that @a nodesOf lists for each
+/// level (a collapsed lower node can make its upper node constant), and erases the root's inactive
+/// background tiles, as Tree::prune does. Returns the leaves collapsed.
+template <typename NodesOf> uint64_t collapseLevels(MassTree& tree, int64_t tc, NodesOf&& nodesOf)
+{
+    using Upper = MassTree::RootNodeType::ChildNodeType;
     using Lower = Upper::ChildNodeType;
-    // A value and state a tile may hold: at most Tc, active exactly when nonzero.
-    auto fits = [tc](int32_t v, bool on) { return int64_t(v) <= tc && on == (v != 0) && v >= 0; };
-    // Each node (leaf, lower, upper) holding one value and state that fits becomes a tile of its
-    // parent, lowest level first (a collapsed lower node can make its upper node constant).
-    auto collapse = [&](auto* /*level's node type*/ tag, openvdb::Index level) {
-        using NodeT = std::remove_pointer_t<decltype(tag)>;
-        std::vector<NodeT*> nodes;
-        tree.getNodes(nodes);
-        std::vector<std::pair<Coord, int32_t>> todo; // origin, value
-        for (NodeT* n : nodes) {
-            int32_t v = 0;
-            bool on = false;
-            if (n->isConstant(v, on, 0) && fits(v, on)) todo.emplace_back(n->origin(), v);
-        }
-        for (const auto& c : todo)
-            tree.addTile(level, c.first, c.second, c.second != 0);
-        return uint64_t(todo.size());
-    };
-    const uint64_t removed = collapse(static_cast<MassTree::LeafNodeType*>(nullptr), 1);
-    collapse(static_cast<Lower*>(nullptr), 2);
-    collapse(static_cast<Upper*>(nullptr), 3);
-    // Root tiles of the background, inactive: gone, as Tree::prune leaves them.
+    using Leaf = MassTree::LeafNodeType;
+    const uint64_t removed = collapseConstantNodes(tree, tc, nodesOf(static_cast<const Leaf*>(nullptr)), 1);
+    collapseConstantNodes(tree, tc, nodesOf(static_cast<const Lower*>(nullptr)), 2);
+    collapseConstantNodes(tree, tc, nodesOf(static_cast<const Upper*>(nullptr)), 3);
     tree.root().eraseBackgroundTiles();
     return removed;
 }
 
+} // namespace
+
+uint64_t collapseUniformLeaves(MassTree& tree, int64_t tc)
+{
+    return collapseLevels(tree, tc, [&](auto* tag) {
+        using NodeT = std::remove_pointer_t<decltype(tag)>;
+        std::vector<const NodeT*> nodes;
+        static_cast<const MassTree&>(tree).getNodes(nodes);
+        return nodes;
+    });
+}
+
 uint64_t collapseUniformLeavesIn(MassTree& tree, int64_t tc, const std::vector<Box>& regions)
 {
-    using Root = MassTree::RootNodeType;
-    using Upper = Root::ChildNodeType;
-    using Lower = Upper::ChildNodeType;
-    using Leaf = MassTree::LeafNodeType;
     // The leaf slots the regions hold, counted with their overlaps: more than the tree's leaves,
     // and the whole walk costs less.
     uint64_t slots = 0;
@@ -172,43 +185,26 @@ uint64_t collapseUniformLeavesIn(MassTree& tree, int64_t tc, const std::vector<B
         slots += n;
         if (slots > tree.leafCount()) return collapseUniformLeaves(tree, tc);
     }
-    auto fits = [tc](int32_t v, bool on) { return int64_t(v) <= tc && on == (v != 0) && v >= 0; };
-    // The origins of the nodes of one level (DIM voxels wide) meeting the regions, each once, in the
-    // order of their coordinates.
-    auto origins = [&](int64_t dim) {
-        std::vector<Coord> out;
+    // The nodes of one level meeting the regions, each once, in the order of their origins.
+    return collapseLevels(tree, tc, [&](auto* tag) {
+        using NodeT = std::remove_const_t<std::remove_pointer_t<decltype(tag)>>;
+        const int64_t dim = int64_t(NodeT::DIM), mask = ~(dim - 1);
+        std::vector<Coord> origins;
         for (const Box& r : regions) {
             if (r.empty()) continue;
-            const int64_t mask = ~(dim - 1);
             for (int64_t x = int64_t(r.min[0]) & mask; x <= r.max[0]; x += dim)
                 for (int64_t y = int64_t(r.min[1]) & mask; y <= r.max[1]; y += dim)
                     for (int64_t z = int64_t(r.min[2]) & mask; z <= r.max[2]; z += dim)
-                        out.emplace_back(int32_t(x), int32_t(y), int32_t(z));
+                        origins.emplace_back(int32_t(x), int32_t(y), int32_t(z));
         }
-        std::sort(out.begin(), out.end());
-        out.erase(std::unique(out.begin(), out.end()), out.end());
-        return out;
-    };
-    // Each node of one level that meets the regions and holds one value and state that fits becomes a
-    // tile of its parent (its origins taken before any tile is added, as the whole walk does).
-    auto collapse = [&](auto* /*level's node type*/ tag, openvdb::Index level) {
-        using NodeT = std::remove_pointer_t<decltype(tag)>;
-        std::vector<std::pair<Coord, int32_t>> todo; // origin, value
-        for (const Coord& o : origins(int64_t(NodeT::DIM))) {
-            const NodeT* n = tree.template probeConstNode<NodeT>(o);
-            int32_t v = 0;
-            bool on = false;
-            if (n && n->isConstant(v, on, 0) && fits(v, on)) todo.emplace_back(o, v);
-        }
-        for (const auto& c : todo)
-            tree.addTile(level, c.first, c.second, c.second != 0);
-        return uint64_t(todo.size());
-    };
-    const uint64_t removed = collapse(static_cast<Leaf*>(nullptr), 1);
-    collapse(static_cast<Lower*>(nullptr), 2);
-    collapse(static_cast<Upper*>(nullptr), 3);
-    tree.root().eraseBackgroundTiles();
-    return removed;
+        std::sort(origins.begin(), origins.end());
+        origins.erase(std::unique(origins.begin(), origins.end()), origins.end());
+        std::vector<const NodeT*> nodes;
+        for (const Coord& o : origins)
+            if (const NodeT* n = static_cast<const MassTree&>(tree).template probeConstNode<NodeT>(o))
+                nodes.push_back(n);
+        return nodes;
+    });
 }
 
 } // namespace automaton_internal
