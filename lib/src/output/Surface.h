@@ -52,6 +52,11 @@ struct GrownLeaves {
 };
 /// Whether growByBox can grow @a density: no tiles, and 0 < radius < 8.
 bool boxGrowable(const openvdb::FloatGrid& density, int radius);
+/// @a seeds' leaves (distinct origins) with their active voxels grown by a box of @a radius voxels
+/// (0 < radius < 8), bit for bit what openvdb::tools::dilateActiveValues(NN_FACE_EDGE_VERTEX,
+/// IGNORE_TILES) makes of a tree of those leaves: the seeds' leaves (sources kept) and the new
+/// leaves holding a grown voxel (null sources).
+GrownLeaves growByBox(GrownLeaves seeds, int radius);
 /// The leaves surfaceFog(density, radius) has, without building them (requires boxGrowable).
 GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius);
 

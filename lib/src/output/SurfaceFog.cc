@@ -12,7 +12,9 @@
 // nothing. The leaves the box reaches are the density's and their 26 neighbours; each pass is
 // parallel over them and writes only its own masks; the tree is assembled serially afterwards. The
 // mask shifts (maskGrownAlong) and the leaves' face-neighbour table (leafFaceNeighbours) also serve
-// the band's reach in SurfaceSweep.cc (a face step is one voxel along each axis, united).
+// the band's reach in SurfaceSweep.cc (a face step is one voxel along each axis, united), and the
+// box grows the sweep's leaves of a density with tiles too (SurfaceTiles.cc: its leaves and the tile
+// slots near its isosurface).
 #include "output/Surface.h"
 
 #include "core/CoordHash.h"
@@ -113,23 +115,21 @@ bool boxGrowable(const openvdb::FloatGrid& density, int radius)
     return radius > 0 && radius < kDim && !holdsTiles(density.tree());
 }
 
-GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
+GrownLeaves growByBox(GrownLeaves g, int radius)
 {
-    GrownLeaves g;
-    // The density's leaves, then every leaf next to one (the box reaches no further).
-    for (auto it = density.tree().cbeginLeaf(); it; ++it)
-        g.source.push_back(&*it);
-    std::vector<Coord>& keys = g.origins;                 // leaf keys (origin / 8) until the end
+    // The seeds' leaves, then every leaf next to one holding an active voxel (the box reaches no
+    // further).
+    std::vector<Coord> keys;                              // leaf keys (origin / 8)
     std::unordered_map<Coord, uint32_t, CoordHash> index; // which keys are in, as they are added
-    index.reserve(g.source.size() * 2);
+    index.reserve(g.origins.size() * 2);
     auto add = [&](const Coord& key) {
         if (index.emplace(key, uint32_t(keys.size())).second) keys.push_back(key);
     };
-    for (const LeafT* leaf : g.source)
-        add(leaf->origin() >> 3);
+    for (const Coord& o : g.origins)
+        add(o >> 3);
     const size_t n0 = keys.size();
     for (size_t i = 0; i < n0; ++i) {
-        if (g.source[i]->isEmpty()) continue; // no active voxel: grows nothing
+        if (g.masks[i].isOff()) continue; // no active voxel: grows nothing
         const Coord k = keys[i];
         for (int dx = -1; dx <= 1; ++dx)
             for (int dy = -1; dy <= 1; ++dy)
@@ -144,8 +144,6 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     std::vector<MaskT>& masks = g.masks;
     masks.resize(n);
     std::vector<MaskT> next(n);
-    for (size_t i = 0; i < n0; ++i)
-        masks[i] = g.source[i]->getValueMask();
     for (int axis = 0; axis < 3; ++axis) {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i != r.end(); ++i)
@@ -155,8 +153,9 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
         masks.swap(next);
     }
 
-    // Kept: the density's leaves and the new ones holding a grown voxel.
+    // Kept: the seeds' leaves and the new ones holding a grown voxel.
     size_t kept = 0;
+    g.origins.resize(n);
     for (size_t i = 0; i < n; ++i) {
         if (i >= n0 && masks[i].isOff()) continue;
         g.origins[kept] =
@@ -169,6 +168,17 @@ GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
     g.masks.resize(kept);
     g.source.resize(kept);
     return g;
+}
+
+GrownLeaves growByBox(const openvdb::FloatGrid& density, int radius)
+{
+    GrownLeaves seeds;
+    for (auto it = density.tree().cbeginLeaf(); it; ++it) {
+        seeds.origins.push_back(it->origin());
+        seeds.masks.push_back(it->getValueMask());
+        seeds.source.push_back(&*it);
+    }
+    return growByBox(std::move(seeds), radius);
 }
 
 openvdb::FloatGrid::Ptr surfaceFog(const openvdb::FloatGrid& density, int radius)

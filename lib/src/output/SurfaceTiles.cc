@@ -103,20 +103,28 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromTiledDensity(const openvdb::FloatGrid& 
 {
     // The sweep's voxels: the density's active voxels and every voxel of the tile slots near the
     // isosurface (as in the voxelized density, whose tiles' voxels are all active), grown by the box
-    // as surfaceFog grows the density (26-neighbour dilation, radius times).
-    openvdb::MaskTree topology(false);
-    for (auto it = density.tree().cbeginLeaf(); it; ++it)
-        topology.touchLeaf(it->origin())->setValueMask(it->getValueMask());
-    for (const Coord& key : tileSlotsNearIsosurface(density, isoValue))
-        topology.touchLeaf(Coord(key.x() * kDim, key.y() * kDim, key.z() * kDim))->setValuesOn();
-    openvdb::tools::dilateActiveValues(topology, radius, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::IGNORE_TILES);
-    GrownLeaves g;
-    for (auto it = topology.cbeginLeaf(); it; ++it) {
-        if (it->isEmpty()) continue;
-        g.origins.push_back(it->origin());
-        g.masks.push_back(it->getValueMask());
+    // surfaceFog grows the density by (growByBox), kept in the leaves holding one.
+    GrownLeaves seeds;
+    for (auto it = density.tree().cbeginLeaf(); it; ++it) {
+        seeds.origins.push_back(it->origin());
+        seeds.masks.push_back(it->getValueMask());
     }
+    for (const Coord& key : tileSlotsNearIsosurface(density, isoValue)) {
+        seeds.origins.emplace_back(key.x() * kDim, key.y() * kDim, key.z() * kDim);
+        seeds.masks.emplace_back(true);
+    }
+    seeds.source.resize(seeds.origins.size(), nullptr);
+    GrownLeaves g = growByBox(std::move(seeds), radius);
+    size_t kept = 0; // the leaves holding a voxel of the sweep
+    for (size_t i = 0; i < g.origins.size(); ++i) {
+        if (g.masks[i].isOff()) continue;
+        g.origins[kept] = g.origins[i];
+        g.masks[kept] = g.masks[i];
+        ++kept;
+    }
+    g.origins.resize(kept);
+    g.masks.resize(kept);
+    g.source.resize(kept);
     std::shared_ptr<FloatTree> tree = sweepTreeOf(g, density.tree().background());
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
     if (swept) *swept = count;
