@@ -48,7 +48,9 @@
 // and the voxels deeper inside or further out (most of a large lump) are not swept. Those keep
 // +-FLT_MAX, which the finalisation turns into the extreme finite values: of band or more whenever
 // some swept value is (checked; otherwise, clay thinner than the band, the whole fog is swept), as
-// in the full sweep; clipped to the band, they are what the full sweep gives. The clipping itself
+// in the full sweep; clipped to the band, they are what the full sweep gives. Nor is a voxel updated
+// while none of its face neighbours holds less than band: the update would exceed them all, so it
+// keeps a value of band or more, the band once clipped, as it would be updated. The clipping itself
 // (clipToNarrowBand's) is done in the finalisation's pass over the values. tests/TestSurface.cc
 // checks the band against OpenVDB's fogToSdf, clipped alike, bit for bit.
 //
@@ -144,16 +146,20 @@ struct SweepLeaf {
     LeafT::NodeMaskType recent() const { return changed[0] | changed[1]; }
 };
 
-/// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only).
+/// OpenVDB's bound on a neighbour's |value| for the Godunov update to read it (kValid and over: none).
+constexpr float kValid = 1000.f;
+
+/// The Godunov update of OpenVDB's SweepingKernel::sweep for one voxel (the SDF part only). No update
+/// when every neighbour's |value| is @a valid or more: OpenVDB's kValid, or the band when only the
+/// band's values are kept (the update would exceed every neighbour, so the band).
 inline void updateVoxel(float& value, float n0, float n1, float n2, float n3, float n4, float n5, float h,
-                        float sqrt2h)
+                        float sqrt2h, float valid)
 {
-    // NN: |neighbour value|, valid below 1000; std::min keeps the first of equals.
+    // NN: |neighbour value|; std::min keeps the first of equals.
     auto pick = [](float a, float b) { return b < a ? b : a; };
     float d1 = pick(openvdb::math::Abs(n0), openvdb::math::Abs(n1));
     float d2 = pick(openvdb::math::Abs(n2), openvdb::math::Abs(n3));
     float d3 = pick(openvdb::math::Abs(n4), openvdb::math::Abs(n5));
-    const float valid = 1000.f;
     if (!(d1 < valid || d2 < valid || d3 < valid)) return;
     const float sign = value >= 0.f ? 1.f : -1.f;
     const float absV = openvdb::math::Abs(value);
@@ -196,7 +202,7 @@ LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
 /// updating only the voxels a face neighbour of which changed since their last update (see the top).
 void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64_t, size_t>>& order,
                const std::vector<size_t>& sliceStart, int index, int sx, int sy, int sz, float h,
-               float sqrt2h, bool reverse)
+               float sqrt2h, float valid, bool reverse)
 {
     const int now = index & 1;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()), [&](const tbb::blocked_range<size_t>& r) {
@@ -258,7 +264,7 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                                 const float vz0 = z > 0 ? v[i - 1] : at(nb[4], offsetOf(x, y, kDim - 1));
                                 const float vz1 = z < kDim - 1 ? v[i + 1] : at(nb[5], offsetOf(x, y, 0));
                                 const float old = v[i];
-                                updateVoxel(v[i], vx0, vx1, vy0, vy1, vz0, vz1, h, sqrt2h);
+                                updateVoxel(v[i], vx0, vx1, vy0, vy1, vz0, vz1, h, sqrt2h, valid);
                                 if (v[i] == old) continue;
                                 changed.setOn(i);
                                 if (x > 0) pending.setOn(i - kDim * kDim);
@@ -444,6 +450,9 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             swept += leaf.sweep.countOn();
         // The leaves of each sweep direction's diagonals, in key order (ties: leaf index).
         const float sqrt2h = openvdb::math::Sqrt(2.f) * h;
+        // With only the band's reach swept, a voxel none of whose neighbours lies within the band is
+        // not updated: its value would be the band or more, which reads as the band (see the top).
+        const float valid = band > 0 && reachOnly ? std::min(band, kValid) : kValid;
         const int signs[4][3] = {{1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}};
         // Before the first sweep the only finite values are those next to the isosurface (changed[1]): as
         // if a sweep before it had changed them (an update whose neighbours are all +-FLT_MAX changes
@@ -461,8 +470,8 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
                 if (i == 0 || order[i].first != order[i - 1].first) sliceStart.push_back(i);
             }
             sliceStart.push_back(n);
-            sweepOnce(leaves, order, sliceStart, index++, s[0], s[1], s[2], h, sqrt2h, false);
-            sweepOnce(leaves, order, sliceStart, index++, -s[0], -s[1], -s[2], h, sqrt2h, true);
+            sweepOnce(leaves, order, sliceStart, index++, s[0], s[1], s[2], h, sqrt2h, valid, false);
+            sweepOnce(leaves, order, sliceStart, index++, -s[0], -s[1], -s[2], h, sqrt2h, valid, true);
         }
         // Finalisation: active voxels still at +-FLT_MAX take the extreme finite active values.
         struct MinMax {
