@@ -17,9 +17,8 @@
 // slots near its isosurface).
 #include "output/Surface.h"
 
-#include "core/CoordHash.h"
-
 #include <openvdb/tools/Morphology.h>
+#include <openvdb/tree/ValueAccessor.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -27,7 +26,6 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -91,19 +89,23 @@ MaskT maskGrownAlong(const std::vector<MaskT>& in, size_t li, int64_t lo, int64_
 
 std::vector<std::array<int64_t, 6>> leafFaceNeighbours(const std::vector<Coord>& keys)
 {
+    // Each key's index, in a tree over the keys (a key's neighbours lie in its leaf or the next one:
+    // an accessor finds them without a search from the root).
+    openvdb::Int64Tree index(-1);
+    {
+        openvdb::tree::ValueAccessor<openvdb::Int64Tree> acc(index);
+        for (size_t i = 0; i < keys.size(); ++i)
+            acc.setValueOn(keys[i], int64_t(i));
+    }
     const size_t n = keys.size();
-    std::vector<std::pair<Coord, size_t>> sorted(n);
-    for (size_t i = 0; i < n; ++i)
-        sorted[i] = {keys[i], i};
-    std::sort(sorted.begin(), sorted.end());
     std::vector<std::array<int64_t, 6>> out(n);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
+        openvdb::tree::ValueAccessor<const openvdb::Int64Tree> acc(index);
         for (size_t i = r.begin(); i != r.end(); ++i) {
             for (int f = 0; f < 6; ++f) {
                 Coord k = keys[i];
                 k[f / 2] += (f & 1) ? 1 : -1;
-                const auto it = std::lower_bound(sorted.begin(), sorted.end(), std::make_pair(k, size_t(0)));
-                out[i][size_t(f)] = it != sorted.end() && it->first == k ? int64_t(it->second) : -1;
+                out[i][size_t(f)] = acc.getValue(k);
             }
         }
     });
@@ -119,11 +121,13 @@ GrownLeaves growByBox(GrownLeaves g, int radius)
 {
     // The seeds' leaves, then every leaf next to one holding an active voxel (the box reaches no
     // further).
-    std::vector<Coord> keys;                              // leaf keys (origin / 8)
-    std::unordered_map<Coord, uint32_t, CoordHash> index; // which keys are in, as they are added
-    index.reserve(g.origins.size() * 2);
+    std::vector<Coord> keys;        // leaf keys (origin / 8)
+    openvdb::MaskTree added(false); // which keys are in, as they are added
+    openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(added);
     auto add = [&](const Coord& key) {
-        if (index.emplace(key, uint32_t(keys.size())).second) keys.push_back(key);
+        if (acc.isValueOn(key)) return;
+        acc.setValueOn(key);
+        keys.push_back(key);
     };
     for (const Coord& o : g.origins)
         add(o >> 3);
