@@ -136,7 +136,7 @@ inline float initValue(float value, const float nb[6], float isoValue, float h, 
 struct SweepLeaf {
     float* values;
     LeafT::NodeMaskType sweep;        // active and not next to the isosurface
-    std::array<int64_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1
+    std::array<int32_t, 6> neighbour; // leaf index at -x, +x, -y, +y, -z, +z, or -1 (2^31 leaves: 4 TiB)
     /// The voxels each sweep changed, by the sweep's parity. Before the sweeps, changed[1] holds the
     /// voxels next to the isosurface (active), which count as changed before the first sweep (below).
     LeafT::NodeMaskType changed[2];
@@ -190,7 +190,7 @@ inline void updateVoxel(float& value, float n0, float n1, float n2, float n3, fl
 /// Leaf @a li's voxels of @a masks grown by one face step, within the leaf and from its face
 /// neighbours @a nb (-x, +x, -y, +y, -z, +z; -1: none): one voxel along each axis, united.
 LeafT::NodeMaskType faceDilated(const std::vector<LeafT::NodeMaskType>& masks,
-                                const std::array<int64_t, 6>& nb, size_t li)
+                                const std::array<int32_t, 6>& nb, size_t li)
 {
     LeafT::NodeMaskType out = maskGrownAlong(masks, li, nb[0], nb[1], 0, 1);
     out |= maskGrownAlong(masks, li, nb[2], nb[3], 1, 1);
@@ -218,7 +218,7 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                 // A leaf's recent changes and its face neighbours' (index 1 + f, empty where there is no
                 // leaf), for faceDilated.
                 std::vector<LeafT::NodeMaskType> recent(7);
-                std::array<int64_t, 6> across;
+                std::array<int32_t, 6> across;
                 for (int f = 0; f < 6; ++f)
                     across[size_t(f)] = 1 + f;
                 for (size_t k = r.begin(); k != r.end(); ++k) {
@@ -363,7 +363,8 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
         uint64_t boundary = 0, sweeping = 0;
         for (size_t li = r.begin(); li != r.end(); ++li) {
             SweepLeaf& out = leaves[li];
-            out.neighbour = neighbours[li];
+            for (int f = 0; f < 6; ++f)
+                out.neighbour[size_t(f)] = int32_t(neighbours[li][size_t(f)]);
             out.sweep.setOff();
             out.boundary().setOff();
             forEachOn(li, manager.leaf(li).getValueMask(), acc, [&](Index i, float value, const float nb[6]) {

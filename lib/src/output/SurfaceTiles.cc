@@ -126,6 +126,9 @@ openvdb::FloatGrid::Ptr narrowBandSdfFromTiledDensity(const openvdb::FloatGrid& 
     g.masks.resize(kept);
     g.source.resize(kept);
     std::shared_ptr<FloatTree> tree = sweepTreeOf(g, density.tree().background());
+    // The tree holds the masks now; freed before the sweep, which holds the peak.
+    decltype(g.masks)().swap(g.masks);
+    decltype(g.source)().swap(g.source);
     const uint64_t count = sweepFogTree(*tree, density.tree(), isoValue, float(density.voxelSize()[0]), band);
     if (swept) *swept = count;
 
