@@ -193,9 +193,11 @@ TEST_F(MemoryTest, EachPartBoundsWhatTheRunAllocatesForIt)
 {
     // A sphere 128 wide at Tc, alone and stroked by a small tool (the automaton settling it: its leaf
     // table built): writing the .vdb takes, beyond the run's own grids, no more than the output's
-    // figure and more than half of it; the clay's tree, the tools' cells and the automaton's state
-    // after the run no more than theirs; the whole run's and write's peak no more than the estimate's
-    // heap, and more than half of it.
+    // figure and more than 40 % of it (the figure gives values to every leaf of the surface's band
+    // around the clay's leaves, grown to the tools' reach; the sweep gives them to 57 % of those on
+    // the stroked sphere); the clay's tree, the tools' cells and the automaton's state after the run
+    // no more than theirs; the whole run's and write's peak no more than the estimate's heap, and
+    // more than half of it.
     const std::string still =
         R"({"clay": [{"shape": "sphere", "center": [64, 64, 64], "radius": 64, "mass": 1000}]})";
     const std::string stroked =
@@ -206,7 +208,7 @@ TEST_F(MemoryTest, EachPartBoundsWhatTheRunAllocatesForIt)
         uint64_t held = 0, output = 0;
         const uint64_t peak = peakOfRunAndOutput(json, 1, &held, &output);
         EXPECT_GE(e.outputBytes, output) << e.describe();
-        EXPECT_LE(e.outputBytes, 2 * output) << e.describe() << "; the write takes " << output;
+        EXPECT_LE(2 * e.outputBytes, 5 * output) << e.describe() << "; the write takes " << output;
         EXPECT_GE(e.clayBytes + e.obstacleBytes + e.toolBytes + e.automatonBytes, held) << e.describe();
         EXPECT_GE(heapOf(e), peak) << e.describe();
         EXPECT_LE(heapOf(e), 2 * peak) << e.describe() << "; the run peaks at " << peak;

@@ -58,10 +58,11 @@ constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + 16;
 /// per entry at most (24).
 constexpr uint64_t kChangedClayBytesPerSlot = 3 * 36 + 24;
 /// Per leaf of the surface level set writing a .vdb builds (output/SurfaceFog.cc, SurfaceSweep.cc),
-/// besides the leaf itself: the grown fog's origin, masks and source (12 + 2 x 64 + 8), its index (a
-/// hash node, ~32), the leaf made (8); the sweep's per-leaf record (248), input (8), key (12), face
-/// neighbours (48), reach masks (2 x 64) and order (16).
-constexpr uint64_t kOutputScratchPerLeaf = 12 + 2 * 64 + 8 + 32 + 8 + 248 + 8 + 12 + 48 + 2 * 64 + 16;
+/// besides the leaf itself, as the sweep allocates the leaves' values (the output's peak; the box's
+/// masks and the reach's, 2 x 64 each, are freed by then): the grown leaves' origins (12), the leaf
+/// made and the leaf manager's pointer to it (16), the sweep's per-leaf record (224), input (8), key
+/// (12), face neighbours (48), and whether the leaf needs values and its side (2).
+constexpr uint64_t kOutputScratchPerLeaf = 12 + 16 + 224 + 8 + 12 + 48 + 2;
 /// Scene::transport global: per cell of the layer's domain (transport/Domain.h: the workspace's arrays): its
 /// coordinates (twice, 24 bytes), mass, distance and current mass (24), kinds and flags (10), six
 /// neighbours and the solver's (48), row maps and parts (36), the potential, inflow, right-hand side
