@@ -72,14 +72,21 @@ struct Block {
     }
 };
 
+/// Whether the shelters read the voxel at index @a k as filled (fillOf above 0): an obstacle, or a
+/// voxel of the clay's solid shape (holding at least Tc/2).
+inline bool filled(const Block& b, int64_t tc, size_t k)
+{
+    return b.obstacle[k] || 2 * b.mass[k] >= tc;
+}
+
 /// A voxel's fill as the shelters read it: the clay's solid shape, Tc for a voxel holding at least
 /// Tc/2 and 0 for one holding less (a film of clay under Tc/2 on a face does not shelter its
 /// neighbours, so it neither gathers into lumps nor makes the face look concave), Tc/2 for an
 /// obstacle.
 inline int64_t fillOf(const Block& b, int64_t tc, size_t k)
 {
-    if (b.obstacle[k]) return tc / 2;
-    return 2 * b.mass[k] >= tc ? tc : 0;
+    if (!filled(b, tc, k)) return 0;
+    return b.obstacle[k] ? tc / 2 : tc;
 }
 
 /// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills (fillOf) of its
@@ -178,7 +185,6 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
     const int axes = b.is2D ? 2 : 3;
-    auto solid = [&](size_t k) { return b.obstacle[k] || 2 * b.mass[k] >= tc; };
     std::vector<char> taker(b.mass.size(), 0);
     // Only a voxel more convex than a flat face gives and only one more concave receives, so a flat
     // face keeps its voxels, and a film on it stays where it is.
@@ -186,14 +192,14 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     std::vector<int64_t> givers;
     for (size_t k = 0; k < b.member.size(); ++k) {
         if (!b.member[k]) continue;
-        const bool in = solid(k);
+        const bool in = filled(b, tc, k);
         if (in && b.mass[k] > tc) continue; // an overloaded voxel is left to the automaton
         const int64_t c[3] = {int64_t(k) / stride[0], (int64_t(k) / stride[1]) % b.ny, int64_t(k) % b.nz};
         bool edge = false;
         for (int axis = 0; axis < axes && !edge; ++axis)
             for (const int d : {-1, 1}) {
                 if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
-                if (solid(size_t(int64_t(k) + d * stride[axis])) != in) edge = true;
+                if (filled(b, tc, size_t(int64_t(k) + d * stride[axis])) != in) edge = true;
             }
         if (!edge) continue;
         if (in ? g[k] < flat.in : g[k] < flat.out && b.mass[k] > 0)
@@ -203,7 +209,7 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     }
     // Whole voxels first, then the film's clay into the creases they leave.
     std::sort(givers.begin(), givers.end(), [&](int64_t x, int64_t y) {
-        const bool inX = solid(size_t(x)), inY = solid(size_t(y));
+        const bool inX = filled(b, tc, size_t(x)), inY = filled(b, tc, size_t(y));
         if (inX != inY) return inX;
         return g[size_t(x)] != g[size_t(y)] ? g[size_t(x)] < g[size_t(y)] : x < y;
     });
@@ -252,7 +258,7 @@ bool opensOnto(const Block& b, int64_t tc, int64_t k, const int64_t c[3])
         for (const int d : {-1, 1}) {
             if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
             const size_t q = size_t(k + d * stride[axis]);
-            if (!b.obstacle[q] && 2 * b.mass[q] < tc) return true;
+            if (!filled(b, tc, q)) return true;
         }
     return false;
 }
