@@ -9,6 +9,7 @@
 // gives exactly what recomputing them over the block would: the work of a pass follows the block once
 // and the clay that moves, not the block seven times over.
 #include "vdbclay/Smooth.h"
+#include "sculpt/SmoothInternal.h"
 #include "vdbclay/Automaton.h"
 
 #include <openvdb/openvdb.h>
@@ -38,7 +39,7 @@ inline int64_t weight(int dx, int dy, int dz)
 /// The shelter's kernel along one axis: (1 2 3 2 1), so a voxel's shelter weighs the fills of its
 /// 5^3 neighbourhood (5^2 in 2D) by the product of these, its own fill left out.
 constexpr int64_t kTent[5] = {1, 2, 3, 2, 1};
-constexpr int kReach = 2;
+constexpr int kReach = smooth_internal::kShelterReach;
 
 /// A dense copy of a box grown by kReach voxels, the shelters' reach (2D: in x and y only).
 struct Block {
@@ -317,7 +318,8 @@ void refresh(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<in
     changed.clear();
 }
 
-SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
+/// The passes on @a b's block; returns what they did and the cells they changed, unwritten.
+smooth_internal::Smoothed run(const Automaton& automaton, Block& b, double strength, int passes)
 {
     const int64_t tc = automaton.options().rule.threshold;
     const std::vector<int64_t> before = b.mass;
@@ -374,9 +376,10 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                 refresh(b, tc, g, fill, open, changed);
             }
     }
-    SmoothReport r;
+    smooth_internal::Smoothed out;
+    SmoothReport& r = out.report;
+    std::vector<Automaton::CellMass>& cells = out.cells;
     r.visited = b.mass.size();
-    std::vector<Automaton::CellMass> cells;
     for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
         for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
             for (int64_t z = in.min[2]; z <= in.max[2]; ++z) {
@@ -387,10 +390,8 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                 r.region = unite(r.region, Box{at, at});
                 if (b.mass[k] > before[k]) r.massMoved += b.mass[k] - before[k];
             }
-    if (cells.empty()) return r;
     r.voxels = cells.size();
-    automaton.setMasses(r.region, cells);
-    return r;
+    return out;
 }
 
 void check(double strength, int passes)
@@ -470,21 +471,41 @@ SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, in
     if (region.empty()) return SmoothReport();
     Block b(region, is2D);
     load(automaton, b, InsideTool{tool, solids});
-    return run(automaton, b, strength, passes);
+    const smooth_internal::Smoothed s = run(automaton, b, strength, passes);
+    smooth_internal::write(automaton, s);
+    return s.report;
 }
 
 SmoothReport smoothRegion(Automaton& automaton, const Box& region, double strength, int passes,
                           const std::vector<ShapePtr>& solids)
 {
+    const smooth_internal::Smoothed s =
+        smooth_internal::smoothedRegion(automaton, region, strength, passes, solids);
+    smooth_internal::write(automaton, s);
+    return s.report;
+}
+
+namespace smooth_internal {
+
+Smoothed smoothedRegion(const Automaton& automaton, const Box& region, double strength, int passes,
+                        const std::vector<ShapePtr>& solids)
+{
     check(strength, passes);
     const bool is2D = automaton.options().dimensions == 2;
     Box r = region;
     if (is2D) r = intersect(r, Box{{{INT32_MIN / 2, INT32_MIN / 2, 0}}, {{INT32_MAX / 2, INT32_MAX / 2, 0}}});
-    if (r.empty()) return SmoothReport();
+    if (r.empty()) return Smoothed();
     Block b(r, is2D);
     load(automaton, b, InsideRegion{solids});
     return run(automaton, b, strength, passes);
 }
+
+void write(Automaton& automaton, const Smoothed& s)
+{
+    if (!s.cells.empty()) automaton.setMasses(s.report.region, s.cells);
+}
+
+} // namespace smooth_internal
 
 int64_t surfaceEnergy(const MassGrid& mass, const Box& region, int32_t threshold, int dimensions)
 {
