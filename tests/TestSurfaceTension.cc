@@ -374,13 +374,14 @@ TEST_F(SurfaceTensionTest, EachBoxFitsTheMemoryEstimatesBlock)
             EXPECT_TRUE(in);
         }
     }
-    // The estimate counts the journal and a block when the scene has surface tension.
+    // The estimate counts the journal and a block a thread when the scene has surface tension.
     const std::string body =
         R"("clay": [{"shape": "sphere", "center": [0,0,0], "radius": 40, "mass": 1000}]})";
     const MemoryEstimate off = estimateSceneMemory(scene("{" + body));
     const MemoryEstimate on = estimateSceneMemory(scene("{\"surface_tension\": 0.5, " + body));
     EXPECT_GE(on.pushBytes - off.pushBytes,
-              sculpt_internal::tensionBlockVoxels(3) * memory_internal::kSmoothBytesPerVoxel +
+              uint64_t(sculpt_internal::tensionLanes(0)) * sculpt_internal::tensionBlockVoxels(3) *
+                      memory_internal::kSmoothBytesPerVoxel +
                   2 * on.clayLeavesGrown * memory_internal::kChangedClayBytesPerSlot);
 }
 
@@ -412,6 +413,40 @@ std::string bigBumpyBall(int frames)
 }
 
 } // namespace
+
+TEST_F(SurfaceTensionTest, TheBoxesOfALevelMeetNoEarlierBoxOfItsOwnOrAHigherLevel)
+{
+    // The whole surface of the big bumpy ball: its boxes fall on many levels, many of several
+    // boxes, and a box whose reads (the box grown by the shelters' reach) meet an earlier box lies on
+    // a higher level than it.
+    Sculptor sc(scene(bigBumpyBall(1)), 1);
+    ChangedClay c;
+    sculpt_internal::addWholeSurface(*sc.mass(), 3, c);
+    const std::vector<Box> boxes = sculpt_internal::tensionBoxes(c.entries(), 3, kSurfaceTensionMargin);
+    const std::vector<uint32_t> level = sculpt_internal::tensionLevels(boxes, 3);
+    ASSERT_EQ(level.size(), boxes.size());
+    const uint32_t levels = 1 + *std::max_element(level.begin(), level.end());
+    std::vector<size_t> per(levels, 0);
+    for (const uint32_t l : level)
+        ++per[l];
+    size_t several = 0;
+    for (const size_t n : per)
+        several += n > 1;
+    // 161 boxes on 91 levels, 58 of them of 2 or 3 boxes.
+    EXPECT_GT(levels, 1u);
+    EXPECT_GE(several, 20u);
+    for (size_t i = 0; i < boxes.size(); ++i) {
+        Box reads = boxes[i];
+        for (size_t a = 0; a < 3; ++a) {
+            reads.min[a] -= 2;
+            reads.max[a] += 2;
+        }
+        for (size_t j = 0; j < i; ++j)
+            if (!intersect(reads, boxes[j]).empty()) {
+                ASSERT_LT(level[j], level[i]) << j << " " << i;
+            }
+    }
+}
 
 TEST_F(SurfaceTensionTest, TheBoxesSmoothedLevelByLevelGiveWhatTheyGiveOneAfterTheOther)
 {
@@ -450,6 +485,7 @@ TEST_F(SurfaceTensionTest, TheBoxesSmoothedLevelByLevelGiveWhatTheyGiveOneAfterT
         EXPECT_EQ(r.massMoved, moved) << threads;
         EXPECT_EQ(r.visited, visited) << threads;
         EXPECT_EQ(r.boxes, boxes.size()) << threads;
+        EXPECT_LT(r.levels, r.boxes) << threads; // levels of several boxes
         const std::vector<ChangedClay::Entry> e = changed.entries();
         ASSERT_EQ(e.size(), recordedSerially.size()) << threads;
         for (size_t i = 0; i < e.size(); ++i) {
