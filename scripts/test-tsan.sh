@@ -45,8 +45,9 @@ if [ ! -f "$TBB_PREFIX/lib/libtbb.so.12" ]; then
 fi
 
 # --- vdbclay, instrumented: the library, the CLI and the threaded tests ------------------------
-# Threads run in the automaton, the push and the tools' placement (Sculpt.cc, Push.cc), the global
-# transport's solver (Transport.cc) and the output (Surface.cc): all of them are instrumented.
+# Threads run in the automaton, the push and the tools' placement (Sculpt.cc, Push.cc), the scene's
+# surface tension (SurfaceTension.cc), the global transport's solver (Transport.cc) and the output
+# (Surface.cc): all of them are instrumented.
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
 launcher=() # ccache, as scripts/build.sh uses it
@@ -58,7 +59,7 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
         -DVDBCLAY_SANITIZE=thread -DVDBCLAY_BUILD_PYTHON=OFF >/dev/null
 fi
 cmake --build "$BUILD_DIR" --parallel "$JOBS" --target test_automaton test_pass_crew test_sculptor \
-  test_transport test_surface test_metrics test_rasterize vdbclay_cli
+  test_transport test_surface test_metrics test_rasterize test_surface_tension vdbclay_cli
 
 # The instrumented TBB must be the one loaded: check, rather than trust the search path.
 export LD_LIBRARY_PATH=$TBB_PREFIX/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
@@ -95,6 +96,9 @@ export TSAN_OPTIONS="halt_on_error=1 exitcode=66 second_deadlock_stack=1 history
 "$BUILD_DIR/tests/test_surface" --gtest_brief=1
 "$BUILD_DIR/tests/test_metrics" --gtest_brief=1 --gtest_filter='MetricsTest.MeasureClayOverLeaves*'
 "$BUILD_DIR/tests/test_rasterize" --gtest_brief=1
+# The scene's surface tension, its boxes smoothed level by level on 1, 2, 3 and 8 threads.
+"$BUILD_DIR/tests/test_surface_tension" --gtest_brief=1 \
+  --gtest_filter='*Level*:*AnyThread*:*BigBumpyBall*'
 # A whole scene through the CLI (scene, push, settle, the parallel output) on 2 and 3 threads.
 # Not --mesh: OpenVDB's volumeToMesh locks a tbb::concurrent_hash_map whose spin_rw_mutex is compiled
 # into libopenvdb.so, which is not instrumented, so TSan cannot see the lock and reports a race in

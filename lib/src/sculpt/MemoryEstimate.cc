@@ -706,11 +706,12 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.pushBytes = std::min(sources, clayVoxels) * kPushBytesPerSource;
     // Surface tension (Smooth.cc) copies a smooth tool's bounds grown by two voxels into dense arrays
     // (kSmoothBytesPerVoxel), one at a time; a frame's bounds hold at most sw.most voxels. The scene's
-    // "surface_tension" smooths one box at a time (sculpt/SurfaceTension.h: at most
-    // tensionBlockVoxels), and holds where the frame's clay changed: per slot of the whole surface
-    // in the first frame (the clay's leaves and about as many tile slots beside them, as the output's
-    // sweep below) or of a later frame's change (the clay's leaves and the tools' slots at most),
-    // kChangedClayBytesPerSlot.
+    // "surface_tension" smooths boxes of at most tensionBlockVoxels (sculpt/SurfaceTension.h), a box
+    // on each of its threads at once (tensionLanes on every core), and holds the changed cells of
+    // tensionBoxesHeld boxes until they are written (kSmoothCellBytes a voxel at most); it holds
+    // where the frame's clay changed: per slot of the whole surface in the first frame (the clay's
+    // leaves and about as many tile slots beside them, as the output's sweep below) or of a later
+    // frame's change (the clay's leaves and the tools' slots at most), kChangedClayBytesPerSlot.
     {
         uint64_t most = 0;
         auto grownCube = [&](uint64_t voxels, double by) {
@@ -721,8 +722,14 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         for (size_t t = 0; t < sweeps.size(); ++t)
             if (scene.tools[t].action == ToolAction::Smooth)
                 most = std::max(most, grownCube(sweeps[t].most, 2));
-        if (scene.surfaceTension > 0) most = std::max(most, sculpt_internal::tensionBlockVoxels(dims));
         uint64_t bytes = most > UINT64_MAX / kSmoothBytesPerVoxel ? UINT64_MAX : most * kSmoothBytesPerVoxel;
+        if (scene.surfaceTension > 0) {
+            const uint64_t lanes = uint64_t(sculpt_internal::tensionLanes(0));
+            const uint64_t held = sculpt_internal::tensionBoxesHeld(int(lanes));
+            const uint64_t perBlock =
+                lanes * kSmoothBytesPerVoxel + (held - std::min(held, lanes)) * kSmoothCellBytes;
+            bytes = std::max(bytes, sculpt_internal::tensionBlockVoxels(dims) * perBlock);
+        }
         if (scene.surfaceTension > 0) {
             const uint64_t slots =
                 e.clayLeavesGrown > UINT64_MAX / 4 ? UINT64_MAX : 2 * e.clayLeavesGrown + e.toolSlots;

@@ -49,10 +49,12 @@ constexpr uint64_t kToolBytesPerSlot = 2 * 80 + 2 * 48 + 64;
 /// where a tool's face fills 64 voxels of a leaf; 104 allowed for sparser targets) and the two cell
 /// masses written (16 each).
 constexpr uint64_t kPushBytesPerSource = 32 + 32 + 56 + 28 + 48 + 8 + 2 * 24 + 2 * 16;
+/// Per voxel of surface tension's changed cells written back (sculpt/Smooth.cc: a CellMass, 16).
+constexpr uint64_t kSmoothCellBytes = 16;
 /// Per voxel surface tension copies (sculpt/Smooth.cc): its mass (8), the mass before (8), its
 /// shelter, the separable pass's scratch and the fills (3 x 8), obstacle and member flags (2), and
-/// the changed cells written back (16).
-constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + 16;
+/// the changed cells written back (kSmoothCellBytes).
+constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + kSmoothCellBytes;
 /// Per slot of a frame's changed clay (automaton/ChangedClay.h, an entry of 36 bytes): the journal grown
 /// to twice its compacted entries, the copy tensionBoxes() sorts (sculpt/SurfaceTension.h) and a box
 /// per entry at most (24).

@@ -9,6 +9,7 @@
 // gives exactly what recomputing them over the block would: the work of a pass follows the block once
 // and the clay that moves, not the block seven times over.
 #include "vdbclay/Smooth.h"
+#include "sculpt/SmoothInternal.h"
 #include "vdbclay/Automaton.h"
 
 #include <openvdb/openvdb.h>
@@ -38,7 +39,7 @@ inline int64_t weight(int dx, int dy, int dz)
 /// The shelter's kernel along one axis: (1 2 3 2 1), so a voxel's shelter weighs the fills of its
 /// 5^3 neighbourhood (5^2 in 2D) by the product of these, its own fill left out.
 constexpr int64_t kTent[5] = {1, 2, 3, 2, 1};
-constexpr int kReach = 2;
+constexpr int kReach = smooth_internal::kShelterReach;
 
 /// A dense copy of a box grown by kReach voxels, the shelters' reach (2D: in x and y only).
 struct Block {
@@ -72,14 +73,21 @@ struct Block {
     }
 };
 
+/// Whether the shelters read the voxel at index @a k as filled (fillOf above 0): an obstacle, or a
+/// voxel of the clay's solid shape (holding at least Tc/2).
+inline bool filled(const Block& b, int64_t tc, size_t k)
+{
+    return b.obstacle[k] || 2 * b.mass[k] >= tc;
+}
+
 /// A voxel's fill as the shelters read it: the clay's solid shape, Tc for a voxel holding at least
 /// Tc/2 and 0 for one holding less (a film of clay under Tc/2 on a face does not shelter its
 /// neighbours, so it neither gathers into lumps nor makes the face look concave), Tc/2 for an
 /// obstacle.
 inline int64_t fillOf(const Block& b, int64_t tc, size_t k)
 {
-    if (b.obstacle[k]) return tc / 2;
-    return 2 * b.mass[k] >= tc ? tc : 0;
+    if (!filled(b, tc, k)) return 0;
+    return b.obstacle[k] ? tc / 2 : tc;
 }
 
 /// Every voxel's shelter (@a g, over the outer box): the tent-weighted fills (fillOf) of its
@@ -178,7 +186,6 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     const int64_t stride[3] = {b.ny * b.nz, b.nz, 1};
     const int64_t dimsN[3] = {b.nx, b.ny, b.nz};
     const int axes = b.is2D ? 2 : 3;
-    auto solid = [&](size_t k) { return b.obstacle[k] || 2 * b.mass[k] >= tc; };
     std::vector<char> taker(b.mass.size(), 0);
     // Only a voxel more convex than a flat face gives and only one more concave receives, so a flat
     // face keeps its voxels, and a film on it stays where it is.
@@ -186,14 +193,14 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     std::vector<int64_t> givers;
     for (size_t k = 0; k < b.member.size(); ++k) {
         if (!b.member[k]) continue;
-        const bool in = solid(k);
+        const bool in = filled(b, tc, k);
         if (in && b.mass[k] > tc) continue; // an overloaded voxel is left to the automaton
         const int64_t c[3] = {int64_t(k) / stride[0], (int64_t(k) / stride[1]) % b.ny, int64_t(k) % b.nz};
         bool edge = false;
         for (int axis = 0; axis < axes && !edge; ++axis)
             for (const int d : {-1, 1}) {
                 if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
-                if (solid(size_t(int64_t(k) + d * stride[axis])) != in) edge = true;
+                if (filled(b, tc, size_t(int64_t(k) + d * stride[axis])) != in) edge = true;
             }
         if (!edge) continue;
         if (in ? g[k] < flat.in : g[k] < flat.out && b.mass[k] > 0)
@@ -203,7 +210,7 @@ int64_t swapSurface(Block& b, int64_t tc, const std::vector<int64_t>& g, std::ve
     }
     // Whole voxels first, then the film's clay into the creases they leave.
     std::sort(givers.begin(), givers.end(), [&](int64_t x, int64_t y) {
-        const bool inX = solid(size_t(x)), inY = solid(size_t(y));
+        const bool inX = filled(b, tc, size_t(x)), inY = filled(b, tc, size_t(y));
         if (inX != inY) return inX;
         return g[size_t(x)] != g[size_t(y)] ? g[size_t(x)] < g[size_t(y)] : x < y;
     });
@@ -252,7 +259,7 @@ bool opensOnto(const Block& b, int64_t tc, int64_t k, const int64_t c[3])
         for (const int d : {-1, 1}) {
             if (c[axis] + d < 0 || c[axis] + d >= dimsN[axis]) continue;
             const size_t q = size_t(k + d * stride[axis]);
-            if (!b.obstacle[q] && 2 * b.mass[q] < tc) return true;
+            if (!filled(b, tc, q)) return true;
         }
     return false;
 }
@@ -311,7 +318,8 @@ void refresh(const Block& b, int64_t tc, std::vector<int64_t>& g, std::vector<in
     changed.clear();
 }
 
-SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
+/// The passes on @a b's block; returns what they did and the cells they changed, unwritten.
+smooth_internal::Smoothed run(const Automaton& automaton, Block& b, double strength, int passes)
 {
     const int64_t tc = automaton.options().rule.threshold;
     const std::vector<int64_t> before = b.mass;
@@ -368,9 +376,10 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                 refresh(b, tc, g, fill, open, changed);
             }
     }
-    SmoothReport r;
+    smooth_internal::Smoothed out;
+    SmoothReport& r = out.report;
+    std::vector<Automaton::CellMass>& cells = out.cells;
     r.visited = b.mass.size();
-    std::vector<Automaton::CellMass> cells;
     for (int64_t x = in.min[0]; x <= in.max[0]; ++x)
         for (int64_t y = in.min[1]; y <= in.max[1]; ++y)
             for (int64_t z = in.min[2]; z <= in.max[2]; ++z) {
@@ -381,10 +390,8 @@ SmoothReport run(Automaton& automaton, Block& b, double strength, int passes)
                 r.region = unite(r.region, Box{at, at});
                 if (b.mass[k] > before[k]) r.massMoved += b.mass[k] - before[k];
             }
-    if (cells.empty()) return r;
     r.voxels = cells.size();
-    automaton.setMasses(r.region, cells);
-    return r;
+    return out;
 }
 
 void check(double strength, int passes)
@@ -464,21 +471,41 @@ SmoothReport smooth(Automaton& automaton, const Shape& tool, double strength, in
     if (region.empty()) return SmoothReport();
     Block b(region, is2D);
     load(automaton, b, InsideTool{tool, solids});
-    return run(automaton, b, strength, passes);
+    const smooth_internal::Smoothed s = run(automaton, b, strength, passes);
+    smooth_internal::write(automaton, s);
+    return s.report;
 }
 
 SmoothReport smoothRegion(Automaton& automaton, const Box& region, double strength, int passes,
                           const std::vector<ShapePtr>& solids)
 {
+    const smooth_internal::Smoothed s =
+        smooth_internal::smoothedRegion(automaton, region, strength, passes, solids);
+    smooth_internal::write(automaton, s);
+    return s.report;
+}
+
+namespace smooth_internal {
+
+Smoothed smoothedRegion(const Automaton& automaton, const Box& region, double strength, int passes,
+                        const std::vector<ShapePtr>& solids)
+{
     check(strength, passes);
     const bool is2D = automaton.options().dimensions == 2;
     Box r = region;
     if (is2D) r = intersect(r, Box{{{INT32_MIN / 2, INT32_MIN / 2, 0}}, {{INT32_MAX / 2, INT32_MAX / 2, 0}}});
-    if (r.empty()) return SmoothReport();
+    if (r.empty()) return Smoothed();
     Block b(r, is2D);
     load(automaton, b, InsideRegion{solids});
     return run(automaton, b, strength, passes);
 }
+
+void write(Automaton& automaton, const Smoothed& s)
+{
+    if (!s.cells.empty()) automaton.setMasses(s.report.region, s.cells);
+}
+
+} // namespace smooth_internal
 
 int64_t surfaceEnergy(const MassGrid& mass, const Box& region, int32_t threshold, int dimensions)
 {

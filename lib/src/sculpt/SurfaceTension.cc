@@ -1,13 +1,21 @@
 // The scene's surface tension (SurfaceTension.h): the surface's slots (the whole surface, or the
-// frame's changed clay), cut into boxes by halving, each box smoothed by smoothRegion in turn.
+// frame's changed clay), cut into boxes by halving, the boxes smoothed level by level.
 #include "sculpt/SurfaceTension.h"
+
+#include "core/CoordHash.h"
+#include "core/ParallelFor.h"
+#include "sculpt/SmoothInternal.h"
 
 #include "vdbclay/Automaton.h"
 #include "vdbclay/Smooth.h"
 
 #include <openvdb/openvdb.h>
 
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <unordered_map>
 
 namespace vdbclay {
 namespace sculpt_internal {
@@ -122,15 +130,96 @@ std::vector<Box> tensionBoxes(const std::vector<Entry>& changed, int dims, int m
     return out;
 }
 
+int tensionLanes(int threads)
+{
+    const int cores = std::max(1, tbb::info::default_concurrency());
+    return threads == 0 ? cores : std::max(1, std::min(threads, cores));
+}
+
+size_t tensionBoxesHeld(int lanes)
+{
+    return lanes <= 1 ? 1 : size_t(lanes) * kTensionBoxesPerLane;
+}
+
+std::vector<uint32_t> tensionLevels(const std::vector<Box>& boxes, int dims)
+{
+    // Each box is listed in the cells (kLevelCell voxels a side) it meets; a box's reads meet an
+    // earlier box only where they share a cell, so a box looks at the few boxes listed in the
+    // cells its reads meet, not at every earlier box.
+    constexpr int kLevelCellLog2 = 6;
+    std::unordered_map<openvdb::Coord, std::vector<uint32_t>, CoordHash> listed;
+    auto cells = [](const Box& b, auto&& f) {
+        for (int32_t x = b.min[0] >> kLevelCellLog2; x <= b.max[0] >> kLevelCellLog2; ++x)
+            for (int32_t y = b.min[1] >> kLevelCellLog2; y <= b.max[1] >> kLevelCellLog2; ++y)
+                for (int32_t z = b.min[2] >> kLevelCellLog2; z <= b.max[2] >> kLevelCellLog2; ++z)
+                    f(openvdb::Coord(x, y, z));
+    };
+    std::vector<uint32_t> level(boxes.size(), 0);
+    for (size_t i = 0; i < boxes.size(); ++i) {
+        Box reads = boxes[i];
+        for (size_t a = 0; a < (dims == 2 ? 2u : 3u); ++a) {
+            reads.min[a] -= smooth_internal::kShelterReach;
+            reads.max[a] += smooth_internal::kShelterReach;
+        }
+        uint32_t l = 0;
+        cells(reads, [&](const openvdb::Coord& c) {
+            const auto it = listed.find(c);
+            if (it == listed.end()) return;
+            for (const uint32_t j : it->second)
+                if (level[j] >= l && !intersect(reads, boxes[j]).empty()) l = level[j] + 1;
+        });
+        level[i] = l;
+        cells(boxes[i], [&](const openvdb::Coord& c) { listed[c].push_back(uint32_t(i)); });
+    }
+    return level;
+}
+
 TensionReport smoothBoxes(Automaton& automaton, const std::vector<Box>& boxes, double strength,
                           const std::vector<ShapePtr>& solids)
 {
     TensionReport r;
-    for (const Box& b : boxes) {
-        const SmoothReport s = smoothRegion(automaton, b, strength, 1, solids);
-        r.massMoved += s.massMoved;
-        r.visited += s.visited;
-        ++r.boxes;
+    if (boxes.empty()) return r;
+    // The boxes level by level, each level's in their order.
+    const std::vector<uint32_t> level = tensionLevels(boxes, automaton.options().dimensions);
+    r.levels = 1 + *std::max_element(level.begin(), level.end());
+    std::vector<size_t> start(r.levels + 1, 0);
+    for (const uint32_t l : level)
+        ++start[l + 1];
+    for (size_t l = 0; l < r.levels; ++l)
+        start[l + 1] += start[l];
+    std::vector<uint32_t> order(boxes.size());
+    {
+        std::vector<size_t> next(start.begin(), start.end() - 1);
+        for (size_t i = 0; i < boxes.size(); ++i)
+            order[next[level[i]]++] = uint32_t(i);
+    }
+    const int lanes = tensionLanes(automaton.options().threads);
+    const size_t held = tensionBoxesHeld(lanes);
+    auto pass = [&] {
+        // A level's boxes in groups of `held`: a group's boxes computed in parallel (each reads the
+        // grid only), then written one after the other in their order.
+        std::vector<smooth_internal::Smoothed> done(held);
+        for (size_t l = 0; l < r.levels; ++l)
+            for (size_t at = start[l]; at < start[l + 1]; at += held) {
+                const size_t n = std::min(held, start[l + 1] - at);
+                parallel_internal::forEachIndex(n, lanes == 1 ? 1 : 0, [&](size_t k) {
+                    done[k] =
+                        smooth_internal::smoothedRegion(automaton, boxes[order[at + k]], strength, 1, solids);
+                });
+                for (size_t k = 0; k < n; ++k) {
+                    smooth_internal::write(automaton, done[k]);
+                    r.massMoved += done[k].report.massMoved;
+                    r.visited += done[k].report.visited;
+                    ++r.boxes;
+                    done[k] = smooth_internal::Smoothed();
+                }
+            }
+    };
+    if (lanes > 1 && r.levels < boxes.size()) { // some level holds several boxes
+        tbb::task_arena arena(lanes);
+        arena.execute(pass);
+    } else {
+        pass();
     }
     return r;
 }
