@@ -294,14 +294,20 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
         const CellCoord c = mC.at[size_t(i)];
         const int64_t di = mB.dist[size_t(i)];
         face.resize(size_t(i + 1) * 6, kFaceDone); // cells are taken in index order
+        // The cell's part by its root; the cells it adds are labelled by it, so a label is most
+        // often a root and one comparison finds two cells in one part.
+        int32_t root = find(comp[size_t(i)]);
         for (int d = 0; d < mDirs; ++d) {
             const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
             const int32_t k = indexOf(q);
             if (k >= 0) { // every face between two domain cells is seen here, from one side
                 linkPair(i, d, k);
-                if (comp[size_t(i)] == comp[size_t(k)]) continue; // one label: one part already
-                const int32_t a = find(comp[size_t(i)]), b = find(comp[size_t(k)]);
-                if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+                if (comp[size_t(k)] == root) continue; // one label: one part already
+                const int32_t b = find(comp[size_t(k)]);
+                if (b != root) {
+                    parent[size_t(std::max(root, b))] = std::min(root, b);
+                    root = std::min(root, b);
+                }
                 continue;
             }
             int32_t m = 0;
@@ -315,8 +321,9 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
             }
             linkPair(i, d, addCell(q, kUnknown, m));
             mB.dist.push_back(di + 1);
-            comp.push_back(comp[size_t(i)]);
+            comp.push_back(root);
         }
+        comp[size_t(i)] = root;
     }
     // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
     // the parts that touch a Dirichlet cell.
