@@ -77,7 +77,7 @@ private:
 
     CellIndexArrays& mA;
     bool mCovers = false;
-    int64_t mLo[3] = {0, 0, 0}; ///< the box's first cell, a multiple of 8 on each axis
+    int64_t mLo[3] = {0, 0, 0};   ///< the box's first cell, a multiple of 8 on each axis
     uint64_t mDim[3] = {0, 0, 0}; ///< its cells along each axis, a multiple of 8
 };
 

@@ -19,7 +19,7 @@
 // reach + 2, when the reach is bounded and the box has at most kDenseIndexMax bricks), an Int32 tree
 // beyond it (the whole body's reach; the active set's rounds may add cells with room past the box).
 // Only a map: results do not depend on it. The flood's lookups (the index, the masses, the
-// obstacles) are inline in Domain.cc.
+// obstacles) are inline: no calls through the shared library's symbol table.
 //
 // Serial and ordered: the same cells, numbers and links on any thread count. OpenVDB stays in
 // Domain.cc.
