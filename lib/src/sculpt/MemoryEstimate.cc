@@ -751,9 +751,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // their face neighbours: at most 7 cells per full cell; and at most the clay's leaves' voxels.
     // Near the tools' sweeps, where the bound of the file comment (the layer's domain) holds, it is at
     // most the clay's voxels (in the leaves the grown clay may hold) within the reach's face steps of
-    // the seeds' box, at the frame that holds most; the index is then the dense array over the seeds'
-    // bounds grown by the reach + 2 (at most kDenseIndexMax entries) and a tree over the cells beyond
-    // it, counted as every voxel of those leaves.
+    // the seeds' box, at the frame that holds most; the index is then a slot per 8^3 brick of the
+    // seeds' bounds grown by the reach + 2 (at most kDenseIndexMax slots; counted as at most one per
+    // voxel of that box) and a table per brick or tree leaf that holds cells, in the box or beyond it,
+    // counted as every voxel of those leaves.
     e.clayVoxels = clayVoxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : clayVoxels + tiledVoxels;
     if (frame_policy::usesGlobalLayer(scene)) {
         const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
@@ -806,8 +807,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             lb.buried |= !out;
         }
         const LayerReach reach = layerReach(lb);
-        // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood
-        // densely when that holds at most kDenseIndexMax cells.
+        // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood by
+        // bricks when that holds at most kDenseIndexMax of them.
         uint64_t bytes =
             cells * kTransportBytesPerCell + (toolBoxes.empty() ? 0 : 4 * uint64_t(kDenseIndexMax));
         uint64_t counted = cells; // the domain's cells counted

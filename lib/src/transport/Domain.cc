@@ -56,18 +56,19 @@ struct Domain::Grids {
 
 Domain::Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact)
     : mTc(automaton.options().rule.threshold), mDirs(automaton.options().dimensions == 2 ? 4 : 6),
-      mFromContact(reachFromContact), mB(arrays), mC(arrays.cells), mGrids(std::make_unique<Grids>(automaton))
+      mFromContact(reachFromContact), mB(arrays), mC(arrays.cells),
+      mGrids(std::make_unique<Grids>(automaton)), mIndex(arrays.index)
 {
 }
 
 Domain::~Domain() = default;
 
-bool Domain::isObstacle(const CellCoord& c) const
+inline bool Domain::isObstacle(const CellCoord& c) const
 {
     return mGrids->isObstacle(toCoord(c));
 }
 
-int32_t Domain::massAt(const CellCoord& c) const
+inline int32_t Domain::massAt(const CellCoord& c) const
 {
     return mGrids->massAcc.getValue(toCoord(c));
 }
@@ -137,28 +138,13 @@ bool Domain::fitsNearby(const std::vector<CellCoord>& seeds, int64_t excess) con
     return total >= excess;
 }
 
-int32_t Domain::indexOf(const CellCoord& c) const
+int32_t Domain::indexBeyond(const CellCoord& c) const
 {
-    if (mDense) {
-        // One unsigned comparison per axis: a negative offset wraps past every dimension.
-        const uint64_t x = uint64_t(int64_t(c.x) - mDenseLo.x), y = uint64_t(int64_t(c.y) - mDenseLo.y),
-                       z = uint64_t(int64_t(c.z) - mDenseLo.z);
-        if (x < uint64_t(mDenseDim[0]) && y < uint64_t(mDenseDim[1]) && z < uint64_t(mDenseDim[2]))
-            return mB.denseIndex[size_t((x * uint64_t(mDenseDim[1]) + y) * uint64_t(mDenseDim[2]) + z)];
-    }
     return mGrids->indexAcc ? mGrids->indexAcc->getValue(toCoord(c)) : -1;
 }
 
-void Domain::setIndex(const CellCoord& c, int32_t i)
+void Domain::setIndexBeyond(const CellCoord& c, int32_t i)
 {
-    if (mDense) {
-        const int64_t x = int64_t(c.x) - mDenseLo.x, y = int64_t(c.y) - mDenseLo.y,
-                      z = int64_t(c.z) - mDenseLo.z;
-        if (x >= 0 && y >= 0 && z >= 0 && x < mDenseDim[0] && y < mDenseDim[1] && z < mDenseDim[2]) {
-            mB.denseIndex[size_t((x * mDenseDim[1] + y) * mDenseDim[2] + z)] = i;
-            return;
-        }
-    }
     Grids& g = *mGrids;
     if (!g.indexAcc) {
         g.index = std::make_unique<openvdb::Int32Tree>(-1);
@@ -171,30 +157,23 @@ void Domain::resetIndex(const std::vector<CellCoord>& seeds, int64_t reach)
 {
     mGrids->indexAcc.reset();
     mGrids->index.reset();
-    mDense = false;
+    mIndex.clear();
     if (reach <= 0 || seeds.empty() || reach > (int64_t(1) << 20)) return;
     CellCoord lo = seeds.front(), hi = lo;
     for (const CellCoord& c : seeds) {
         lo.minComponent(c);
         hi.maxComponent(c);
     }
-    const int64_t g = reach + 2;
-    int64_t volume = 1;
-    for (int a = 0; a < 3; ++a) {
-        const int64_t grow = (a == 2 && mDirs == 4) ? 0 : g;
-        mDenseDim[a] = int64_t(hi[a]) - lo[a] + 1 + 2 * grow;
-        volume *= mDenseDim[a];
-        if (volume > kDenseIndexMax) return;
-    }
-    mDenseLo = CellCoord{int32_t(int64_t(lo.x) - g), int32_t(int64_t(lo.y) - g),
-                         int32_t(int64_t(lo.z) - (mDirs == 4 ? 0 : g))};
-    if (int64_t(lo.x) - g < INT32_MIN || int64_t(lo.y) - g < INT32_MIN || int64_t(lo.z) - g < INT32_MIN)
-        return;
-    mB.denseIndex.assign(size_t(volume), -1);
-    mDense = true;
+    const int64_t g = reach + 2, gz = mDirs == 4 ? 0 : g;
+    const int64_t boxLo[3] = {int64_t(lo.x) - g, int64_t(lo.y) - g, int64_t(lo.z) - gz};
+    const int64_t boxHi[3] = {int64_t(hi.x) + g, int64_t(hi.y) + g, int64_t(hi.z) + gz};
+    for (int a = 0; a < 3; ++a)
+        if (boxLo[a] < INT32_MIN || boxHi[a] > INT32_MAX) return;
+    mIndex.reset(CellCoord{int32_t(boxLo[0]), int32_t(boxLo[1]), int32_t(boxLo[2])},
+                 CellCoord{int32_t(boxHi[0]), int32_t(boxHi[1]), int32_t(boxHi[2])}, kDenseIndexMax);
 }
 
-int32_t Domain::addCell(const CellCoord& c, uint8_t kind, int32_t m)
+inline int32_t Domain::addCell(const CellCoord& c, uint8_t kind, int32_t m)
 {
     const int32_t i = int32_t(mC.size());
     mC.at.push_back(c);
@@ -206,7 +185,12 @@ int32_t Domain::addCell(const CellCoord& c, uint8_t kind, int32_t m)
     return i;
 }
 
-uint8_t Domain::faceAt(const CellCoord& q, int32_t& m) const
+inline int32_t Domain::addCell(const CellCoord& c, uint8_t kind)
+{
+    return addCell(c, kind, massAt(c));
+}
+
+inline uint8_t Domain::faceAt(const CellCoord& q, int32_t& m) const
 {
     if (isObstacle(q)) return kFaceDone;
     m = massAt(q);
@@ -310,14 +294,20 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
         const CellCoord c = mC.at[size_t(i)];
         const int64_t di = mB.dist[size_t(i)];
         face.resize(size_t(i + 1) * 6, kFaceDone); // cells are taken in index order
+        // The cell's part by its root; the cells it adds are labelled by it, so a label is most
+        // often a root and one comparison finds two cells in one part.
+        int32_t root = find(comp[size_t(i)]);
         for (int d = 0; d < mDirs; ++d) {
             const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
             const int32_t k = indexOf(q);
             if (k >= 0) { // every face between two domain cells is seen here, from one side
                 linkPair(i, d, k);
-                if (comp[size_t(i)] == comp[size_t(k)]) continue; // one label: one part already
-                const int32_t a = find(comp[size_t(i)]), b = find(comp[size_t(k)]);
-                if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+                if (comp[size_t(k)] == root) continue; // one label: one part already
+                const int32_t b = find(comp[size_t(k)]);
+                if (b != root) {
+                    parent[size_t(std::max(root, b))] = std::min(root, b);
+                    root = std::min(root, b);
+                }
                 continue;
             }
             int32_t m = 0;
@@ -331,8 +321,9 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
             }
             linkPair(i, d, addCell(q, kUnknown, m));
             mB.dist.push_back(di + 1);
-            comp.push_back(comp[size_t(i)]);
+            comp.push_back(root);
         }
+        comp[size_t(i)] = root;
     }
     // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
     // the parts that touch a Dirichlet cell.

@@ -14,16 +14,19 @@
 // are merged by union-find as it goes, so the common case (every part touches room) needs no second
 // pass over the domain.
 //
-// The cell index maps a coordinate to its cell: a dense array over the box the flood can reach (the
-// seeds' bounds grown by the reach + 2, when the reach is bounded and the box holds at most
-// kDenseIndexMax entries), an Int32 tree beyond it (the whole body's reach; the active set's rounds
-// may add cells with room past the box). Only a map: results do not depend on it.
+// The cell index maps a coordinate to its cell: a CellIndex (CellIndex.h: a slot per 8^3 brick, a
+// table per brick with cells) over the box the flood can reach (the seeds' bounds grown by the
+// reach + 2, when the reach is bounded and the box has at most kDenseIndexMax bricks), an Int32 tree
+// beyond it (the whole body's reach; the active set's rounds may add cells with room past the box).
+// Only a map: results do not depend on it. The flood's lookups (the index, the masses, the
+// obstacles) are inline: no calls through the shared library's symbol table.
 //
 // Serial and ordered: the same cells, numbers and links on any thread count. OpenVDB stays in
 // Domain.cc.
 #pragma once
 
 #include "transport/CellCoord.h"
+#include "transport/CellIndex.h"
 
 #include "vdbclay/Transport.h"
 
@@ -69,7 +72,7 @@ struct DomainArrays {
     std::vector<int32_t> innerSeeds;       ///< seeds inside the full clay (indices into the seeds)
     std::vector<uint8_t> seen;             ///< freezeSingular()'s search
     std::vector<int32_t> part;
-    std::vector<int32_t> denseIndex; ///< the cell index over the flood's box
+    CellIndexArrays index; ///< the cell index over the flood's box
 };
 
 class Domain {
@@ -120,18 +123,29 @@ public:
 private:
     struct Grids; ///< the automaton's grids' accessors and the index's tree (Domain.cc)
 
-    bool isObstacle(const CellCoord& c) const;
-    int32_t massAt(const CellCoord& c) const;
-    int32_t indexOf(const CellCoord& c) const;
-    void setIndex(const CellCoord& c, int32_t i);
+    inline bool isObstacle(const CellCoord& c) const;
+    inline int32_t massAt(const CellCoord& c) const;
+    int32_t indexOf(const CellCoord& c) const
+    {
+        bool inside;
+        const int32_t i = mIndex.get(c, inside);
+        return inside ? i : indexBeyond(c);
+    }
+    void setIndex(const CellCoord& c, int32_t i)
+    {
+        if (!mIndex.set(c, i)) setIndexBeyond(c, i);
+    }
+    /// The cell index beyond the box (the tree).
+    int32_t indexBeyond(const CellCoord& c) const;
+    void setIndexBeyond(const CellCoord& c, int32_t i);
     /// Sets up the index for a flood of @a reach steps (0: unbounded) from @a seeds.
     void resetIndex(const std::vector<CellCoord>& seeds, int64_t reach);
-    int32_t addCell(const CellCoord& c, uint8_t kind) { return addCell(c, kind, massAt(c)); }
+    inline int32_t addCell(const CellCoord& c, uint8_t kind);
     /// addCell() of a cell whose mass @a m is known.
-    int32_t addCell(const CellCoord& c, uint8_t kind, int32_t m);
+    inline int32_t addCell(const CellCoord& c, uint8_t kind, int32_t m);
     /// What lies beyond a face at @a q that is not a cell of the domain (FaceFound): an obstacle (a
     /// wall), room (m < Tc), or full clay (its mass in @a m).
-    uint8_t faceAt(const CellCoord& q, int32_t& m) const;
+    inline uint8_t faceAt(const CellCoord& q, int32_t& m) const;
     /// Links cell @a i's face @a d to cell @a j, and back: a Dirichlet cell then knows its unknown
     /// neighbours, and its inflow is gathered in parallel.
     void linkPair(int32_t i, int d, int32_t j)
@@ -146,9 +160,7 @@ private:
     DomainArrays& mB;
     Cells& mC;
     std::unique_ptr<Grids> mGrids;
-    bool mDense = false; ///< mB.denseIndex holds the index over the box at mDenseLo, mDenseDim
-    CellCoord mDenseLo;
-    int64_t mDenseDim[3] = {0, 0, 0};
+    CellIndex mIndex; ///< over the flood's box, in mB.index
 };
 
 } // namespace transport_internal

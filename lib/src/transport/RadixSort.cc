@@ -29,19 +29,26 @@ template <typename Fn> void forBlocks(size_t n, const Fn& fn)
     });
 }
 
+/// The sorts' scratch for @a n entries (the second buffers of the keys and the order) and @a counts
+/// digit counts, every count 0.
+void scratchFor(RadixScratch& s, size_t n, size_t counts)
+{
+    s.keyTmp.resize(n);
+    s.tmp.resize(n);
+    s.count.assign(counts, 0);
+}
+
 /// radixSort() by blocks, in parallel: per digit, each block's counts (count[block * kBuckets +
 /// digit value]), then each value's place for each block, in (value, block) order, then the
 /// blocks scattered.
 void radixSortBlocks(std::vector<int32_t>& order, RadixScratch& s)
 {
     const size_t n = order.size(), blocks = (n + kSortBlock - 1) / kSortBlock;
+    scratchFor(s, n, blocks * kBuckets);
     std::vector<uint64_t>& key = s.key;
     std::vector<uint64_t>& keyTmp = s.keyTmp;
     std::vector<int32_t>& tmp = s.tmp;
-    keyTmp.resize(n);
-    tmp.resize(n);
     std::vector<size_t>& count = s.count;
-    count.resize(blocks * kBuckets);
     for (int d = 0; d < kDigits; ++d) {
         const int shift = kBits * d;
         forBlocks(n, [&](size_t b, size_t lo, size_t hi) {
@@ -84,13 +91,11 @@ void radixSort(std::vector<int32_t>& order, RadixScratch& s, bool serial)
         radixSortBlocks(order, s);
         return;
     }
+    scratchFor(s, n, size_t(kDigits) << kBits);
     std::vector<uint64_t>& key = s.key;
     std::vector<uint64_t>& keyTmp = s.keyTmp;
     std::vector<int32_t>& tmp = s.tmp;
-    keyTmp.resize(n);
-    tmp.resize(n);
     std::vector<size_t>& count = s.count;
-    count.assign(size_t(kDigits) << kBits, 0);
     for (size_t u = 0; u < n; ++u)
         for (int d = 0; d < kDigits; ++d)
             ++count[(size_t(d) << kBits) + ((key[u] >> (kBits * d)) & kMask)];

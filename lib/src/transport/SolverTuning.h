@@ -36,8 +36,8 @@ struct SolverTuning {
     uint64_t multigridMin = 16000;
 };
 
-/// The dense cell index (Domain.h) holds at most this many entries of 4 bytes (32 MiB); a larger
-/// box uses the tree alone.
+/// The cell index over the flood's box (CellIndex.h) has at most this many slots of 4 bytes (32 MiB),
+/// one per 8^3 brick; a larger box uses the tree alone.
 constexpr int64_t kDenseIndexMax = int64_t(1) << 23;
 
 /// vdbclay::transportGlobally() with the solver's tuning given.
