@@ -502,6 +502,29 @@ TEST_F(MemoryTest, TheWholeBodysCellsAreNoMoreThanSevenPerFullCell)
     EXPECT_GE(e.transportCells, most);
 }
 
+TEST_F(MemoryTest, ClayHeldAsTilesIsCountedOnceWhereItsBoxesLeavesAreCounted)
+{
+    // A cube at Tc (tiles inside) under a plate wider than it: the clay may spread over its box, whose
+    // leaves are all counted, tiles' voxels among them; the layer's cells are those voxels, not those
+    // and the tiles' again. A ball poked by a small tool is counted by the leaves near its surface:
+    // its voxels inside are counted beside them.
+    const Scene press = parseScene(
+        R"({"threshold": 1000, "rule": "prorata", "push": "compress", "transport": "global",
+        "clay": [{"shape": "box", "min": [0, 0, 0], "max": [63, 63, 63], "mass": 1000}],
+        "tools": [{"shape": "box", "min": [-32, 64, -32], "max": [95, 67, 95], "path": [{"translate": [0, -1, 0], "frames": 8}]}],
+        "obstacles": [{"shape": "box", "min": [-128, -3, -128], "max": [192, -1, 192]}]})",
+        "s.json", "");
+    const MemoryEstimate pe = estimateSceneMemory(press);
+    EXPECT_EQ(pe.clayVoxels, pe.clayLeavesGrown * 512) << pe.describe();
+    const Scene poke = parseScene(
+        R"({"threshold": 1000, "rule": "prorata", "push": "compress", "transport": "global",
+        "clay": [{"shape": "sphere", "center": [64, 64, 64], "radius": 48, "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [64, 115, 64], "radius": 3, "path": [{"translate": [0, -1, 0], "frames": 4}]}]})",
+        "s.json", "");
+    const MemoryEstimate ke = estimateSceneMemory(poke);
+    EXPECT_GT(ke.clayVoxels, ke.clayLeavesGrown * 512) << ke.describe();
+}
+
 TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)
 {
     // A plate 256 x 4 x 256 voxels (a transformed box's bounds are up to two voxels loose on every

@@ -395,6 +395,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         const Shape* shape = nullptr; ///< clay of an analytic shape: its distance is exact
         bool overTc = false;          ///< clay that starts over Tc, or a file that may hold some
         bool tiled = false;           ///< clay of a convex analytic shape in 3D at most Tc: tiles inside
+        uint64_t tiledVoxels = 0;     ///< its voxels, when tiled
     };
     std::vector<Box> fileBoxes; // of clay from files: where a tool's corner may lie inside clay
     std::vector<Area> areas;
@@ -405,7 +406,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     std::vector<int64_t> clayMasses;       // their masses per voxel
     uint64_t fileLeaves = 0;               // of clay from files
     uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
-    uint64_t tiledVoxels = 0;              // voxels inside shapes held as tiles (not in clayLeavesGrown)
+    uint64_t tiledVoxels = 0;              // voxels inside shapes held as tiles
+    uint64_t tiledApart =
+        0; // of those, the voxels clayLeavesGrown leaves out (their leaves near the surface)
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
         const FileGrid g = fileGridStats(path, grid);
         const Box b = clip2D(g.bounds, dims);
@@ -456,7 +459,10 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             // Its mass: the voxels of an analytic shape counted (while the budget lasts), else its box's.
             const uint64_t voxels = a.shape ? voxelsInsideShape(*a.shape, b, voxelBudget) : voxelsIn(b);
             const double m = double(c.mass) * double(voxels);
-            if (a.tiled) tiledVoxels = voxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : tiledVoxels + voxels;
+            if (a.tiled) {
+                tiledVoxels = voxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : tiledVoxels + voxels;
+                areas.back().tiledVoxels = voxels;
+            }
             if (massBound != UINT64_MAX)
                 massBound = m >= 1.8e19 - double(massBound) ? UINT64_MAX : massBound + uint64_t(m);
             // Clay above Tc spreads until no cell holds more: over mass / Tc voxels at least.
@@ -562,6 +568,13 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             if (areas[i].clay ? files || !areas[i].file : sweeps) add(c, i);
         return c;
     };
+    // A group counted by its cover holds its tiled clay's leaves near the surface only: the voxels inside
+    // are counted apart. A group counted by its boxes' leaves holds them all.
+    auto countTiledApart = [&](const std::vector<size_t>& g) {
+        for (size_t i : g)
+            tiledApart = areas[i].tiledVoxels >= UINT64_MAX - tiledApart ? UINT64_MAX
+                                                                         : tiledApart + areas[i].tiledVoxels;
+    };
     ClayCover everywhere; // the grown clay of every group: where the global layer's cells may lie
     everywhere.margin = 8;
     everywhere.dims = dims;
@@ -595,6 +608,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 still.count(growBox(region, 14, dims), true, coverBudget, plus)) {
                 grown += n;
                 grownPlus += plus;
+                countTiledApart(g);
             } else {
                 grown += distinctNodes(own, 3);
                 std::vector<Box> around;
@@ -625,6 +639,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 poked.count(growBox(region, 14, dims), true, coverBudget, plus)) {
                 grown += n;
                 grownPlus += plus;
+                countTiledApart(g);
                 everywhere.members.insert(everywhere.members.end(), poked.members.begin(),
                                           poked.members.end());
                 continue;
@@ -755,7 +770,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // seeds' bounds grown by the reach + 2 (at most kDenseIndexMax slots; counted as at most one per
     // voxel of that box) and a table per brick or tree leaf that holds cells, in the box or beyond it,
     // counted as every voxel of those leaves.
-    e.clayVoxels = clayVoxels >= UINT64_MAX - tiledVoxels ? UINT64_MAX : clayVoxels + tiledVoxels;
+    e.clayVoxels = clayVoxels >= UINT64_MAX - tiledApart ? UINT64_MAX : clayVoxels + tiledApart;
     if (frame_policy::usesGlobalLayer(scene)) {
         const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
         uint64_t cells = std::min(e.clayVoxels, fullCells > UINT64_MAX / 7 ? UINT64_MAX : 7 * fullCells);
