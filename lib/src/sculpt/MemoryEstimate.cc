@@ -767,9 +767,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // Near the tools' sweeps, where the bound of the file comment (the layer's domain) holds, it is at
     // most the clay's voxels (in the leaves the grown clay may hold) within the reach's face steps of
     // the seeds' box, at the frame that holds most; the index is then a slot per 8^3 brick of the
-    // seeds' bounds grown by the reach + 2 (at most kDenseIndexMax slots; counted as at most one per
-    // voxel of that box) and a table per brick or tree leaf that holds cells, in the box or beyond it,
-    // counted as every voxel of those leaves.
+    // seeds' bounds grown by the reach + 2 (at most kDenseIndexMax slots) and a table per brick or tree
+    // leaf that holds cells, in the box or beyond it, counted as every voxel of those leaves.
     e.clayVoxels = clayVoxels >= UINT64_MAX - tiledApart ? UINT64_MAX : clayVoxels + tiledApart;
     if (frame_policy::usesGlobalLayer(scene)) {
         const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
@@ -833,7 +832,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 extent = unite(extent, b);
             const int64_t d = reach.seeds + reach.faceSteps;
             uint64_t nearLeaves = 0, nearCells = 0; // voxels of the leaves meeting the grown boxes; cells
-            Box denseBox;                           // where the dense index may lie
+            Box indexBox;                           // where the cell index's box may lie
             bool walled = false;
             for (size_t i = 0; i < toolBoxes.size(); ++i) {
                 const Box& t = toolBoxes[i];
@@ -845,13 +844,14 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 nearLeaves += leaves;
                 nearCells += std::min(leaves, layerCellsAlong(sweeps[i].frames, t, reach, extent, everywhere,
                                                               coverBudget, dims));
-                denseBox = unite(denseBox, growBox(t, d + 2, dims));
+                indexBox = unite(indexBox, growBox(t, d + 2, dims));
             }
             if (!walled) {
-                const uint64_t dense = std::min<uint64_t>(voxelsIn(denseBox), uint64_t(kDenseIndexMax));
+                const uint64_t slots = std::min<uint64_t>(uint64_t(clay_internal::slotCount(indexBox)),
+                                                          uint64_t(kDenseIndexMax));
                 counted = std::min(cells, nearCells);
                 bytes = std::min(bytes, counted * (kTransportBytesPerCell - 4) +
-                                            4 * (std::min(cells, nearLeaves) + dense));
+                                            4 * (std::min(cells, nearLeaves) + slots));
             }
         }
         e.transportBytes = bytes;
