@@ -27,7 +27,7 @@
 #include "AllocationCounter.h"      // the byte-counting operator new and delete
 #include "sculpt/FramePolicy.h"     // frame_policy::tryStepsBeforeLayer
 #include "sculpt/MemoryEstimate.h"  // memory_internal: voxelsWithinFaceSteps, the bytes per part
-#include "transport/SolverTuning.h" // transport_internal::kDenseIndexMax
+#include "transport/SolverTuning.h" // transport_internal::kCellIndexSlotsMax
 #include "TestRng.h"
 
 using namespace vdbclay;
@@ -116,7 +116,7 @@ Scene withObstacleBesideTheStroke(Scene s)
 uint64_t wholeBody(const MemoryEstimate& e)
 {
     return e.clayVoxels * memory_internal::kTransportBytesPerCell +
-           4 * uint64_t(transport_internal::kDenseIndexMax);
+           4 * uint64_t(transport_internal::kCellIndexSlotsMax);
 }
 
 } // namespace

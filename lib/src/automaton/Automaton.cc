@@ -91,6 +91,7 @@
 #include "automaton/PassEngine.h"
 #include "automaton/Tiles.h"
 #include "core/Format.h"
+#include "core/LeafSlots.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -222,10 +223,7 @@ struct Automaton::Impl {
         } else if (region->empty()) {
             return Scan();
         } else {
-            int64_t slots = 1;
-            for (int a = 0; a < 3 && slots <= INT64_MAX / 4096 / 1024; ++a)
-                slots *= (int64_t(region->max[a]) >> 3) - (int64_t(region->min[a]) >> 3) + 1;
-            if (slots <= int64_t(tree().leafCount())) {
+            if (leafSlotCount(*region) <= int64_t(tree().leafCount())) {
                 const Coord lo(region->min[0] & ~7, region->min[1] & ~7, region->min[2] & ~7);
                 for (int64_t x = lo.x(); x <= region->max[0]; x += 8)
                     for (int64_t y = lo.y(); y <= region->max[1]; y += 8)

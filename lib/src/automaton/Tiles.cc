@@ -2,6 +2,7 @@
 #include "automaton/Tiles.h"
 
 #include "core/Format.h"
+#include "core/LeafSlots.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tree/ValueAccessor.h>
@@ -178,11 +179,7 @@ uint64_t collapseUniformLeavesIn(MassTree& tree, int64_t tc, const std::vector<B
     // and the whole walk costs less.
     uint64_t slots = 0;
     for (const Box& r : regions) {
-        if (r.empty()) continue;
-        uint64_t n = 1;
-        for (int a = 0; a < 3 && n <= tree.leafCount(); ++a)
-            n *= uint64_t((int64_t(r.max[size_t(a)]) >> 3) - (int64_t(r.min[size_t(a)]) >> 3) + 1);
-        slots += n;
+        slots += uint64_t(leafSlotCount(r));
         if (slots > tree.leafCount()) return collapseUniformLeaves(tree, tc);
     }
     // The nodes of one level meeting the regions, each once, in the order of their origins.

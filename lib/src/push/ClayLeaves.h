@@ -23,6 +23,8 @@
 
 #include "vdbclay/Types.h"
 
+#include "core/LeafSlots.h"
+
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -34,18 +36,6 @@ namespace vdbclay {
 namespace clay_internal {
 
 using MassLeafT = openvdb::Int32Tree::LeafNodeType;
-
-/// Number of leaf slots (8^3 aligned) that @a b meets (0 if empty); saturates at INT64_MAX / 4.
-inline int64_t slotCount(const Box& b)
-{
-    if (b.empty()) return 0;
-    int64_t n = 1;
-    for (int i = 0; i < 3; ++i) {
-        n *= (int64_t(b.max[i]) >> 3) - (int64_t(b.min[i]) >> 3) + 1;
-        if (n > INT64_MAX / (int64_t(1) << 30)) return INT64_MAX / 4;
-    }
-    return n;
-}
 
 inline bool originLess(const openvdb::Coord& a, const openvdb::Coord& b)
 {
@@ -59,7 +49,7 @@ inline std::vector<const MassLeafT*> leavesNear(const openvdb::Int32Tree& tree, 
     if (b.empty()) return out;
     const openvdb::CoordBBox bb(openvdb::Coord(b.min[0], b.min[1], b.min[2]),
                                 openvdb::Coord(b.max[0], b.max[1], b.max[2]));
-    if (slotCount(b) <= int64_t(tree.leafCount())) {
+    if (leafSlotCount(b) <= int64_t(tree.leafCount())) {
         for (int64_t x = b.min[0] & ~7; x <= b.max[0]; x += 8)
             for (int64_t y = b.min[1] & ~7; y <= b.max[1]; y += 8)
                 for (int64_t z = b.min[2] & ~7; z <= b.max[2]; z += 8)
@@ -96,7 +86,7 @@ inline std::vector<openvdb::Coord> claySlotsNear(const openvdb::Int32Tree& tree,
     if (b.empty()) return out;
     const openvdb::CoordBBox bb(openvdb::Coord(b.min[0], b.min[1], b.min[2]),
                                 openvdb::Coord(b.max[0], b.max[1], b.max[2]));
-    if (slotCount(b) <= int64_t(tree.leafCount()) + 4096) {
+    if (leafSlotCount(b) <= int64_t(tree.leafCount()) + 4096) {
         openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(tree);
         for (int64_t x = b.min[0] & ~7; x <= b.max[0]; x += 8)
             for (int64_t y = b.min[1] & ~7; y <= b.max[1]; y += 8)

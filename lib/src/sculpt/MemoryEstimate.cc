@@ -83,8 +83,8 @@
 #include "vdbclay/Smooth.h"
 
 #include "io/ClayFileMeta.h"
-#include "push/ClayLeaves.h"
 #include "core/Format.h"
+#include "core/LeafSlots.h"
 #include "core/InputFile.h"
 #include "sculpt/EstimateGeometry.h"
 #include "sculpt/MemoryEstimate.h"
@@ -131,7 +131,7 @@ template <typename TreeT> constexpr uint64_t upperNodeBytes()
 
 using frame_policy::growBox;
 using namespace memory_internal; // the byte figures (MemoryEstimate.h), the geometry (EstimateGeometry.h)
-using transport_internal::kDenseIndexMax;
+using transport_internal::kCellIndexSlotsMax;
 
 /// Bytes of a tree of type T whose leaves are @a leaves, lying in the boxes @a boxes (which give the
 /// internal nodes).
@@ -407,8 +407,8 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     uint64_t fileLeaves = 0;               // of clay from files
     uint64_t settledVoxels = 0;            // voxels the clay fills at Tc per voxel, once its overload spread
     uint64_t tiledVoxels = 0;              // voxels inside shapes held as tiles
-    uint64_t tiledApart =
-        0; // of those, the voxels clayLeavesGrown leaves out (their leaves near the surface)
+    // Of those, the voxels clayLeavesGrown leaves out (it counts their leaves near the surface).
+    uint64_t tiledApart = 0;
     auto addFileClay = [&](const std::string& path, const std::string& grid) {
         const FileGrid g = fileGridStats(path, grid);
         const Box b = clip2D(g.bounds, dims);
@@ -744,8 +744,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             const uint64_t perBlock =
                 lanes * kSmoothBytesPerVoxel + (held - std::min(held, lanes)) * kSmoothCellBytes;
             bytes = std::max(bytes, sculpt_internal::tensionBlockVoxels(dims) * perBlock);
-        }
-        if (scene.surfaceTension > 0) {
             const uint64_t slots =
                 e.clayLeavesGrown > UINT64_MAX / 4 ? UINT64_MAX : 2 * e.clayLeavesGrown + e.toolSlots;
             const uint64_t journal =
@@ -767,7 +765,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // Near the tools' sweeps, where the bound of the file comment (the layer's domain) holds, it is at
     // most the clay's voxels (in the leaves the grown clay may hold) within the reach's face steps of
     // the seeds' box, at the frame that holds most; the index is then a slot per 8^3 brick of the
-    // seeds' bounds grown by the reach + 2 (at most kDenseIndexMax slots) and a table per brick or tree
+    // seeds' bounds grown by the reach + 2 (at most kCellIndexSlotsMax slots) and a table per brick or tree
     // leaf that holds cells, in the box or beyond it, counted as every voxel of those leaves.
     e.clayVoxels = clayVoxels >= UINT64_MAX - tiledApart ? UINT64_MAX : clayVoxels + tiledApart;
     if (frame_policy::usesGlobalLayer(scene)) {
@@ -822,9 +820,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         }
         const LayerReach reach = layerReach(lb);
         // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood by
-        // bricks when that holds at most kDenseIndexMax of them.
+        // bricks when that holds at most kCellIndexSlotsMax of them.
         uint64_t bytes =
-            cells * kTransportBytesPerCell + (toolBoxes.empty() ? 0 : 4 * uint64_t(kDenseIndexMax));
+            cells * kTransportBytesPerCell + (toolBoxes.empty() ? 0 : 4 * uint64_t(kCellIndexSlotsMax));
         uint64_t counted = cells; // the domain's cells counted
         if (reach.bounded && !toolBoxes.empty()) {
             Box extent; // where the clay can be
@@ -840,15 +838,15 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
                 for (const Box& o : obsBoxes)
                     walled |= !intersect(g, o).empty();
                 const Box b = intersect(g, extent);
-                const uint64_t leaves = b.empty() ? 0 : uint64_t(clay_internal::slotCount(b)) * 512;
+                const uint64_t leaves = b.empty() ? 0 : uint64_t(leafSlotCount(b)) * 512;
                 nearLeaves += leaves;
                 nearCells += std::min(leaves, layerCellsAlong(sweeps[i].frames, t, reach, extent, everywhere,
                                                               coverBudget, dims));
                 indexBox = unite(indexBox, growBox(t, d + 2, dims));
             }
             if (!walled) {
-                const uint64_t slots = std::min<uint64_t>(uint64_t(clay_internal::slotCount(indexBox)),
-                                                          uint64_t(kDenseIndexMax));
+                const uint64_t slots =
+                    std::min<uint64_t>(uint64_t(leafSlotCount(indexBox)), uint64_t(kCellIndexSlotsMax));
                 counted = std::min(cells, nearCells);
                 bytes = std::min(bytes, counted * (kTransportBytesPerCell - 4) +
                                             4 * (std::min(cells, nearLeaves) + slots));

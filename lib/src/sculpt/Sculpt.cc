@@ -49,6 +49,7 @@
 #include "core/CoordHash.h"
 #include "shapes/InsideBox.h"
 #include "core/Format.h"
+#include "core/LeafSlots.h"
 #include "sculpt/MemoryEstimate.h"
 #include "sculpt/MemoryWatchdog.h"
 #include "core/ParallelFor.h"
@@ -438,7 +439,7 @@ struct Sculptor::Impl {
         const bool is2D = scene.dimensions == 2;
         const Coord lo(box.min[0] >> 3, box.min[1] >> 3, box.min[2] >> 3);
         const Coord hi(box.max[0] >> 3, box.max[1] >> 3, box.max[2] >> 3);
-        const int64_t boxSlots = clay_internal::slotCount(box);
+        const int64_t boxSlots = leafSlotCount(box);
         bool all = frame_policy::toolCellsOverWholeBounds(scene) || reach > 64;
         std::vector<Coord> leaves; // the slots holding clay, in leaves or tiles
         if (!all) {

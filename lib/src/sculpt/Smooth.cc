@@ -363,9 +363,9 @@ smooth_internal::Smoothed run(const Automaton& automaton, Block& b, double stren
                             // The solid shape grows only where it is concave and shrinks only
                             // where it is convex: a film under Tc/2 does not gather into voxels
                             // over it on a flat face, nor does a flat face thin below it.
-                            if (2 * b.mass[to] < tc && g[to] <= flat.out)
+                            if (!filled(b, tc, to) && g[to] <= flat.out)
                                 t = std::min(t, (tc - 1) / 2 - b.mass[to]);
-                            if (2 * b.mass[from] >= tc && g[from] >= flat.in)
+                            if (filled(b, tc, from) && g[from] >= flat.in)
                                 t = std::min(t, b.mass[from] - (tc + 1) / 2);
                             if (t <= 0) continue;
                             b.mass[from] -= t;

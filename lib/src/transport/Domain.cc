@@ -170,7 +170,7 @@ void Domain::resetIndex(const std::vector<CellCoord>& seeds, int64_t reach)
     for (int a = 0; a < 3; ++a)
         if (boxLo[a] < INT32_MIN || boxHi[a] > INT32_MAX) return;
     mIndex.reset(CellCoord{int32_t(boxLo[0]), int32_t(boxLo[1]), int32_t(boxLo[2])},
-                 CellCoord{int32_t(boxHi[0]), int32_t(boxHi[1]), int32_t(boxHi[2])}, kDenseIndexMax);
+                 CellCoord{int32_t(boxHi[0]), int32_t(boxHi[1]), int32_t(boxHi[2])}, kCellIndexSlotsMax);
 }
 
 inline int32_t Domain::addCell(const CellCoord& c, uint8_t kind, int32_t m)

@@ -16,7 +16,7 @@
 //
 // The cell index maps a coordinate to its cell: a CellIndex (CellIndex.h: a slot per 8^3 brick, a
 // table per brick with cells) over the box the flood can reach (the seeds' bounds grown by the
-// reach + 2, when the reach is bounded and the box has at most kDenseIndexMax bricks), an Int32 tree
+// reach + 2, when the reach is bounded and the box has at most kCellIndexSlotsMax bricks), an Int32 tree
 // beyond it (the whole body's reach; the active set's rounds may add cells with room past the box).
 // Only a map: results do not depend on it. The flood's lookups (the index, the masses, the
 // obstacles) are inline: no calls through the shared library's symbol table.

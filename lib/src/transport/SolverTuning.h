@@ -1,7 +1,7 @@
 // The global transport's tuning: what the layer's work (and, within the solver's tolerance, its
 // result) depends on but a user does not choose; GlobalTransportOptions holds what a user chooses.
 // transportGlobally() uses SolverTuning's defaults; the tests vary them through the overload below.
-// The memory estimate (MemoryEstimate.cc) follows kDenseIndexMax.
+// The memory estimate (MemoryEstimate.cc) follows kCellIndexSlotsMax.
 #pragma once
 
 #include "vdbclay/Transport.h"
@@ -38,7 +38,7 @@ struct SolverTuning {
 
 /// The cell index over the flood's box (CellIndex.h) has at most this many slots of 4 bytes (32 MiB),
 /// one per 8^3 brick; a larger box uses the tree alone.
-constexpr int64_t kDenseIndexMax = int64_t(1) << 23;
+constexpr int64_t kCellIndexSlotsMax = int64_t(1) << 23;
 
 /// vdbclay::transportGlobally() with the solver's tuning given.
 /// @throw Error naming the field if @a options or @a tuning are invalid (maxRounds < 1, tolerance
