@@ -525,6 +525,35 @@ TEST_F(MemoryTest, ClayHeldAsTilesIsCountedOnceWhereItsBoxesLeavesAreCounted)
     EXPECT_GT(ke.clayVoxels, ke.clayLeavesGrown * 512) << ke.describe();
 }
 
+TEST_F(MemoryTest, ClayAtMostTcGrowsOnlyNearTheToolsWhereTheLayerMovesAllOfTheOverload)
+{
+    // A 256-wide ball at Tc stroked by a small tool, compress push and global layer: the push and the
+    // layer move clay only within the layer's bound of the tool, so the clay's leaves grow there and
+    // nowhere else; every frame's leaves stay within those counted. The same stroke with the surface
+    // push on clay under Tc (the automaton's try may carry overload past the push's region), or
+    // beside an obstacle (the reach may double up to the whole body), may grow anywhere on the
+    // surface: a leaf of margin all round.
+    const std::string json = stroke(256);
+    const MemoryEstimate e = estimateSceneMemory(parseScene(json, "s.json", ""));
+    EXPECT_LE(e.clayLeavesGrown, e.clayLeaves + e.clayLeaves / 4) << e.describe();
+    Sculptor sc(parseScene(json, "s.json", ""), 1);
+    uint64_t most = sc.mass()->tree().leafCount();
+    sc.run(0, [&](const FrameReport&) { most = std::max<uint64_t>(most, sc.mass()->tree().leafCount()); });
+    EXPECT_GE(e.clayLeavesGrown, most) << e.describe();
+    EXPECT_GT(most, uint64_t(sc.mass()->tree().leafCount()) / 2); // the frames were seen
+    const MemoryEstimate under =
+        estimateSceneMemory(parseScene(stroke(256, "surface", 16, 3, 900), "s.json", ""));
+    EXPECT_GE(under.clayLeavesGrown, under.clayLeaves + under.clayLeaves / 2) << under.describe();
+    Scene beside = parseScene(json, "s.json", "");
+    beside.obstacles.push_back(
+        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
+        "obstacles": [{"shape": "box", "min": [150,262,100], "max": [170,270,160]}]})",
+                   "t.json", "")
+            .obstacles[0]);
+    const MemoryEstimate walled = estimateSceneMemory(beside);
+    EXPECT_GE(walled.clayLeavesGrown, walled.clayLeaves + walled.clayLeaves / 2) << walled.describe();
+}
+
 TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)
 {
     // A plate 256 x 4 x 256 voxels (a transformed box's bounds are up to two voxels loose on every

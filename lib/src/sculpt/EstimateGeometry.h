@@ -101,9 +101,9 @@ Box neighbourhood(Box b, bool neighbours, int dims);
 constexpr uint64_t kCoverBudget = uint64_t(1) << 25;
 constexpr uint64_t kCoverTests = uint64_t(1) << 26;
 
-/// Where clay may lie during a run, leaf by leaf: within `margin` voxels of a clay shape's voxels
-/// (an analytic shape, whose distance is exact: a leaf whose centre is at least
-/// kLeafHalfDiagonal + margin from it holds no such voxel; other shapes: their bounds), or of a box
+/// Where clay may lie during a run, leaf by leaf: within a margin (a member's own, else `margin`) of
+/// a clay shape's voxels (an analytic shape, whose distance is exact: a leaf whose centre is at least
+/// kLeafHalfDiagonal + the margin from it holds no such voxel; other shapes: their bounds), or of a box
 /// (clay from a file, a tool's sweep). Counting leaves costs a distance per leaf near a shape's
 /// surface (whole 128^3 nodes are decided from their centre), within a budget of evaluations and of
 /// tests; past either the count gives up and the caller counts boxes.
@@ -112,6 +112,7 @@ struct ClayCover {
         const Shape* shape = nullptr; ///< an analytic shape, or null: the box alone
         Box box;                      ///< the shape's tightened bounds, or the box
         bool tiled = false;           ///< the shape's clay is tiles inside (automaton/Tiles.h)
+        int64_t margin = -1;          ///< how far its clay may spread; -1: the cover's margin
     };
     std::vector<Member> members;
     int64_t margin = 0;
@@ -126,11 +127,12 @@ struct ClayCover {
     static constexpr double kNodeLeafSpread = 103.9231; // 60 sqrt 3: leaf centres from the node's
     static constexpr double kAnchorSpread = 6.9283; // 4 sqrt 3: a leaf centre + (4, 4, 4) to its 8 corners
 
-    void addShape(const Shape* analytic, const Box& bounds, bool tiled = false)
+    void addShape(const Shape* analytic, const Box& bounds, bool tiled = false, int64_t ownMargin = -1)
     {
-        members.push_back({analytic, bounds, tiled});
+        members.push_back({analytic, bounds, tiled, ownMargin});
     }
-    void addBox(const Box& b) { members.push_back({nullptr, b, false}); }
+    void addBox(const Box& b) { members.push_back({nullptr, b, false, -1}); }
+    int64_t marginOf(const Member& mb) const { return mb.margin >= 0 ? mb.margin : margin; }
 
     /// The leaves (8^3, leaf-aligned) of @a region that may hold clay (with @a neighbours: those
     /// and their 26 neighbours); false (and @a out untouched) when @a budget ran out.
@@ -149,37 +151,47 @@ struct ClayCover {
     {
         region = clip2D(region, dims);
         if (region.empty()) return true;
-        const double m = double(margin);
-        // A leaf holds clay when its centre lies within kLeafHalfDiagonal + m of a shape. With
-        // @a neighbours, also when one of its voxels lies within the band's 4 voxels of such a voxel
-        // (its centre within kLeafHalfDiagonal + 4 + m), or one of the 7 leaves above it (+8 along
-        // some axes: it is their anchor) holds clay; those 8 centres lie within kAnchorSpread of the
-        // leaf's centre moved by (4, 4, 4).
-        const double holdsWithin = m + kLeafHalfDiagonal, bandWithin = holdsWithin + 4;
-        const double anchorWithin = holdsWithin + kAnchorSpread;
-        const double leafWithin =
-            neighbours ? std::max(bandWithin, anchorWithin + kAnchorSpread) : holdsWithin;
+        // A leaf holds clay when its centre lies within kLeafHalfDiagonal + m of a shape (m: the
+        // member's margin). With @a neighbours, also when one of its voxels lies within the band's 4
+        // voxels of such a voxel (its centre within kLeafHalfDiagonal + 4 + m), or one of the 7 leaves
+        // above it (+8 along some axes: it is their anchor) holds clay; those 8 centres lie within
+        // kAnchorSpread of the leaf's centre moved by (4, 4, 4).
+        struct Within {
+            double m, holds, band, anchor, leaf;
+        };
+        std::vector<Within> within(members.size());
         std::vector<Box> grown(members.size());
-        for (size_t i = 0; i < members.size(); ++i)
+        for (size_t i = 0; i < members.size(); ++i) {
+            const int64_t mi = marginOf(members[i]);
+            Within& w = within[i];
+            w.m = double(mi);
+            w.holds = w.m + kLeafHalfDiagonal;
+            w.band = w.holds + 4;
+            w.anchor = w.holds + kAnchorSpread;
+            w.leaf = neighbours ? std::max(w.band, w.anchor + kAnchorSpread) : w.holds;
             grown[i] = clip2D(
-                neighbourhood(frame_policy::growBox(members[i].box, margin, dims), neighbours, dims), dims);
+                neighbourhood(frame_policy::growBox(members[i].box, mi, dims), neighbours, dims), dims);
+        }
         // A tiled member's clay lies in leaves only near its surface: outside, as for any shape, within
         // the margin (where it may spread); inside, within a leaf's half-diagonal of the surface, the
         // rest being tiles. So inside the distance counts as margin - distance (the magnitude is a
         // lower bound of the distance to the surface, as the distance is outside).
-        auto distanceAt = [&](const Member& mb, double x, double y, double z) {
+        auto distanceAt = [&](const Member& mb, const Within& w, double x, double y, double z) {
             if (budget > 0) --budget;
             const double d = mb.shape->distance(Vec3{{x, y, z}});
-            return mb.tiled && tilesAsTiles && d < 0 ? m - d : d;
+            return mb.tiled && tilesAsTiles && d < 0 ? w.m - d : d;
         };
-        // Whether leaf (x, y, z) holds clay of shape member @a mb (or, with neighbours, is a neighbour).
-        auto shapeHolds = [&](const Member& mb, int64_t x, int64_t y, int64_t z) {
+        // Whether leaf (x, y, z) holds clay of shape member @a i (or, with neighbours, is a neighbour).
+        auto shapeHolds = [&](size_t i, int64_t x, int64_t y, int64_t z) {
+            const Member& mb = members[i];
+            const Within& w = within[i];
+            const double holdsWithin = w.holds, anchorWithin = w.anchor;
             const double cx = double(x) + 3.5, cy = double(y) + 3.5, cz = double(z) + 3.5;
-            const double d = distanceAt(mb, cx, cy, cz);
-            if (d < (neighbours ? bandWithin : holdsWithin)) return true;
-            if (!neighbours || distanceAt(mb, cx + 4, cy + 4, cz + 4) >= anchorWithin) return false;
+            const double d = distanceAt(mb, w, cx, cy, cz);
+            if (d < (neighbours ? w.band : holdsWithin)) return true;
+            if (!neighbours || distanceAt(mb, w, cx + 4, cy + 4, cz + 4) >= anchorWithin) return false;
             for (int k = 1; k < 8; ++k)
-                if (distanceAt(mb, cx + (k & 1 ? 8 : 0), cy + (k & 2 ? 8 : 0), cz + (k & 4 ? 8 : 0)) <
+                if (distanceAt(mb, w, cx + (k & 1 ? 8 : 0), cy + (k & 2 ? 8 : 0), cz + (k & 4 ? 8 : 0)) <
                     holdsWithin)
                     return true;
             return false;
@@ -213,11 +225,11 @@ struct ClayCover {
                             continue;
                         }
                         if (budget == 0) return false;
-                        const double d = distanceAt(members[i], double(node.min[0]) + 63.5,
+                        const double d = distanceAt(members[i], within[i], double(node.min[0]) + 63.5,
                                                     double(node.min[1]) + 63.5, double(node.min[2]) + 63.5);
-                        if (d >= kNodeLeafSpread + leafWithin) continue; // no leaf of it
-                        whole =
-                            all && d < holdsWithin - kNodeLeafSpread && !(members[i].tiled && tilesAsTiles);
+                        if (d >= kNodeLeafSpread + within[i].leaf) continue; // no leaf of it
+                        whole = all && d < within[i].holds - kNodeLeafSpread &&
+                                !(members[i].tiled && tilesAsTiles);
                         near.push_back(i);
                     }
                     if (near.empty()) continue;
@@ -233,7 +245,7 @@ struct ClayCover {
                                     const Member& mb = members[near[k]];
                                     if (!touches(leaf, grown[near[k]])) continue;
                                     if (mb.shape && budget < 9) return false;
-                                    holds = !mb.shape || shapeHolds(mb, x, y, z);
+                                    holds = !mb.shape || shapeHolds(near[k], x, y, z);
                                 }
                                 if (holds) fn(intersect(leaf, region));
                             }

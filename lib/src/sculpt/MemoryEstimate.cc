@@ -25,10 +25,12 @@
 // touching clay boxes and tool sweeps (each grown by a leaf): clay no tool reaches, at most Tc, keeps
 // its leaves; clay a tool pokes spreads within a leaf of itself and of the tools' sweeps (what a push
 // moves lands beside the tool, the global layer writes only the cells its domain touches, next to the
-// clay); clay a tool covers (a sweep spanning its box on two axes: squeezed over the whole footprint),
-// clay over Tc and clay from files that may hold some spread over the group's box. Never more than
-// 27 leaves per initial leaf (a step moves clay one voxel), a leaf per unit of mass, and clay over Tc
-// at least over its settled volume.
+// clay); where the global layer moves all of a push's overload within its bound (no try before it,
+// no obstacle near: changesNearTools), an analytic shape's clay spreads so only within the layer's
+// reach of a tool and keeps its own leaves elsewhere; clay a tool covers (a sweep spanning its box on two
+// axes: squeezed over the whole footprint), clay over Tc and clay from files that may hold some spread over
+// the group's box. Never more than 27 leaves per initial leaf (a step moves clay one voxel), a leaf per unit
+// of mass, and clay over Tc at least over its settled volume.
 //
 // The global layer's domain (transport/Domain.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
 // touch clay runs the layer with reach r0 = frame_policy::layerReach(contact) (contact: sqrt of the
@@ -536,6 +538,72 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             spans += t.min[ax] <= a.min[ax] && t.max[ax] >= a.max[ax] ? 1 : 0;
         return spans >= 2; // in 2D z spans trivially: one more axis
     };
+    std::vector<Box> obsBoxes;
+    for (const ShapeSpec& o : scene.obstacles) {
+        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims, budget);
+        e.obstacleLeaves += nodesIn(b, 3);
+        obsBoxes.push_back(b);
+    }
+    // The global layer's domain (file comment): where its bound holds, its cells lie within
+    // `layerNear` voxels of a tool's bounds (its seeds within reach.seeds, its cells reach.faceSteps
+    // from those), and no obstacle lies that near (clay walled in: the reach doubles up to the whole
+    // body).
+    LayerBound lb;
+    lb.push = scene.push;
+    lb.dims = dims;
+    lb.toolInside = toolInside;
+    lb.toolFace = toolFace;
+    lb.toolExtent = toolExtent;
+    lb.maxSteps = scene.settle.maxSteps;
+    // The try runs after a surface push on clay that is not saturated near it: clay whose shapes
+    // all start saturated (pushes move clay, they do not thin it) is taken to stay so.
+    lb.trySkipped = !frame_policy::tryAfterPush(scene) ||
+                    (fileLeaves == 0 && !clayMasses.empty() &&
+                     std::all_of(clayMasses.begin(), clayMasses.end(),
+                                 [&](int64_t m) { return frame_policy::trySaturated(scene, m, 1); }));
+    lb.clayMoves = std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
+    // Shapes that overlap add up: over Tc where two of them do.
+    if (!lb.clayMoves) {
+        std::vector<size_t> shapes(clayBoxes.size());
+        for (size_t i = 0; i < shapes.size(); ++i)
+            shapes[i] = i;
+        lb.clayMoves = anyTouchingPair(
+            shapes, [&](size_t i) -> const Box& { return clayBoxes[i]; },
+            [&](size_t i, size_t j) { return clayMasses[i] + clayMasses[j] > tc; });
+    }
+    for (const Box& t : toolBoxes) {
+        for (size_t a = 0; a < clayAreas; ++a)
+            lb.covers |= covers(t, areas[a].box);
+        // A tool that enters the clay from its surface has a corner of its sweep outside every clay
+        // shape (where it sticks out); one with none starts inside the clay.
+        bool out = false;
+        for (int corner = 0; corner < 8 && !out; ++corner) {
+            const Vec3 p{{double(corner & 1 ? t.max[0] : t.min[0]), double(corner & 2 ? t.max[1] : t.min[1]),
+                          double(corner & 4 ? t.max[2] : t.min[2])}};
+            const bool inShape = std::any_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
+                return c.shape.shape && c.shape.shape->distance(p) < 0;
+            });
+            // Clay from a file: its voxels are not read, so a corner within its bounds may be in it.
+            const Box at{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
+                         {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}};
+            const bool inFile =
+                std::any_of(fileBoxes.begin(), fileBoxes.end(), [&](const Box& f) { return touches(f, at); });
+            out = !inShape && !inFile;
+        }
+        lb.buried |= !out;
+    }
+    const LayerReach reach = layerReach(lb);
+    const int64_t layerNear = reach.seeds + reach.faceSteps;
+    bool walled = false;
+    for (const Box& t : toolBoxes)
+        for (const Box& o : obsBoxes)
+            walled |= !intersect(growBox(t, layerNear, 3), o).empty();
+    // Clay changes only near the tools where the global layer moves all of a push's overload and
+    // its bound holds: the compress push and the layer move clay within layerNear of a tool's bounds
+    // (the Dirichlet cells included), no try carries overload out of the push's region first, and the
+    // automaton then finds none to move (frame_policy). Elsewhere the clay at most Tc keeps its leaves.
+    const bool changesNearTools = frame_policy::usesGlobalLayer(scene) && reach.bounded && lb.trySkipped &&
+                                  !walled && !toolBoxes.empty();
     // The clay's leaves, group by group (clay boxes and tool sweeps that touch, each grown by a leaf):
     // at the start (the shapes' own), grown (as far as the run may move them), and within one leaf of
     // those (grownPlus: the automaton's anchors, the surface's band).
@@ -558,14 +626,26 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             c.addBox(areas[i].box);
     };
     // The cover of group @a g's leaves (files too when @a files) and, when @a sweeps, its tools' sweeps:
-    // tiled clay by the leaves near its surface.
-    auto coverOf = [&](const std::vector<size_t>& g, int64_t margin, bool files, bool sweeps) {
+    // tiled clay by the leaves near its surface. With @a nearTools, an analytic shape's clay spreads
+    // by the margin only near the tools (changesNearTools): elsewhere it keeps its own leaves.
+    auto coverOf = [&](const std::vector<size_t>& g, int64_t margin, bool files, bool sweeps,
+                       bool nearTools = false) {
         ClayCover c;
         c.margin = margin;
         c.dims = dims;
         c.tilesAsTiles = true;
-        for (size_t i : g)
-            if (areas[i].clay ? files || !areas[i].file : sweeps) add(c, i);
+        for (size_t i : g) {
+            if (!(areas[i].clay ? files || !areas[i].file : sweeps)) continue;
+            if (!nearTools || !areas[i].shape) {
+                add(c, i);
+                continue;
+            }
+            c.addShape(areas[i].shape, areas[i].box, areas[i].tiled, 0);
+            for (const Box& t : toolBoxes) {
+                const Box near = intersect(areas[i].box, growBox(t, layerNear + 8, dims));
+                if (!near.empty()) c.addShape(areas[i].shape, near, areas[i].tiled);
+            }
+        }
         return c;
     };
     // A group counted by its cover holds its tiled clay's leaves near the surface only: the voxels inside
@@ -630,7 +710,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         }
         grownBoxes.insert(grownBoxes.end(), members.begin(), members.end());
         if (!spreads) {
-            const ClayCover poked = coverOf(g, 8, true, true);
+            const ClayCover poked = coverOf(g, 8, true, true, changesNearTools);
             Box region;
             for (const Box& b : members)
                 region = unite(region, b);
@@ -698,12 +778,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     e.clayBytes =
         std::max(treeBytes<MassTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap), fileTreeBytes);
 
-    std::vector<Box> obsBoxes;
-    for (const ShapeSpec& o : scene.obstacles) {
-        const Box b = tighten(*o.shape, clip2D(o.shape->bounds(), dims), dims, budget);
-        e.obstacleLeaves += nodesIn(b, 3);
-        obsBoxes.push_back(b);
-    }
     // The static mask, and the automaton's copy, which also holds the tools' cells.
     e.obstacleBytes = 2 * treeBytes<MaskTreeT>(e.obstacleLeaves, obsBoxes);
     e.toolBytes = e.toolSlots * kToolBytesPerSlot + treeBytes<MaskTreeT>(e.toolSlots, toolBoxes);
@@ -771,54 +845,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     if (frame_policy::usesGlobalLayer(scene)) {
         const uint64_t fullCells = massBound == UINT64_MAX ? UINT64_MAX : massBound / uint64_t(tc);
         uint64_t cells = std::min(e.clayVoxels, fullCells > UINT64_MAX / 7 ? UINT64_MAX : 7 * fullCells);
-        LayerBound lb;
-        lb.push = scene.push;
-        lb.dims = dims;
-        lb.toolInside = toolInside;
-        lb.toolFace = toolFace;
-        lb.toolExtent = toolExtent;
-        lb.maxSteps = scene.settle.maxSteps;
-        // The try runs after a surface push on clay that is not saturated near it: clay whose shapes
-        // all start saturated (pushes move clay, they do not thin it) is taken to stay so.
-        lb.trySkipped = !frame_policy::tryAfterPush(scene) ||
-                        (fileLeaves == 0 && !clayMasses.empty() &&
-                         std::all_of(clayMasses.begin(), clayMasses.end(),
-                                     [&](int64_t m) { return frame_policy::trySaturated(scene, m, 1); }));
-        lb.clayMoves =
-            std::any_of(areas.begin(), areas.end(), [](const Area& a) { return a.clay && a.moves; });
-        // Shapes that overlap add up: over Tc where two of them do.
-        if (!lb.clayMoves) {
-            std::vector<size_t> shapes(clayBoxes.size());
-            for (size_t i = 0; i < shapes.size(); ++i)
-                shapes[i] = i;
-            lb.clayMoves = anyTouchingPair(
-                shapes, [&](size_t i) -> const Box& { return clayBoxes[i]; },
-                [&](size_t i, size_t j) { return clayMasses[i] + clayMasses[j] > tc; });
-        }
-        for (const Box& t : toolBoxes) {
-            for (size_t a = 0; a < clayAreas; ++a)
-                lb.covers |= covers(t, areas[a].box);
-            // A tool that enters the clay from its surface has a corner of its sweep outside every clay
-            // shape (where it sticks out); one with none starts inside the clay.
-            bool out = false;
-            for (int corner = 0; corner < 8 && !out; ++corner) {
-                const Vec3 p{{double(corner & 1 ? t.max[0] : t.min[0]),
-                              double(corner & 2 ? t.max[1] : t.min[1]),
-                              double(corner & 4 ? t.max[2] : t.min[2])}};
-                const bool inShape =
-                    std::any_of(scene.clay.begin(), scene.clay.end(), [&](const ClaySpec& c) {
-                        return c.shape.shape && c.shape.shape->distance(p) < 0;
-                    });
-                // Clay from a file: its voxels are not read, so a corner within its bounds may be in it.
-                const Box at{{{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}},
-                             {{int32_t(p[0]), int32_t(p[1]), int32_t(p[2])}}};
-                const bool inFile = std::any_of(fileBoxes.begin(), fileBoxes.end(),
-                                                [&](const Box& f) { return touches(f, at); });
-                out = !inShape && !inFile;
-            }
-            lb.buried |= !out;
-        }
-        const LayerReach reach = layerReach(lb);
         // A layer seeded in a push's region has a bounded reach, and indexes the box it can flood by
         // bricks when that holds at most kCellIndexSlotsMax of them.
         uint64_t bytes =
@@ -828,21 +854,16 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             Box extent; // where the clay can be
             for (const Box& b : grownBoxes)
                 extent = unite(extent, b);
-            const int64_t d = reach.seeds + reach.faceSteps;
             uint64_t nearLeaves = 0, nearCells = 0; // voxels of the leaves meeting the grown boxes; cells
             Box indexBox;                           // where the cell index's box may lie
-            bool walled = false;
             for (size_t i = 0; i < toolBoxes.size(); ++i) {
                 const Box& t = toolBoxes[i];
-                const Box g = growBox(t, d, 3);
-                for (const Box& o : obsBoxes)
-                    walled |= !intersect(g, o).empty();
-                const Box b = intersect(g, extent);
+                const Box b = intersect(growBox(t, layerNear, 3), extent);
                 const uint64_t leaves = b.empty() ? 0 : uint64_t(leafSlotCount(b)) * 512;
                 nearLeaves += leaves;
                 nearCells += std::min(leaves, layerCellsAlong(sweeps[i].frames, t, reach, extent, everywhere,
                                                               coverBudget, dims));
-                indexBox = unite(indexBox, growBox(t, d + 2, dims));
+                indexBox = unite(indexBox, growBox(t, layerNear + 2, dims));
             }
             if (!walled) {
                 const uint64_t slots =
