@@ -42,6 +42,7 @@ struct RunArgs {
     bool quiet = false;
     bool sceneOutputsAnywhere = false; ///< --scene-outputs-anywhere
     std::string up;                    ///< --up: empty keeps the scene's
+    std::string grids;                 ///< --grids: empty keeps the scene's
 };
 
 /// Where a run writes: the options' files, else the scene's outputs; the checkpoint's default
@@ -305,6 +306,8 @@ vdbclay::Scene sceneOf(const RunArgs& a)
         }
         scene.sweep = a.sweep == "on";
     }
+    if (!a.grids.empty())
+        scene.outputs.grids = parsedOption("--grids", [&] { return vdbclay::parseClayGrids(a.grids); });
     if (!a.resume.empty()) scene.start = a.resume; // relative to the current directory
     applyUp(scene, a.up);
     if (cliBudget != 0) scene.memoryBudget = cliBudget;
@@ -464,7 +467,10 @@ public:
         for (Sequence& q : mSeqs) {
             const std::string path = frameFile(q.path, q.pattern, frame);
             switch (q.kind) {
-            case Kind::Vdb: vdbclay::writeClayFile(path, *sculptor.mass(), sculptor.checkpointMeta()); break;
+            case Kind::Vdb:
+                vdbclay::writeClayFile(path, *sculptor.mass(), sculptor.checkpointMeta(),
+                                       scene.outputs.grids);
+                break;
             case Kind::Png:
                 vdbclay::renderPng(path, *sculptor.mass(), scene.rule.threshold, scene.dimensions);
                 break;
@@ -591,7 +597,7 @@ double writeOutputs(const vdbclay::Sculptor& sculptor, const RunOutputs& o, cons
     vdbclay::adviseBatchHeapGrowth();
     frames.printWritten();
     if (!o.vdb.empty() && !frames.writes(o.vdb)) {
-        vdbclay::writeClayFile(o.vdb, *sculptor.mass(), sculptor.checkpointMeta());
+        vdbclay::writeClayFile(o.vdb, *sculptor.mass(), sculptor.checkpointMeta(), scene.outputs.grids);
         std::printf("wrote %s\n", o.vdb.c_str());
     }
     if (!o.png.empty() && !frames.writes(o.png)) {
@@ -662,7 +668,7 @@ void addRunOptions(CLI::App* run, RunArgs& ra)
                     "scene JSON file (see docs/SCENES.md), - for standard input; omitted: the built-in scene")
         ->check(fileName());
     run->add_option("-o,--output", ra.out,
-                    "write the clay to this .vdb (mass, density, surface grids); a run of # in the name "
+                    "write the clay to this .vdb (the grids --grids names); a run of # in the name "
                     "(clay.####.vdb) writes every frame, numbered")
         ->check(fileName());
     run->add_option("--threads", ra.threads, "worker threads for the whole command; 0 = all cores")
@@ -693,6 +699,10 @@ void addRunOptions(CLI::App* run, RunArgs& ra)
     run->add_option("--resume", ra.resume,
                     "continue an interrupted run from its checkpoint (same scene and options)")
         ->check(fileName());
+    run->add_option("--grids", ra.grids,
+                    "the grids the .vdb holds: mass, density, surface, comma-separated (default: all three; "
+                    "\"start\" and --resume read mass)")
+        ->check(nonEmpty("grid names"));
     run->add_option("--push", ra.push, "override the scene's push: surface (the paper's) or compress");
     run->add_option("--transport", ra.transport,
                     "override the scene's transport: local (the paper's automaton) or global");

@@ -177,6 +177,25 @@ Box boxOf(const Int3& lo, const Int3& hi)
 }
 
 /// The active voxels' bounding box, or the box the caller gave.
+/// The grids @a names names (none: @a byDefault). @throw Error naming a name that is not a grid, or
+/// one named twice, or an empty list.
+ClayGrids gridsOf(const std::optional<std::vector<std::string>>& names, const ClayGrids& byDefault)
+{
+    if (!names) return byDefault;
+    if (names->empty()) throw Error("grids: expected at least one of mass, density, surface");
+    std::string list;
+    for (const std::string& n : *names) {
+        if (n.find(',') != std::string::npos)
+            throw Error("grids: \"" + n + "\" is not a grid of a clay file (mass, density or surface)");
+        list += (list.empty() ? "" : ",") + n;
+    }
+    try {
+        return parseClayGrids(list);
+    } catch (const Error& e) {
+        throw Error(std::string("grids: ") + e.what());
+    }
+}
+
 Box regionOf(const Clay& c, const std::optional<Int3>& lo, const std::optional<Int3>& hi)
 {
     if (lo.has_value() != hi.has_value()) throw Error("give both min and max, or neither");
@@ -753,12 +772,14 @@ PYBIND11_MODULE(_vdbclay, m)
             "An independent copy.")
         .def(
             "write",
-            [](const Clay& c, const std::string& path) {
+            [](const Clay& c, const std::string& path, const std::optional<std::vector<std::string>>& grids) {
+                const ClayGrids named = gridsOf(grids, ClayGrids());
                 GridGuard g(c.lock, false);
-                writeClayFile(path, *c.mass, c.meta);
+                writeClayFile(path, *c.mass, c.meta, named);
             },
-            py::arg("path"),
-            "Writes a clay .vdb (grids mass, density, surface; atomically) with this clay's metadata.")
+            py::arg("path"), py::arg("grids") = py::none(),
+            "Writes a clay .vdb atomically with this clay's metadata, holding the grids named (a list of "
+            "\"mass\", \"density\", \"surface\"; default: all three).")
         .def(
             "write_mesh",
             [](const Clay& c, const std::string& path, double iso, bool keepVolume) {
@@ -1163,12 +1184,17 @@ PYBIND11_MODULE(_vdbclay, m)
             "The clay now (shares the grid and its lock), with metadata to continue from a file.")
         .def(
             "write",
-            [](const PySculptor& p, const std::string& path) {
+            [](const PySculptor& p, const std::string& path,
+               const std::optional<std::vector<std::string>>& grids) {
+                const ClayGrids named = gridsOf(grids, p.sculptor->scene().outputs.grids);
                 GridGuard g(p.lock, false);
                 const Clay c = sculptorClay(p);
-                writeClayFile(path, *c.mass, c.meta);
+                writeClayFile(path, *c.mass, c.meta, named);
             },
-            py::arg("path"), "Writes the clay as a .vdb that a scene's \"start\" continues exactly.")
+            py::arg("path"), py::arg("grids") = py::none(),
+            "Writes the clay as a .vdb that a scene's \"start\" continues exactly (it needs \"mass\"), "
+            "holding the grids named (a list of \"mass\", \"density\", \"surface\"; default: the scene's "
+            "outputs.grids).")
         .def_property_readonly(
             "mass_added",
             [](const PySculptor& p) {

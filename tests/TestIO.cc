@@ -17,6 +17,7 @@
 
 #include <png.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -220,6 +221,88 @@ TEST_F(IOTest, RoundTripIsExactWithMetadata)
     // The caller's grid is not changed by writing (name, metadata, transform).
     EXPECT_EQ(clay->metaCount(), openvdb::Int32Grid::create(0)->metaCount());
     EXPECT_EQ(clay->voxelSize()[0], 1.0);
+}
+
+TEST_F(IOTest, AFileHoldsTheGridsNamedEachAsInTheFullFile)
+{
+    auto clay = sampleClay();
+    const ClayMeta meta = sampleMeta();
+    const std::string full = file("full.vdb");
+    writeClayFile(full, *clay, meta);
+    auto gridNames = [](const std::string& path) {
+        openvdb::io::File f(path);
+        f.open();
+        std::vector<std::string> names;
+        const openvdb::GridPtrVecPtr grids = f.readAllGridMetadata();
+        for (const auto& g : *grids)
+            names.push_back(g->getName());
+        std::sort(names.begin(), names.end());
+        return names;
+    };
+    EXPECT_EQ(gridNames(full), (std::vector<std::string>{"density", "mass", "surface"}));
+    // Each grid as the full file holds it, value for value.
+    auto sameFloatGrid = [&](const std::string& path, const std::string& name) {
+        auto a = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, name));
+        auto b = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(full, name));
+        ASSERT_TRUE(a && b) << path << " " << name;
+        EXPECT_EQ(a->getGridClass(), b->getGridClass());
+        EXPECT_TRUE(a->tree().hasSameTopology(b->tree())) << path << " " << name;
+        auto bAcc = b->getConstAccessor();
+        for (auto it = a->cbeginValueAll(); it; ++it)
+            ASSERT_EQ(*it, bAcc.getValue(it.getCoord())) << path << " " << name << " " << it.getCoord();
+    };
+    const std::string massOnly = file("mass.vdb");
+    writeClayFile(massOnly, *clay, meta, parseClayGrids("mass"));
+    EXPECT_EQ(gridNames(massOnly), std::vector<std::string>{"mass"});
+    const ClayFile back = readClayFile(massOnly);
+    EXPECT_EQ(contentHash(*back.mass), contentHash(*clay));
+    EXPECT_EQ(back.meta.seed, meta.seed);
+
+    const std::string fog = file("density.vdb");
+    writeClayFile(fog, *clay, meta, parseClayGrids("density"));
+    EXPECT_EQ(gridNames(fog), std::vector<std::string>{"density"});
+    sameFloatGrid(fog, "density");
+    EXPECT_EQ(readGrid(fog, "density")->metaValue<int32_t>("vdbclay_threshold"), 1000);
+    EXPECT_TRUE(
+        contains(errorOf([&] { readClayFile(fog); }), "has no grid named \"mass\" (grids: \"density\")"))
+        << errorOf([&] { readClayFile(fog); });
+
+    // The surface alone (swept from a density not kept) carries the clay's metadata itself.
+    const std::string level = file("surface.vdb");
+    writeClayFile(level, *clay, meta, parseClayGrids("surface"));
+    EXPECT_EQ(gridNames(level), std::vector<std::string>{"surface"});
+    sameFloatGrid(level, "surface");
+    EXPECT_EQ(readGrid(level, "surface")->metaValue<int32_t>("vdbclay_threshold"), 1000);
+
+    const std::string two = file("two.vdb");
+    writeClayFile(two, *clay, meta, parseClayGrids("surface,mass"));
+    EXPECT_EQ(gridNames(two), (std::vector<std::string>{"mass", "surface"}));
+    sameFloatGrid(two, "surface");
+    EXPECT_FALSE(readGrid(two, "surface")->getMetadata<openvdb::Int32Metadata>("vdbclay_threshold"));
+
+    // None named: refused, nothing written.
+    const std::string none = file("none.vdb");
+    EXPECT_EQ(errorOf([&] {
+                  writeClayFile(none, *clay, meta, ClayGrids{false, false, false});
+              }),
+              "cannot write " + none + ": no grid named (mass, density or surface)");
+    EXPECT_FALSE(fs::exists(none));
+}
+
+TEST_F(IOTest, GridNamesAreParsedAndEveryWrongOneIsNamed)
+{
+    const ClayGrids g = parseClayGrids("density,mass");
+    EXPECT_TRUE(g.mass && g.density && !g.surface);
+    EXPECT_EQ(clayGridsName(g), "mass,density");
+    EXPECT_EQ(clayGridsName(ClayGrids()), "mass,density,surface");
+    EXPECT_EQ(errorOf([] { parseClayGrids("fog"); }),
+              "\"fog\" is not a grid of a clay file (mass, density or surface)");
+    EXPECT_EQ(errorOf([] { parseClayGrids("mass,,surface"); }),
+              "\"\" is not a grid of a clay file (mass, density or surface) in \"mass,,surface\"");
+    EXPECT_EQ(errorOf([] { parseClayGrids(""); }),
+              "\"\" is not a grid of a clay file (mass, density or surface)");
+    EXPECT_EQ(errorOf([] { parseClayGrids("mass,surface,mass"); }),
+              "grid \"mass\" is named twice in \"mass,surface,mass\"");
 }
 
 TEST_F(IOTest, FileWithoutMetadataReadsWithDefaults)

@@ -215,6 +215,39 @@ TEST_F(MemoryTest, EachPartBoundsWhatTheRunAllocatesForIt)
     }
 }
 
+TEST_F(MemoryTest, TheOutputPartCountsOnlyTheGridsTheFileHolds)
+{
+    // The stroked 128-wide sphere: the mass alone needs no float grid, the density one, the surface
+    // (swept from the density) both and the sweep's scratch; each write takes no more than its figure.
+    Scene s = parseScene(
+        R"({"rule": "prorata", "seed": 1, "clay": [{"shape": "sphere", "center": [64, 64, 64], "radius": 64, "mass": 1000}],
+        "tools": [{"shape": "sphere", "center": [52, 125, 64], "radius": 6, "path": [{"translate": [2, 0, 0], "frames": 4}]}]})",
+        "s.json", "");
+    const MemoryEstimate all = estimateSceneMemory(s);
+    Sculptor sc(s, 1);
+    sc.run();
+    const std::string path = "/tmp/vdbclay-memory-grids-" + std::to_string(::getpid()) + ".vdb";
+    uint64_t last = 0;
+    for (const char* names : {"mass", "density", "surface"}) {
+        s.outputs.grids = parseClayGrids(names);
+        const MemoryEstimate e = estimateSceneMemory(s);
+        EXPECT_GT(e.outputBytes, last) << names; // each one more than the one before
+        last = e.outputBytes;
+        alloc_counter::resetPeak();
+        const int64_t before = alloc_counter::liveBytes.load();
+        writeClayFile(path, *sc.mass(), sc.checkpointMeta(), s.outputs.grids);
+        const uint64_t written = uint64_t(alloc_counter::peakBytes.load() - before);
+        EXPECT_GE(e.outputBytes, written) << names << ": " << e.describe();
+    }
+    std::remove(path.c_str());
+    s.outputs.grids = parseClayGrids("mass");
+    EXPECT_EQ(estimateSceneMemory(s).outputBytes,
+              memory_internal::kOutputWriteBytes +
+                  all.clayLeavesGrown * memory_internal::kOutputWriteBytesPerLeaf);
+    s.outputs.grids = parseClayGrids("surface");
+    EXPECT_EQ(estimateSceneMemory(s).outputBytes, all.outputBytes);
+}
+
 TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
 {
     // A small tool stroking a large sphere (compress push, no obstacle near): the layer's domain is the

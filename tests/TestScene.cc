@@ -627,6 +627,27 @@ TEST_F(SceneTest, ASceneOverItsMemoryBudgetIsRefusedBeforeAnyWork)
 
 // ---- bad input in scene files, and the memory estimate from what is built ------------------------
 
+TEST_F(SceneTest, TheOutputsGridsNameWhatTheVdbHolds)
+{
+    EXPECT_EQ(clayGridsName(parseScene(scene(""), "s.json", "").outputs.grids), "mass,density,surface");
+    const Scene s =
+        parseScene(scene(R"("outputs": {"vdb": "a.vdb", "grids": ["surface", "mass"]})"), "s.json", "");
+    EXPECT_EQ(clayGridsName(s.outputs.grids), "mass,surface");
+    expectRefused(
+        scene(R"("outputs": {"grids": []})"),
+        {"outputs.grids: expected a non-empty array of grid names (mass, density, surface), got []"});
+    expectRefused(
+        scene(R"("outputs": {"grids": "mass"})"),
+        {"outputs.grids: expected a non-empty array of grid names (mass, density, surface), got string"});
+    expectRefused(scene(R"("outputs": {"grids": ["mass", 3]})"), {"outputs.grids[1]: expected a string"});
+    expectRefused(scene(R"("outputs": {"grids": ["mass", "fog"]})"),
+                  {"outputs.grids: \"fog\" is not a grid of a clay file (mass, density or surface)"});
+    expectRefused(scene(R"("outputs": {"grids": ["mass,density"]})"),
+                  {"outputs.grids[0]: \"mass,density\" is not a grid of a clay file"});
+    expectRefused(scene(R"("outputs": {"grids": ["density", "density"]})"),
+                  {"outputs.grids: grid \"density\" is named twice"});
+}
+
 TEST_F(SceneTest, TypesDuplicatesAndEmptyStringsAreRefusedWithTheField)
 {
     expectRefused(R"({"description": {"a": [1]}})", {"description: expected a string, got object"});

@@ -482,6 +482,27 @@ class FilesAndScenes(unittest.TestCase):
             vdbclay.read(os.path.join(d, "missing.vdb"))
         self.assertIn("missing.vdb", str(e.exception))
 
+    def test_write_holds_the_grids_named(self):
+        d = tmpdir()
+        clay = vdbclay.make_clay(vdbclay.sphere((0, 0, 0), 4), mass=250, threshold=250)
+        fog = os.path.join(d, "fog.vdb")
+        clay.write(fog, grids=["density"])
+        grids = [l for l in vdbclay.describe(fog).splitlines() if l.startswith("grid ")]
+        self.assertEqual(len(grids), 1, grids)
+        self.assertTrue(grids[0].startswith('grid "density"'), grids)
+        with self.assertRaises(vdbclay.Error) as e:
+            vdbclay.read(fog)
+        self.assertIn('has no grid named "mass"', str(e.exception))
+        both = os.path.join(d, "both.vdb")
+        clay.write(both, grids=["surface", "mass"])
+        self.assertEqual(vdbclay.read(both).content_hash(), clay.content_hash())
+        for bad, needle in ((["fog"], '"fog" is not a grid of a clay file'), ([], "at least one"),
+                            (["mass", "mass"], 'grid "mass" is named twice')):
+            with self.assertRaises(vdbclay.Error) as e:
+                clay.write(os.path.join(d, "bad.vdb"), grids=bad)
+            self.assertIn(needle, str(e.exception))
+        self.assertFalse(os.path.exists(os.path.join(d, "bad.vdb")))
+
     def test_mesh_clay_keeps_the_volume_of_a_mesh_written_to_keep_it(self):
         d = tmpdir()
         clay = vdbclay.make_clay(vdbclay.box((0, 0, 0), (9, 5, 7)), mass=1000, voxel_size=0.5, up="z")

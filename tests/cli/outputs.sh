@@ -165,4 +165,19 @@ printf '{"frames": 1, "outputs": {"stats": "%s/outside/stats.json"}}' "$top" > i
   fail "--scene-outputs-anywhere: $(cat err.txt)"
 [ -s outside/cli-stats.json ] && [ -s outside/stats.json ] || fail "outputs outside when allowed: $(ls outside)"
 
+# 5. The grids the .vdb holds: --grids, else the scene's outputs.grids; a wrong name is refused before
+# any work; "start" needs the mass.
+grids_of() { "$bin" info "$1" | sed -n 's/^grid "\([a-z]*\)".*/\1/p' | sort | tr '\n' ' '; }
+run1 -o fog.vdb --grids density > /dev/null || fail "--grids density"
+[ "$(grids_of fog.vdb)" = "density " ] || fail "--grids density wrote: $(grids_of fog.vdb)"
+printf '{"frames": 1, "outputs": {"vdb": "chosen.vdb", "grids": ["surface", "mass"]}}' > grids.json
+"$bin" run grids.json --quiet > /dev/null || fail "outputs.grids"
+[ "$(grids_of chosen.vdb)" = "mass surface " ] || fail "outputs.grids wrote: $(grids_of chosen.vdb)"
+"$bin" run grids.json --quiet --grids mass > /dev/null || fail "--grids over outputs.grids"
+[ "$(grids_of chosen.vdb)" = "mass " ] || fail "--grids over outputs.grids wrote: $(grids_of chosen.vdb)"
+refused grids-unknown '--grids: "fog" is not a grid of a clay file (mass, density or surface)' run1 -o never.vdb --grids mass,fog
+[ -e never.vdb ] && fail "grids-unknown: never.vdb was written"
+printf '{"frames": 1, "start": "fog.vdb"}' > from-fog.json
+refused start-without-mass 'fog.vdb has no grid named "mass" (grids: "density")' "$bin" run from-fog.json --quiet
+
 [ $fails -eq 0 ] && echo "OUTPUTS HANDLED" || { echo "$fails failed"; exit 1; }

@@ -45,13 +45,27 @@ struct ClayMeta {
     std::string version; ///< vdbclay version that wrote it (filled by writeClayFile)
 };
 
-/// Writes @a path holding an Int32Grid "mass" (exact clay), a FloatGrid "density" (mass / Tc, a
-/// fog volume) and a FloatGrid level set "surface" (the clay surface at density 0.5), with @a meta
-/// as metadata on "mass". Atomic: writes PATH.tmp-XXXX beside it, then renames, so an interrupted
-/// write never leaves a half-written file; @a path may be the file the clay was read from.
-/// @throw Error naming the path on any failure (unwritable directory, full disk); then nothing is
-///        left behind and an existing @a path is untouched.
-void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta);
+/// The grids a clay file holds (writeClayFile): any of the three, at least one.
+struct ClayGrids {
+    bool mass = true;    ///< Int32Grid "mass": the exact clay, what "start" and readClayFile read
+    bool density = true; ///< FloatGrid "density": mass / Tc, a fog volume
+    bool surface = true; ///< FloatGrid level set "surface": the clay surface at density 0.5
+};
+/// Grid names separated by commas ("mass,surface"), of mass, density and surface.
+/// @throw Error naming a name that is none of those or is given twice, or an empty list.
+ClayGrids parseClayGrids(const std::string& list);
+/// The grids' names in file order, separated by commas ("mass,density,surface").
+std::string clayGridsName(const ClayGrids& grids);
+
+/// Writes @a path holding the @a grids named: an Int32Grid "mass" (exact clay), a FloatGrid
+/// "density" (mass / Tc, a fog volume) and a FloatGrid level set "surface" (the clay surface at
+/// density 0.5), in that order, with @a meta as metadata on "mass" and "density" (on "surface" when
+/// it is alone). Atomic: writes PATH.tmp-XXXX beside it, then renames, so an interrupted write never
+/// leaves a half-written file; @a path may be the file the clay was read from.
+/// @throw Error naming the path on any failure (unwritable directory, full disk, no grid named); then
+///        nothing is left behind and an existing @a path is untouched.
+void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta,
+                   const ClayGrids& grids = ClayGrids());
 
 /// A clay file read back.
 struct ClayFile {

@@ -7,6 +7,7 @@
 #pragma once
 
 #include "vdbclay/Deposit.h"
+#include "vdbclay/IO.h"
 #include "vdbclay/MemoryBudget.h"
 #include "vdbclay/Push.h"
 #include "vdbclay/Shapes.h"
@@ -63,6 +64,7 @@ struct SettleSpec {
 
 struct OutputSpec {
     std::string vdb, png, mesh, stats; ///< empty: not written
+    ClayGrids grids;                   ///< the grids the .vdb holds ("grids": all three by default)
 };
 
 /// The voxel sizes (world units per voxel) a scene or import may use: OpenVDB refuses a transform

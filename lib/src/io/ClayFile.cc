@@ -34,6 +34,7 @@
 #include <cmath>
 #include <ostream>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #ifndef VDBCLAY_VERSION
@@ -100,10 +101,48 @@ void validateMeta(const ClayMeta& meta, const std::string& path)
 
 } // namespace
 
-void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta)
+ClayGrids parseClayGrids(const std::string& list)
+{
+    ClayGrids g{false, false, false};
+    size_t start = 0;
+    for (;;) {
+        const size_t comma = list.find(',', start);
+        const std::string name =
+            list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        bool* slot = name == "mass"      ? &g.mass
+                     : name == "density" ? &g.density
+                     : name == "surface" ? &g.surface
+                                         : nullptr;
+        if (!slot) {
+            throw Error("\"" + name + "\" is not a grid of a clay file (mass, density or surface)" +
+                        (list.find(',') != std::string::npos ? " in \"" + list + "\"" : std::string()));
+        }
+        if (*slot) throw Error("grid \"" + name + "\" is named twice in \"" + list + "\"");
+        *slot = true;
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return g;
+}
+
+std::string clayGridsName(const ClayGrids& grids)
+{
+    std::string out;
+    for (const auto& [on, name] : {std::pair<bool, const char*>{grids.mass, "mass"},
+                                   {grids.density, "density"},
+                                   {grids.surface, "surface"}})
+        if (on) out += (out.empty() ? "" : ",") + std::string(name);
+    return out;
+}
+
+void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta& meta,
+                   const ClayGrids& grids)
 {
     openvdb::initialize();
     validateMeta(meta, path);
+    if (!grids.mass && !grids.density && !grids.surface) {
+        throw Error("cannot write " + path + ": no grid named (mass, density or surface)");
+    }
 
     // The vdbclay_* metadata goes on "mass" (readClayFile's source) and on "density" too: Debian's
     // python3-openvdb (and other FloatGrid-only readers) cannot load Int32 grids, and with Tc there
@@ -166,22 +205,33 @@ void writeClayFile(const std::string& path, const MassGrid& mass, const ClayMeta
     // Shares the caller's tree (read only) with a fresh name, metadata and transform.
     openvdb::GridBase::ConstPtr massOut = mass.copyGridReplacingMetadataAndTransform(massMeta, xform);
 
+    // The surface is swept from the density: built for either, kept for those named.
     openvdb::FloatGrid::Ptr density, surface;
-    try {
-        density = densityGrid(mass, meta.rule.threshold, meta.voxelSize);
-        density->setTransform(xform->copy());
-        surface = surfaceLevelSet(*density, 0.5);
-        surface->setSaveFloatAsHalf(surfaceSavedAsHalf(meta.voxelSize));
-    } catch (const Error& e) {
-        throw Error("cannot write " + path + ": " + e.what());
-    } catch (const std::exception& e) {
-        throw Error("cannot write " + path + ": building the density and surface failed: " + reason(e));
+    if (grids.density || grids.surface) {
+        try {
+            density = densityGrid(mass, meta.rule.threshold, meta.voxelSize);
+            density->setTransform(xform->copy());
+            if (grids.surface) {
+                surface = surfaceLevelSet(*density, 0.5);
+                surface->setSaveFloatAsHalf(surfaceSavedAsHalf(meta.voxelSize));
+            }
+        } catch (const Error& e) {
+            throw Error("cannot write " + path + ": " + e.what());
+        } catch (const std::exception& e) {
+            throw Error("cannot write " + path + ": building the density and surface failed: " + reason(e));
+        }
+        if (!grids.density) density.reset(); // its memory back before the file is written
     }
-    for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it)
-        density->insertMeta(it->first, *it->second);
+    openvdb::FloatGrid* described = density ? density.get() : grids.mass ? nullptr : surface.get();
+    if (described)
+        for (auto it = clayMeta.beginMeta(); it != clayMeta.endMeta(); ++it)
+            described->insertMeta(it->first, *it->second);
 
-    openvdb::GridCPtrVec grids{massOut, density, surface};
-    writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, grids); });
+    openvdb::GridCPtrVec out;
+    if (grids.mass) out.push_back(massOut);
+    if (density) out.push_back(density);
+    if (surface) out.push_back(surface);
+    writeAtomically(path, [&](std::ostream& os) { StreamArchive().writeTo(os, out); });
 }
 
 ClayFile readClayFile(const std::string& path, const std::string& gridName)

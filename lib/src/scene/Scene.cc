@@ -885,7 +885,7 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
     }
     if (memoryBudget != 0) sc.memoryBudget = memoryBudget;
     if (const json* v = cx.find(root, "outputs")) {
-        cx.keys(*v, "outputs", {"vdb", "png", "mesh", "stats"});
+        cx.keys(*v, "outputs", {"vdb", "png", "mesh", "stats", "grids"});
         auto out = [&](const char* k, std::string& dst) {
             if (const json* o = cx.find(*v, k)) dst = cx.string(*o, std::string("outputs.") + k);
         };
@@ -893,6 +893,27 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
         out("png", sc.outputs.png);
         out("mesh", sc.outputs.mesh);
         out("stats", sc.outputs.stats);
+        if (const json* g = cx.find(*v, "grids")) {
+            if (!g->is_array() || g->empty())
+                cx.fail("outputs.grids",
+                        std::string("expected a non-empty array of grid names (mass, density, "
+                                    "surface), got ") +
+                            (g->is_array() ? "[]" : g->type_name()));
+            std::string list;
+            for (size_t i = 0; i < g->size(); ++i) {
+                const std::string field = "outputs.grids[" + std::to_string(i) + "]";
+                const std::string name = cx.string((*g)[i], field);
+                if (name.find(',') != std::string::npos)
+                    cx.fail(field,
+                            "\"" + name + "\" is not a grid of a clay file (mass, density or surface)");
+                list += (i ? "," : "") + name;
+            }
+            try {
+                sc.outputs.grids = parseClayGrids(list);
+            } catch (const Error& e) {
+                cx.fail("outputs.grids", e.what());
+            }
+        }
     }
     return sc;
 }

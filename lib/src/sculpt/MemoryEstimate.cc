@@ -13,9 +13,10 @@
 //   the global layer, frame_policy::toolCellsOverWholeBounds, else those near the clay, no more);
 // - then the larger of: a push's scratch (per clay voxel inside a tool; the compress push's pool,
 //   an Int32 tree over the clay, for a tool that may cover the clay) with the global layer's arrays
-//   (kept from frame to frame: they are there during the next push), and writing the output (the
-//   float density on the clay's leaves and the surface level set on those and its band, with its
-//   scratch; the layer's arrays are freed after the last frame, Sculpt.cc).
+//   (kept from frame to frame: they are there during the next push), and writing the output (of the
+//   grids the scene's outputs name: the float density on the clay's leaves and the surface level set
+//   on those and its band, with its scratch; the layer's arrays are freed after the last frame,
+//   Sculpt.cc).
 //
 // The clay's leaves. At the start: those of the shapes (an analytic shape, whose distance is exact
 // or a lower bound: the leaves within its tightened bounds whose centre lies less than a leaf's
@@ -887,11 +888,16 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // Only the slots within the band's reach get values (output/SurfaceSweep.cc): measured, 20 % of
     // the grown leaves counted here on a 128-wide sphere at Tc, 27 % on a 512-wide one, while those
     // grown leaves are twice the leaves such a sphere holds: the density's count covers them.
+    // Only the grids the scene's output names (OutputSpec::grids): the surface is swept from the
+    // density, so either takes the density; the mass alone takes neither.
     const uint64_t tileSlotsSwept = tiledVoxels > 0 ? e.clayLeavesGrown : 0;
-    e.outputBytes = treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap) +
-                    treeBytes<FloatTreeT>(e.anchorLeaves, aroundBoxes, lowerCap, upperCap) +
-                    tileSlotsSwept * kOutputScratchPerLeaf + e.anchorLeaves * kOutputScratchPerLeaf +
-                    e.clayLeavesGrown * 8;
+    const ClayGrids& grids = scene.outputs.grids;
+    e.outputBytes = kOutputWriteBytes + e.clayLeavesGrown * kOutputWriteBytesPerLeaf;
+    if (grids.density || grids.surface)
+        e.outputBytes += treeBytes<FloatTreeT>(e.clayLeavesGrown, grownBoxes, lowerCap, upperCap);
+    if (grids.surface)
+        e.outputBytes += treeBytes<FloatTreeT>(e.anchorLeaves, aroundBoxes, lowerCap, upperCap) +
+                         tileSlotsSwept * kOutputScratchPerLeaf + e.anchorLeaves * kOutputScratchPerLeaf;
     return e;
 }
 

@@ -59,6 +59,12 @@ constexpr uint64_t kSmoothBytesPerVoxel = 8 + 8 + 3 * 8 + 2 + kSmoothCellBytes;
 /// to twice its compacted entries, the copy tensionBoxes() sorts (sculpt/SurfaceTension.h) and a box
 /// per entry at most (24).
 constexpr uint64_t kChangedClayBytesPerSlot = 3 * 36 + 24;
+/// Writing a .vdb, whatever grids it holds (io/ClayFile.cc): the clay's leaves listed for its largest
+/// cell (8 bytes a leaf) and OpenVDB's node lists for the grid statistics it records (~9 a leaf), and
+/// the file stream's and compressor's buffers: measured writing the mass alone of spheres 32 to 512
+/// wide, 287 to 566 KB, ~280 KB and 17 bytes a leaf.
+constexpr uint64_t kOutputWriteBytesPerLeaf = 24;
+constexpr uint64_t kOutputWriteBytes = uint64_t(512) << 10;
 /// Per leaf of the surface level set writing a .vdb builds (output/SurfaceFog.cc, SurfaceSweep.cc),
 /// besides the leaf itself, as the sweep allocates the leaves' values (the output's peak; the box's
 /// masks and the reach's, 2 x 64 each, are freed by then): the grown leaves' origins (12), the leaf
