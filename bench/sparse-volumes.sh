@@ -5,7 +5,8 @@
 # the command's wall time, the set-up, the frames (mean over every frame, the first included, and the
 # first alone), the output, the peak resident set (GNU time's Maximum resident set size), the memory
 # estimate, and the .vdb's size. docs/PERFORMANCE.md has the figures.
-#   bench/sparse-volumes.sh [WIDTH ...]     (BIN: the vdbclay binary, default build/apps/vdbclay)
+#   bench/sparse-volumes.sh [WIDTH ...]     (BIN: the vdbclay binary, default build/apps/vdbclay;
+#                                            RUN_OPTIONS: more options for vdbclay run, e.g. "--grids mass")
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-build/apps/vdbclay}
@@ -19,8 +20,9 @@ printf '%-6s %8s %8s %10s %10s %8s %9s %10s %9s %s\n' width wall_s setup_s frame
 for d in "${widths[@]}"; do
   c=$((d / 2))
   sed -e "s/{{c}}/$c/g" -e "s/{{tool_y}}/$((d + 6))/g" data/scenes/bench/sparse-stroke.json.in >"$work/scene.json"
+  # shellcheck disable=SC2086 # RUN_OPTIONS: words
   /usr/bin/time -v -o "$work/time.txt" "$BIN" run "$work/scene.json" -o "$work/out.vdb" --threads 1 \
-    --stats "$work/stats.json" >"$work/log.txt" 2>&1 ||
+    --stats "$work/stats.json" ${RUN_OPTIONS:-} >"$work/log.txt" 2>&1 ||
     { echo "sparse-volumes: width $d failed:" >&2; cat "$work/log.txt" >&2; exit 1; }
   python3 - "$d" "$work" <<'PY'
 import json, os, re, sys
