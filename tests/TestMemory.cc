@@ -257,8 +257,8 @@ TEST_F(MemoryTest, TheGlobalLayersEstimateFollowsTheToolNotTheWholeBody)
     EXPECT_LT(e.transportBytes * 20, wholeBody(e)) << e.describe();
     EXPECT_LT(e.total(), uint64_t(2) << 30) << e.describe();
     // The same stroke 160 wide: the estimate stays above the run's heap, within a small factor (the
-    // layer's domain bound, 2 x the tool's diagonal + 5 face steps around the chains, spans most of a
-    // body this small, while the run's reach is the contact's width + 2: 15 x the heap).
+    // layer's domain bound, the tool's diagonal + 5 face steps around the chains, spans much of a body
+    // this small, while the run's reach is the contact's width + 2).
     const std::string small = stroke(160);
     const MemoryEstimate es = estimateSceneMemory(parseScene(small, "s.json", ""));
     const uint64_t peak = peakOfRunAndOutput(small, 1);

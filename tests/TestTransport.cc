@@ -1083,6 +1083,40 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
     }
 }
 
+TEST_F(TransportTest, ADoublingOfTheReachStopsFirstAtTheCallersBoundOnRoom)
+{
+    // The block of the test above: reach 3 finds no room for the lone cell, so it doubles, to 6. With
+    // roomWithin 4 or 5 (room lies within it) the doubling stops there, and that reach finds room: the
+    // memory estimate's bound of the domain (max(reach, roomWithin), not twice). 7 lies past the
+    // doubling: 6. Each exact: every cell at Tc, the 780 extra above the block.
+    for (const int64_t within : {int64_t(0), int64_t(4), int64_t(5), int64_t(7)}) {
+        MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
+        for (int y = 9; y <= 20; ++y)
+            g->tree().setValue(openvdb::Coord(10, y, 10), 1040);
+        g->tree().setValue(openvdb::Coord(4, 4, 4), 1300);
+        Automaton a(g, opts(3, 2));
+        GlobalTransportOptions go;
+        go.reach = 3;
+        go.roomWithin = within;
+        const GlobalTransportReport r = transportGlobally(a, go);
+        EXPECT_EQ(r.reach, within == 4 || within == 5 ? within : 6) << within;
+        EXPECT_EQ(r.overloadAfter, 0) << within;
+        EXPECT_FALSE(r.noRoom);
+        EXPECT_EQ(totalMass(*g), int64_t(21 * 21 * 21) * 1000 + 780);
+        int64_t inside = 0;
+        for (int x = 0; x <= 20; ++x)
+            for (int y = 0; y <= 20; ++y)
+                for (int z = 0; z <= 20; ++z)
+                    inside += at(a, x, y, z) == 1000 ? 1 : 0;
+        EXPECT_EQ(inside, 21 * 21 * 21) << within;
+    }
+    MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
+    Automaton a(g, opts());
+    GlobalTransportOptions go;
+    go.roomWithin = -1;
+    EXPECT_THROW(transportGlobally(a, go), Error);
+}
+
 TEST_F(TransportTest, OverloadTheTryCarriedBeyondTheReachIsLeftToTheCleanupNotToTheLayer)
 {
     // After the automaton's try, the global layer looks for its seeds in the push's region only, not

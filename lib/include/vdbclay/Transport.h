@@ -29,6 +29,10 @@ struct GlobalTransportOptions {
     /// region within the reach has no room, the reach is doubled until it has, or the whole body is
     /// reached (then NoRoom).
     int64_t reach = 0;
+    /// The caller's bound on the face steps from an over cell to room (0: none known): a doubling of
+    /// the reach that would pass it stops there first, so where room lies within it the reach ends
+    /// at most max(reach, roomWithin), not just below twice it.
+    int64_t roomWithin = 0;
     /// Only the cells over Tc in this box move (the push's region); empty: every cell of the grid.
     /// Either way nothing runs when the automaton holds no overload (residualOverload() == 0).
     Box seedRegion;

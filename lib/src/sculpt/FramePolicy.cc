@@ -32,6 +32,27 @@ GlobalTransportOptions layerOptions(const PushReport& push, int threads)
     return go;
 }
 
+int64_t toolExtent(const Scene& scene)
+{
+    double most = 0;
+    for (const ToolSpec& t : scene.tools) {
+        const Box b = t.shape.shape->bounds();
+        if (b.empty()) continue;
+        double d2 = 0;
+        for (int a = 0; a < 3; ++a)
+            d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
+        most = std::max(most, std::sqrt(d2));
+    }
+    return int64_t(std::ceil(most));
+}
+
+int64_t roomWithin(const Scene& scene, uint64_t trySteps)
+{
+    // The layer's seeds lie in the push's region, within maxSearch + 2 of the tool, whatever the try did.
+    const uint64_t steps = std::min<uint64_t>(trySteps, uint64_t(PushOptions().maxSearch) + 2);
+    return toolExtent(scene) + 3 * int64_t(steps);
+}
+
 Box tryNear(const GlobalTransportOptions& layer)
 {
     return layer.reach > 0 ? growBox(layer.seedRegion, layer.reach, 3) : Box();

@@ -63,6 +63,16 @@ int64_t layerReach(double contactSize);
 /// make the layer (and the estimate's bound of it) cover thousands of voxels around the tool.
 GlobalTransportOptions layerOptions(const PushReport& push, int threads);
 
+/// The face steps within which an over cell the layer moves finds room, after a try of @a trySteps
+/// steps: a tool entering the clay from its surface has room around it within its extent (the
+/// largest tool's diagonal, toolExtent(): around the tool to where it sticks out, or to the cells
+/// it left), and each step of the try moves clay a voxel (three face steps) further, the layer's
+/// seeds staying in the push's region (maxSearch + 2 voxels past the tool) whatever the try's steps
+/// (GlobalTransportOptions::roomWithin; the memory estimate's bound of the layer's domain).
+int64_t roomWithin(const Scene& scene, uint64_t trySteps);
+/// The largest diagonal of a tool's shape's bounds, in voxels, rounded up: any pose's extent.
+int64_t toolExtent(const Scene& scene);
+
 /// The clay whose density decides the try (the push's region grown by the reach: the plastic zone),
 /// or an empty box for the whole body (no tool touched clay).
 Box tryNear(const GlobalTransportOptions& layer);

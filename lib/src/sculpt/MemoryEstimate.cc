@@ -39,19 +39,20 @@
 // of the largest face of its bounds at one pose, 2D the longest side) on the cells
 // over Tc within the push's region. Its cells are the full cells within `reach` face steps of those
 // seeds (an inner seed floods a margin of 2 x 2^k < reach) and their face neighbours; where a part the
-// reach cut has no room the reach doubles, so it ends below twice an over cell's distance to room
-// (or r0), which a tool entering the clay from its surface finds within its extent E (the diagonal of
-// its bounds: around the tool to where it sticks out, or to the cells it left). So the layer's seeds
+// reach cut has no room the reach doubles, stopping first at the Sculptor's bound on the room
+// (frame_policy::roomWithin, GlobalTransportOptions::roomWithin): a tool entering the clay from its
+// surface has room within its extent E (the diagonal of its bounds: around the tool to where it sticks
+// out, or to the cells it left), so the reach ends at most max(r0, that bound). So the layer's seeds
 // lie within a tool's sweep grown by S voxels (on every axis), and its cells within F face steps of
 // those seeds (layerReach):
-// - compress push: S = its chains' depth (as deep as the contact is wide); F = max(r0, 2E), 4 for an
+// - compress push: S = its chains' depth (as deep as the contact is wide); F = max(r0, E), 4 for an
 //   inner seed's margin, 1 for the Dirichlet cells;
 // - surface push: its targets (within maxSearch + 2 of the tool: the push's region), then the
 //   automaton's try (frame_policy::tryAfterPush ...), which may run c steps before the layer, moving
 //   the overload a voxel per axis (three face steps) a step, while the layer looks for its seeds in
 //   the push's region only. So a seed lies within the region, moved at most c = min(steps, maxSearch
-//   + 2) voxels from its target, and room lies E + 3c face steps away: S = region, F = max(r0, 2 (E +
-//   3c)) + 4 + 1. The try's steps before the layer: frame_policy::tryStepsBeforeLayer (0 under a step
+//   + 2) voxels from its target, and room lies E + 3c face steps away: S = region, F = max(r0, E +
+//   3c) + 4 + 1. The try's steps before the layer: frame_policy::tryStepsBeforeLayer (0 under a step
 //   budget of at most 16, then 16 up to 32, then 18 whatever the budget); none where the try never
 //   runs: after a compress push, and on clay whose shapes all start saturated
 //   (frame_policy::trySaturated), which pushes move but do not thin.
@@ -242,9 +243,9 @@ struct LayerBound {
     PushMode push = PushMode::Surface;
     int dims = 3;
     uint64_t toolInside = 0; ///< the most voxels inside a tool at one frame (a push enters no more)
-    double toolFace = 0;   ///< the largest face of a tool's bounds at one pose (2D: side; a contact's width)
-    double toolExtent = 0; ///< the largest tool's diagonal
-    uint64_t maxSteps = 0; ///< the scene's step budget per frame
+    double toolFace = 0;    ///< the largest face of a tool's bounds at one pose (2D: side; a contact's width)
+    int64_t toolExtent = 0; ///< the largest tool's diagonal, rounded up (frame_policy::toolExtent)
+    uint64_t maxSteps = 0;  ///< the scene's step budget per frame
     bool trySkipped = false; ///< the automaton's try never runs before the layer (FramePolicy.h)
     bool clayMoves = false;  ///< clay from a file or over Tc: it may overflow with no tool near
     bool covers = false;     ///< a tool's sweep spans a clay shape's box on two axes
@@ -267,10 +268,12 @@ LayerReach layerReach(const LayerBound& b)
     const double contact = b.dims == 2 ? std::min(double(b.toolInside), b.toolFace)
                                        : std::sqrt(std::min(double(b.toolInside), b.toolFace));
     const int64_t reach = frame_policy::layerReach(contact);
-    const int64_t room = int64_t(std::ceil(b.toolExtent)); // an over cell's face steps to room
+    const int64_t room = b.toolExtent; // an over cell's face steps to room (frame_policy::roomWithin)
+    // The reach doubles while a part it cut has no room, stopping at the room's bound first
+    // (GlobalTransportOptions::roomWithin): it ends at most max(r0, room).
     if (b.push == PushMode::Compress) {
         r.seeds = int64_t(std::ceil(contact)); // the chains' depth
-        r.faceSteps = std::max(reach, 2 * room) + 4 + 1;
+        r.faceSteps = std::max(reach, room) + 4 + 1;
         return r;
     }
     // The surface push: targets within the push's region (maxSearch + 2 past the tool), then the
@@ -281,7 +284,7 @@ LayerReach layerReach(const LayerBound& b)
     const int64_t steps =
         b.trySkipped ? 0 : std::min(int64_t(frame_policy::tryStepsBeforeLayer(b.maxSteps)), region);
     r.seeds = region;
-    r.faceSteps = std::max(reach, 2 * (room + 3 * steps)) + 4 + 1;
+    r.faceSteps = std::max(reach, room + 3 * steps) + 4 + 1;
     return r;
 }
 
@@ -482,7 +485,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     std::vector<ToolSweep> sweeps;
     std::vector<Box> toolBoxes;
     uint64_t toolInside = 0; // voxels inside the largest tool at one frame
-    double toolExtent = 0;   // the largest tool's diagonal
     double toolFace = 0;     // the largest face of a tool's bounds at one pose (2D: the longest side)
     for (const ToolSpec& t : scene.tools) {
         sweeps.push_back(sweep(t, scene.frames, dims, !scene.sweep, toolBudget));
@@ -497,7 +499,6 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
             double d2 = 0;
             for (int a = 0; a < 3; ++a)
                 d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
-            toolExtent = std::max(toolExtent, std::sqrt(d2));
             // With Scene::sweep the pushes place the tool between the frames' poses too, where its
             // bounds may be wider (a turning box): any pose's bounds are no wider than its diagonal.
             const double side = std::ceil(std::sqrt(d2));
@@ -554,7 +555,7 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     lb.dims = dims;
     lb.toolInside = toolInside;
     lb.toolFace = toolFace;
-    lb.toolExtent = toolExtent;
+    lb.toolExtent = frame_policy::toolExtent(scene);
     lb.maxSteps = scene.settle.maxSteps;
     // The try runs after a surface push on clay that is not saturated near it: clay whose shapes
     // all start saturated (pushes move clay, they do not thin it) is taken to stay so.

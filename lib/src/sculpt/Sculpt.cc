@@ -850,8 +850,7 @@ FrameReport Sculptor::runFrame()
         // settles in a few cheap steps, as with the local transport; the layer runs only on what the
         // try leaves in the push's region (frame_policy::layerOptions).
         if (frame_policy::layerRuns(im.scene, rep.frame, rep.push)) {
-            const GlobalTransportOptions go =
-                frame_policy::layerOptions(rep.push, im.automaton->options().threads);
+            GlobalTransportOptions go = frame_policy::layerOptions(rep.push, im.automaton->options().threads);
             im.open = true;
             im.openSteps = 0;
             rep.settle = im.settleBounded(rep.finished, frame_policy::tryNear(go));
@@ -860,6 +859,7 @@ FrameReport Sculptor::runFrame()
                 im.endFrame(rep);
                 return rep;
             }
+            if (go.reach > 0) go.roomWithin = frame_policy::roomWithin(im.scene, rep.trySteps);
             rep.transport = transportGlobally(*im.automaton, go, &im.transportWorkspace);
         } else {
             im.open = true;

@@ -126,7 +126,10 @@ GlobalTransportReport run(Automaton& automaton, const GlobalTransportOptions& op
         bool grow = false;
         if (!allRoom) domain.freezeSingular(cut, grow, rep);
         if (!grow) break;
-        reach = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
+        int64_t next = reach * 2 >= int64_t(1) << 40 ? 0 : reach * 2;
+        if (reach > 0 && options.roomWithin > reach && (next == 0 || options.roomWithin < next))
+            next = options.roomWithin;
+        reach = next;
         margin = std::min<int64_t>(margin * 2, int64_t(1) << 40);
     }
     PoissonSolver solver(domain.cells(), ws.poisson, ws.sort, domain.threshold(), tuning.multigridMin,
@@ -145,6 +148,8 @@ GlobalTransportReport transportGlobally(Automaton& automaton, const GlobalTransp
 {
     if (options.reach < 0)
         throw Error("transportGlobally: reach must be >= 0, got " + std::to_string(options.reach));
+    if (options.roomWithin < 0)
+        throw Error("transportGlobally: roomWithin must be >= 0, got " + std::to_string(options.roomWithin));
     if (tuning.maxRounds < 1) throw Error("transportGlobally: maxRounds must be >= 1");
     if (!(tuning.tolerance > 0 && tuning.tolerance < 1))
         throw Error("transportGlobally: tolerance must lie in (0, 1)");
