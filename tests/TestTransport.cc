@@ -1048,6 +1048,32 @@ TEST_F(TransportTest, TheReachCountsFromTheContactNotFromEveryCellOfACompressCha
     }
 }
 
+namespace {
+
+/// A 21^3 block at Tc (1000) with a chain (10, 9 ... 20, 10) of 12 cells, 40 extra each, and a lone
+/// over cell deep inside at (4, 4, 4), 300 extra.
+MassGridPtr chainAndLoneCell()
+{
+    MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
+    for (int y = 9; y <= 20; ++y)
+        g->tree().setValue(openvdb::Coord(10, y, 10), 1040);
+    g->tree().setValue(openvdb::Coord(4, 4, 4), 1300);
+    return g;
+}
+
+/// The cells of that block holding exactly Tc.
+int64_t cellsOfTheBlockAtTc(const Automaton& a)
+{
+    int64_t n = 0;
+    for (int x = 0; x <= 20; ++x)
+        for (int y = 0; y <= 20; ++y)
+            for (int z = 0; z <= 20; ++z)
+                n += at(a, x, y, z) == 1000 ? 1 : 0;
+    return n;
+}
+
+} // namespace
+
 TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdenticallyOnAnyThreadCount)
 {
     // A chain deeper than the reach: (10, 20 ... 9, 10), 12 cells, 40 extra each, reach 3, and a lone
@@ -1055,10 +1081,7 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
     // every over cell is solved, all of the block ends at Tc, mass exact, the same on 1, 2, 3, 8 threads.
     uint64_t first = 0;
     for (int threads : {1, 2, 3, 8}) {
-        MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
-        for (int y = 9; y <= 20; ++y)
-            g->tree().setValue(openvdb::Coord(10, y, 10), 1040);
-        g->tree().setValue(openvdb::Coord(4, 4, 4), 1300);
+        MassGridPtr g = chainAndLoneCell();
         Automaton a(g, opts(3, threads));
         GlobalTransportOptions go;
         go.reach = 3;
@@ -1071,12 +1094,7 @@ TEST_F(TransportTest, OverCellsBeyondTheContactsReachStartTheirOwnFloodIdentical
         // its flood links the face cell beside room (one rebuild, not one per doubling up to the body).
         EXPECT_EQ(r.reach, 6);
         EXPECT_EQ(totalMass(*g), int64_t(21 * 21 * 21) * 1000 + 780);
-        int64_t inside = 0;
-        for (int x = 0; x <= 20; ++x)
-            for (int y = 0; y <= 20; ++y)
-                for (int z = 0; z <= 20; ++z)
-                    inside += at(a, x, y, z) == 1000 ? 1 : 0;
-        EXPECT_EQ(inside, 21 * 21 * 21) << threads;
+        EXPECT_EQ(cellsOfTheBlockAtTc(a), 21 * 21 * 21) << threads;
         const uint64_t h = contentHash(*g);
         if (threads == 1) first = h;
         EXPECT_EQ(h, first) << threads;
@@ -1090,10 +1108,7 @@ TEST_F(TransportTest, ADoublingOfTheReachStopsFirstAtTheCallersBoundOnRoom)
     // memory estimate's bound of the domain (max(reach, roomWithin), not twice). 7 lies past the
     // doubling: 6. Each exact: every cell at Tc, the 780 extra above the block.
     for (const int64_t within : {int64_t(0), int64_t(4), int64_t(5), int64_t(7)}) {
-        MassGridPtr g = block(box(0, 0, 0, 20, 20, 20), 1000);
-        for (int y = 9; y <= 20; ++y)
-            g->tree().setValue(openvdb::Coord(10, y, 10), 1040);
-        g->tree().setValue(openvdb::Coord(4, 4, 4), 1300);
+        MassGridPtr g = chainAndLoneCell();
         Automaton a(g, opts(3, 2));
         GlobalTransportOptions go;
         go.reach = 3;
@@ -1103,12 +1118,7 @@ TEST_F(TransportTest, ADoublingOfTheReachStopsFirstAtTheCallersBoundOnRoom)
         EXPECT_EQ(r.overloadAfter, 0) << within;
         EXPECT_FALSE(r.noRoom);
         EXPECT_EQ(totalMass(*g), int64_t(21 * 21 * 21) * 1000 + 780);
-        int64_t inside = 0;
-        for (int x = 0; x <= 20; ++x)
-            for (int y = 0; y <= 20; ++y)
-                for (int z = 0; z <= 20; ++z)
-                    inside += at(a, x, y, z) == 1000 ? 1 : 0;
-        EXPECT_EQ(inside, 21 * 21 * 21) << within;
+        EXPECT_EQ(cellsOfTheBlockAtTc(a), 21 * 21 * 21) << within;
     }
     MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
     Automaton a(g, opts());
