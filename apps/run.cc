@@ -265,7 +265,10 @@ int finishStopped(vdbclay::Sculptor& sculptor, const RunArgs& a, const std::stri
                      name, where.c_str(), (unsigned long long)steps);
     } else {
         try {
-            vdbclay::writeClayFile(checkpoint, *sculptor.mass(), meta);
+            // The mass alone: what --resume reads, in a second at any size (the surface's sweep of a
+            // 2048-wide model would keep the interrupted user waiting 20 s).
+            vdbclay::writeClayFile(checkpoint, *sculptor.mass(), meta,
+                                   vdbclay::ClayGrids{true, false, false});
             std::fprintf(stderr,
                          "vdbclay: %s %s (step %llu); checkpoint written to %s "
                          "(continue: %s)\n",

@@ -43,6 +43,8 @@ grep -q 'interrupted by SIGINT in frame 1/1 .*checkpoint written to out.checkpoi
   fail "SIGINT: stderr: $(cat run1.log.err)"
 [ -e out.vdb ] && fail "SIGINT: the output was written though the run did not finish"
 s1=$(meta out.checkpoint.vdb vdbclay_steps); f1=$(meta out.checkpoint.vdb vdbclay_frame_steps)
+grids=$("$bin" info out.checkpoint.vdb | sed -n 's/^grid "\([a-z]*\)".*/\1/p' | tr '\n' ' ')
+[ "$grids" = "mass " ] || fail "SIGINT: the checkpoint holds grids '$grids', not the mass alone"
 [ -n "$s1" ] && [ "$f1" = "$s1" ] && [ "$s1" -ge "$at1" ] && [ "$s1" -lt "$whole_steps" ] ||
   fail "SIGINT: checkpoint steps '$s1', frame steps '$f1' (unbroken: $whole_steps)"
 echo "SIGINT: $(cat run1.log.err)"
