@@ -585,6 +585,11 @@ TEST_F(MemoryTest, ClayAtMostTcGrowsOnlyNearTheToolsWhereTheLayerMovesAllOfTheOv
             .obstacles[0]);
     const MemoryEstimate walled = estimateSceneMemory(beside);
     EXPECT_GE(walled.clayLeavesGrown, walled.clayLeaves + walled.clayLeaves / 2) << walled.describe();
+    // The scene's surface tension smooths the whole surface in the first frame.
+    Scene tension = parseScene(json, "s.json", "");
+    tension.surfaceTension = 0.5;
+    const MemoryEstimate te = estimateSceneMemory(tension);
+    EXPECT_GE(te.clayLeavesGrown, te.clayLeaves + te.clayLeaves / 2) << te.describe();
 }
 
 TEST_F(MemoryTest, EveryFrameOfAToolMovedByWholeVoxelsIsTightened)

@@ -27,11 +27,11 @@
 // its leaves; clay a tool pokes spreads within a leaf of itself and of the tools' sweeps (what a push
 // moves lands beside the tool, the global layer writes only the cells its domain touches, next to the
 // clay); where the global layer moves all of a push's overload within its bound (no try before it,
-// no obstacle near: changesNearTools), an analytic shape's clay spreads so only within the layer's
-// reach of a tool and keeps its own leaves elsewhere; clay a tool covers (a sweep spanning its box on two
-// axes: squeezed over the whole footprint), clay over Tc and clay from files that may hold some spread over
-// the group's box. Never more than 27 leaves per initial leaf (a step moves clay one voxel), a leaf per unit
-// of mass, and clay over Tc at least over its settled volume.
+// no obstacle near, no surface tension: changesNearTools), an analytic shape's clay spreads so only within
+// the layer's reach of a tool and keeps its own leaves elsewhere; clay a tool covers (a sweep spanning its
+// box on two axes: squeezed over the whole footprint), clay over Tc and clay from files that may hold some
+// spread over the group's box. Never more than 27 leaves per initial leaf (a step moves clay one voxel), a
+// leaf per unit of mass, and clay over Tc at least over its settled volume.
 //
 // The global layer's domain (transport/Domain.cc; frame_policy::layerRuns, layerOptions). A frame whose tools
 // touch clay runs the layer with reach r0 = frame_policy::layerReach(contact) (contact: sqrt of the
@@ -603,9 +603,11 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
     // Clay changes only near the tools where the global layer moves all of a push's overload and
     // its bound holds: the compress push and the layer move clay within layerNear of a tool's bounds
     // (the Dirichlet cells included), no try carries overload out of the push's region first, and the
-    // automaton then finds none to move (frame_policy). Elsewhere the clay at most Tc keeps its leaves.
+    // automaton then finds none to move (frame_policy); the smooth tools move clay inside their
+    // bounds. Elsewhere the clay at most Tc keeps its leaves, unless the scene's surface tension
+    // smooths the whole surface (its first frame).
     const bool changesNearTools = frame_policy::usesGlobalLayer(scene) && reach.bounded && lb.trySkipped &&
-                                  !walled && !toolBoxes.empty();
+                                  !walled && !toolBoxes.empty() && !(scene.surfaceTension > 0);
     // The clay's leaves, group by group (clay boxes and tool sweeps that touch, each grown by a leaf):
     // at the start (the shapes' own), grown (as far as the run may move them), and within one leaf of
     // those (grownPlus: the automaton's anchors, the surface's band).
