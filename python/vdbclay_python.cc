@@ -176,26 +176,18 @@ Box boxOf(const Int3& lo, const Int3& hi)
     return b;
 }
 
-/// The active voxels' bounding box, or the box the caller gave.
-/// The grids @a names names (none: @a byDefault). @throw Error naming a name that is not a grid, or
-/// one named twice, or an empty list.
+/// The grids @a names names (none: @a byDefault). @throw Error (clayGridsOf's) naming the argument.
 ClayGrids gridsOf(const std::optional<std::vector<std::string>>& names, const ClayGrids& byDefault)
 {
     if (!names) return byDefault;
-    if (names->empty()) throw Error("grids: expected at least one of mass, density, surface");
-    std::string list;
-    for (const std::string& n : *names) {
-        if (n.find(',') != std::string::npos)
-            throw Error("grids: \"" + n + "\" is not a grid of a clay file (mass, density or surface)");
-        list += (list.empty() ? "" : ",") + n;
-    }
     try {
-        return parseClayGrids(list);
+        return clayGridsOf(*names);
     } catch (const Error& e) {
         throw Error(std::string("grids: ") + e.what());
     }
 }
 
+/// The active voxels' bounding box, or the box the caller gave.
 Box regionOf(const Clay& c, const std::optional<Int3>& lo, const std::optional<Int3>& hi)
 {
     if (lo.has_value() != hi.has_value()) throw Error("give both min and max, or neither");

@@ -100,12 +100,15 @@ std::string stroke(int w, const std::string& push = "compress", uint64_t maxStep
            std::to_string(maxSteps) + R"(}, "memory_budget": "none"})";
 }
 
-/// @a s (a stroke()) with an obstacle box beside its tool, which may wall the clay in.
-Scene withObstacleBesideTheStroke(Scene s)
+/// @a s (a stroke(), 512 wide unless @a box says where) with an obstacle box beside its tool, which
+/// may wall the clay in.
+Scene withObstacleBesideTheStroke(Scene s,
+                                  const std::string& box = R"("min": [200,520,200], "max": [300,530,300])")
 {
     s.obstacles.push_back(
         parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
-        "obstacles": [{"shape": "box", "min": [200,520,200], "max": [300,530,300]}]})",
+        "obstacles": [{"shape": "box", )" +
+                       box + "}]}",
                    "t.json", "")
             .obstacles[0]);
     return s;
@@ -577,13 +580,8 @@ TEST_F(MemoryTest, ClayAtMostTcGrowsOnlyNearTheToolsWhereTheLayerMovesAllOfTheOv
     const MemoryEstimate under =
         estimateSceneMemory(parseScene(stroke(256, "surface", 16, 3, 900), "s.json", ""));
     EXPECT_GE(under.clayLeavesGrown, under.clayLeaves + under.clayLeaves / 2) << under.describe();
-    Scene beside = parseScene(json, "s.json", "");
-    beside.obstacles.push_back(
-        parseScene(R"({"clay": [{"shape": "box", "min": [0,0,0], "max": [1,1,1], "mass": 1}],
-        "obstacles": [{"shape": "box", "min": [150,262,100], "max": [170,270,160]}]})",
-                   "t.json", "")
-            .obstacles[0]);
-    const MemoryEstimate walled = estimateSceneMemory(beside);
+    const MemoryEstimate walled = estimateSceneMemory(withObstacleBesideTheStroke(
+        parseScene(json, "s.json", ""), R"("min": [150,262,100], "max": [170,270,160])"));
     EXPECT_GE(walled.clayLeavesGrown, walled.clayLeaves + walled.clayLeaves / 2) << walled.describe();
     // The scene's surface tension smooths the whole surface in the first frame.
     Scene tension = parseScene(json, "s.json", "");

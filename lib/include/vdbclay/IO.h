@@ -51,8 +51,10 @@ struct ClayGrids {
     bool density = true; ///< FloatGrid "density": mass / Tc, a fog volume
     bool surface = true; ///< FloatGrid level set "surface": the clay surface at density 0.5
 };
-/// Grid names separated by commas ("mass,surface"), of mass, density and surface.
-/// @throw Error naming a name that is none of those or is given twice, or an empty list.
+/// The grids @a names names, each of mass, density and surface.
+/// @throw Error naming a name that is none of those or is given twice, or saying the list is empty.
+ClayGrids clayGridsOf(const std::vector<std::string>& names);
+/// Grid names separated by commas ("mass,surface"): clayGridsOf() of them, an error naming the list.
 ClayGrids parseClayGrids(const std::string& list);
 /// The grids' names in file order, separated by commas ("mass,density,surface").
 std::string clayGridsName(const ClayGrids& grids);

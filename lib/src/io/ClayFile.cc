@@ -101,28 +101,36 @@ void validateMeta(const ClayMeta& meta, const std::string& path)
 
 } // namespace
 
-ClayGrids parseClayGrids(const std::string& list)
+ClayGrids clayGridsOf(const std::vector<std::string>& names)
 {
+    if (names.empty()) throw Error("no grid named: expected at least one of mass, density, surface");
     ClayGrids g{false, false, false};
-    size_t start = 0;
-    for (;;) {
-        const size_t comma = list.find(',', start);
-        const std::string name =
-            list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    for (const std::string& name : names) {
         bool* slot = name == "mass"      ? &g.mass
                      : name == "density" ? &g.density
                      : name == "surface" ? &g.surface
                                          : nullptr;
-        if (!slot) {
-            throw Error("\"" + name + "\" is not a grid of a clay file (mass, density or surface)" +
-                        (list.find(',') != std::string::npos ? " in \"" + list + "\"" : std::string()));
-        }
-        if (*slot) throw Error("grid \"" + name + "\" is named twice in \"" + list + "\"");
+        if (!slot) throw Error("\"" + name + "\" is not a grid of a clay file (mass, density or surface)");
+        if (*slot) throw Error("grid \"" + name + "\" is named twice");
         *slot = true;
+    }
+    return g;
+}
+
+ClayGrids parseClayGrids(const std::string& list)
+{
+    std::vector<std::string> names;
+    for (size_t start = 0;;) {
+        const size_t comma = list.find(',', start);
+        names.push_back(list.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
         if (comma == std::string::npos) break;
         start = comma + 1;
     }
-    return g;
+    try {
+        return clayGridsOf(names);
+    } catch (const Error& e) {
+        throw Error(e.what() + (names.size() > 1 ? " in \"" + list + "\"" : std::string()));
+    }
 }
 
 std::string clayGridsName(const ClayGrids& grids)

@@ -899,17 +899,16 @@ Scene parseScene(const std::string& text, const std::string& source, const std::
                         std::string("expected a non-empty array of grid names (mass, density, "
                                     "surface), got ") +
                             (g->is_array() ? "[]" : g->type_name()));
-            std::string list;
+            std::vector<std::string> names;
             for (size_t i = 0; i < g->size(); ++i) {
                 const std::string field = "outputs.grids[" + std::to_string(i) + "]";
-                const std::string name = cx.string((*g)[i], field);
-                if (name.find(',') != std::string::npos)
-                    cx.fail(field,
-                            "\"" + name + "\" is not a grid of a clay file (mass, density or surface)");
-                list += (i ? "," : "") + name;
+                names.push_back(cx.string((*g)[i], field));
+                if (names.back().find(',') != std::string::npos) // a list where a name belongs
+                    cx.fail(field, "\"" + names.back() +
+                                       "\" is not a grid of a clay file (mass, density or surface)");
             }
             try {
-                sc.outputs.grids = parseClayGrids(list);
+                sc.outputs.grids = clayGridsOf(names);
             } catch (const Error& e) {
                 cx.fail("outputs.grids", e.what());
             }

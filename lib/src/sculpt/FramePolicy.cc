@@ -32,18 +32,23 @@ GlobalTransportOptions layerOptions(const PushReport& push, int threads)
     return go;
 }
 
+int64_t diagonalOf(const Box& bounds)
+{
+    if (bounds.empty()) return 0;
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+        const double side = double(int64_t(bounds.max[a]) - bounds.min[a] + 1);
+        d2 += side * side;
+    }
+    return int64_t(std::ceil(std::sqrt(d2)));
+}
+
 int64_t toolExtent(const Scene& scene)
 {
-    double most = 0;
-    for (const ToolSpec& t : scene.tools) {
-        const Box b = t.shape.shape->bounds();
-        if (b.empty()) continue;
-        double d2 = 0;
-        for (int a = 0; a < 3; ++a)
-            d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
-        most = std::max(most, std::sqrt(d2));
-    }
-    return int64_t(std::ceil(most));
+    int64_t most = 0;
+    for (const ToolSpec& t : scene.tools)
+        most = std::max(most, diagonalOf(t.shape.shape->bounds()));
+    return most;
 }
 
 int64_t roomWithin(const Scene& scene, uint64_t trySteps)

@@ -70,7 +70,10 @@ GlobalTransportOptions layerOptions(const PushReport& push, int threads);
 /// seeds staying in the push's region (maxSearch + 2 voxels past the tool) whatever the try's steps
 /// (GlobalTransportOptions::roomWithin; the memory estimate's bound of the layer's domain).
 int64_t roomWithin(const Scene& scene, uint64_t trySteps);
-/// The largest diagonal of a tool's shape's bounds, in voxels, rounded up: any pose's extent.
+/// The diagonal of @a bounds' voxels (their outer faces), rounded up: no pose of a shape with these
+/// bounds is wider along any line.
+int64_t diagonalOf(const Box& bounds);
+/// The largest diagonalOf() a tool's shape's bounds: any pose's extent.
 int64_t toolExtent(const Scene& scene);
 
 /// The clay whose density decides the try (the push's region grown by the reach: the plastic zone),

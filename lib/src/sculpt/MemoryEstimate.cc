@@ -496,12 +496,9 @@ MemoryEstimate estimateSceneMemory(const Scene& scene)
         toolInside = std::max(toolInside, sw.inside);
         const Box b = t.shape.shape->bounds(); // its diagonal: any pose's extent
         if (!b.empty()) {
-            double d2 = 0;
-            for (int a = 0; a < 3; ++a)
-                d2 += double(int64_t(b.max[a]) - b.min[a] + 1) * double(int64_t(b.max[a]) - b.min[a] + 1);
             // With Scene::sweep the pushes place the tool between the frames' poses too, where its
             // bounds may be wider (a turning box): any pose's bounds are no wider than its diagonal.
-            const double side = std::ceil(std::sqrt(d2));
+            const double side = double(frame_policy::diagonalOf(b));
             toolFace = std::max(toolFace, scene.sweep ? (dims == 2 ? side : side * side) : double(sw.face));
         } else {
             toolFace = std::max(toolFace, double(sw.face));
