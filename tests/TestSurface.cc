@@ -334,3 +334,21 @@ TEST_F(SurfaceTest, FogWithTilesGoesToOpenVdb)
     auto got = io_internal::fogToSdfByLeaves(*fog, 0.5f);
     EXPECT_GT(expectSameBits(*expected, *got), 0u);
 }
+
+TEST_F(SurfaceTest, LeavesFullToTheirFacesOnTheBackgroundMatchOpenVdb)
+{
+    // Leaves whose every value lies over the isovalue, with no leaf beside some of their faces: the
+    // voxels on those faces lie next to the isosurface (the background across them is outside), as
+    // next to a leaf under it.
+    auto fog = openvdb::FloatGrid::create(0.f);
+    fog->tree().fill(openvdb::CoordBBox(Coord(0), Coord(7)), 1.f, true);                  // one leaf, alone
+    fog->tree().fill(openvdb::CoordBBox(Coord(64, 0, 0), Coord(79, 7, 7)), 1.f, true);    // two, side by side
+    fog->tree().fill(openvdb::CoordBBox(Coord(64, 8, 0), Coord(71, 15, 7)), 0.25f, true); // one under
+    fog->tree().voxelizeActiveTiles();
+    auto expected = openvdb::tools::fogToSdf(*fog, 0.5f);
+    for (int threads : {1, 2}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        auto got = io_internal::fogToSdfByLeaves(*fog, 0.5f);
+        EXPECT_GT(expectSameBits(*expected, *got), 0u) << threads << " threads";
+    }
+}

@@ -8,7 +8,9 @@
 //
 // - Initialisation (OpenVDB's InitSdf): a voxel next to the isosurface (a face neighbour on the other
 //   side of the isovalue) gets the distance from the crossings on its axes, h / sqrt(sum 1/d^2);
-//   every other voxel +-FLT_MAX by its side; the same expressions in the same order.
+//   every other voxel +-FLT_MAX by its side; the same expressions in the same order. A leaf whose
+//   values and whose face neighbours' layers facing it all lie on one side has no voxel next to the
+//   isosurface: one test of its values, not six neighbours' per voxel (most leaves of a large lump).
 // - Sweeps (SweepingKernel::sweep): OpenVDB orders a sweep by the diagonal key (e.g. x+y-z
 //   ascending), so when a voxel is updated its three upwind face neighbours have been updated in
 //   this sweep and its three downwind ones have not; voxels of one key are never face neighbours.
@@ -222,6 +224,14 @@ void sweepOnce(std::vector<SweepLeaf>& leaves, const std::vector<std::pair<int64
                 for (int f = 0; f < 6; ++f)
                     across[size_t(f)] = 1 + f;
                 for (size_t k = r.begin(); k != r.end(); ++k) {
+                    // The leaves of a slice lie apart in memory: the values of the one two ahead are
+                    // fetched while this one is swept (the sweep waits on memory more than it computes).
+                    if (k + 2 < r.end()) {
+                        const SweepLeaf& ahead = leaves[order[k + 2].second];
+                        if (ahead.values && !ahead.sweep.isOff())
+                            for (Index i = 0; i < LeafT::SIZE; i += 64 / sizeof(float))
+                                __builtin_prefetch(ahead.values + i);
+                    }
                     SweepLeaf& leaf = leaves[order[k].second];
                     if (leaf.sweep.isOff()) continue;
                     // The voxels next to a recent change: in this leaf or across a face (the leaves across
@@ -357,6 +367,37 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
             fn(i, v[i], nb);
         }
     };
+    // Whether leaf li's fog values and its face neighbours' across its faces all lie on one side of
+    // the isovalue (< or not), so that none of its voxels is next to the isosurface (most leaves of a
+    // large lump: a test of its values instead of six neighbours' per voxel). A face without a leaf
+    // of the sweep reads the fog through the accessor: a tile or the background, one value, unless
+    // the fog holds a leaf there (then no).
+    auto oneSide = [&](size_t li, openvdb::tree::ValueAccessor<const FloatTree>& acc) {
+        const float* v = input[li];
+        const bool less = v[0] < isoValue;
+        for (Index i = 1; i < LeafT::SIZE; ++i)
+            if ((v[i] < isoValue) != less) return false;
+        for (int d = 0; d < 6; ++d) {
+            const int64_t nbLeaf = neighbours[li][size_t(d)];
+            if (nbLeaf < 0) {
+                const Coord& at = manager.leaf(li).origin();
+                const Coord o(at.x() + kDim * dirs[d].x(), at.y() + kDim * dirs[d].y(),
+                              at.z() + kDim * dirs[d].z());
+                if (acc.probeConstLeaf(o) || (acc.getValue(o) < isoValue) != less) return false;
+                continue;
+            }
+            const float* w = input[size_t(nbLeaf)];
+            const int side = (d & 1) ? 0 : kDim - 1; // the neighbour's layer facing this leaf
+            for (int a = 0; a < kDim; ++a)
+                for (int b = 0; b < kDim; ++b) {
+                    const Index j = d < 2   ? offsetOf(side, a, b)
+                                    : d < 4 ? offsetOf(a, side, b)
+                                            : offsetOf(a, b, side);
+                    if ((w[j] < isoValue) != less) return false;
+                }
+        }
+        return true;
+    };
     std::atomic<uint64_t> boundaryCount{0}, sweepCount{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n), [&](const tbb::blocked_range<size_t>& r) {
         openvdb::tree::ValueAccessor<const FloatTree> acc(source);
@@ -367,6 +408,11 @@ uint64_t sweepFogTree(FloatTree& tree, const FloatTree& source, float isoValue, 
                 out.neighbour[size_t(f)] = int32_t(neighbours[li][size_t(f)]);
             out.sweep.setOff();
             out.boundary().setOff();
+            if (oneSide(li, acc)) { // no voxel next to the isosurface: every active voxel is swept
+                out.sweep = manager.leaf(li).getValueMask();
+                sweeping += out.sweep.countOn();
+                continue;
+            }
             forEachOn(li, manager.leaf(li).getValueMask(), acc, [&](Index i, float value, const float nb[6]) {
                 // initValue's test: a face neighbour on the other side of the isovalue.
                 const bool less = value < isoValue;
