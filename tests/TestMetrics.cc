@@ -348,8 +348,14 @@ TEST_F(MetricsTest, MeasureClayOverLeavesIsTheSerialSumOnAnyThreadCount)
             g->tree().setValue(
                 Coord(rng.range(-200, 200), rng.range(-200, 200), dims == 3 ? rng.range(-200, 200) : 0),
                 rng.range(1, 3000));
+        if (dims == 2) // clay off the plane z = 0 (a 2D grid read from a file may hold some): never interior
+            for (int x = -15; x < 15; ++x)
+                for (int y = -5; y < 25; ++y)
+                    g->tree().setValue(Coord(x, y, 1), rng.range(1, 1700));
         auto obstacles = openvdb::MaskGrid::create(false);
         obstacles->tree().fill(openvdb::CoordBBox(Coord(-3, -3, -3), Coord(4, 40, 4)), true, true);
+        obstacles->tree().fill(openvdb::CoordBBox(Coord(8, 8, 0), Coord(15, 15, 7)), true, true); // a tile
+        EXPECT_EQ(obstacles->tree().activeTileCount(), 1u);
         const ClayMetrics expected = serialMeasure(*g, 1000, obstacles.get(), dims);
         EXPECT_GT(expected.interiorCells, 1000u);
         EXPECT_GT(expected.residualOverload, 0);

@@ -5,11 +5,13 @@
 // hash, rules_internal::hashKey), so the order of the walk does not matter and a tile gives the hash
 // of its voxels (it hashes them in parallel, in AVX-512 where the CPU has it: a tile of clay is hashed
 // as the same voxels in leaves would be). measureClay takes each leaf's and each tile's integer sums in
-// parallel (a tile's interior is its voxels off its faces, and those of its faces whose neighbours hold
-// clay), then adds them up; the spread about the mean comes from exact integer sums of m and m^2: the same
-// numbers on any thread count and any tree layout. compareShapes compares occupied sets as masks and measures
-// the distances between their surface voxels with a static 3D tree of voxel centres (exact integer squared
-// distances). metrics/ stands on core/, automaton/ (the hash) and shapes/ (rasterised reference shapes).
+// parallel (a leaf's interior, and an 8^3 tile's, as bits: its voxels holding clay, shifted one face
+// step each way, the facing layers of its neighbours across its faces; a larger tile's interior is its
+// voxels off its faces, and those of its faces whose neighbours hold clay), then adds them up; the spread
+// about the mean comes from exact integer sums of m and m^2: the same numbers on any thread count and any
+// tree layout. compareShapes compares occupied sets as masks and measures the distances between their surface
+// voxels with a static 3D tree of voxel centres (exact integer squared distances). metrics/ stands on core/,
+// automaton/ (the hash) and shapes/ (rasterised reference shapes).
 #include "vdbclay/Metrics.h"
 
 #include "vdbclay/Shapes.h"
@@ -121,14 +123,9 @@ std::vector<ClayTile> clayTiles(const MassGrid& mass)
 /// this many.
 constexpr uint64_t kHashTileVoxelsMax = uint64_t(1) << 35;
 
-/// The hash of one voxel of clay (contentHash's term).
-inline uint64_t voxelHash(uint64_t valuePrefix, int32_t x, int32_t y, int32_t z)
-{
-    return rules_internal::finishHash(valuePrefix, x, y, z);
-}
-
-/// The sum of voxelHash over the voxels x0..x1 of @a box (one value's @a valuePrefix): finishHash
-/// unrolled, its first mix once per x, the row in z a loop a compiler vectorises.
+/// The sum of contentHash's term (rules_internal::finishHash of a value's prefix and a voxel) over the
+/// voxels x0..x1 of @a box (one value's @a valuePrefix): finishHash unrolled, its first mix once per x,
+/// the row in z a loop a compiler vectorises.
 __attribute__((always_inline)) inline uint64_t slabHashSum(uint64_t valuePrefix, int32_t x0, int32_t x1,
                                                            const openvdb::CoordBBox& box)
 {
@@ -201,13 +198,26 @@ uint64_t contentHash(const MassGrid& mass)
     parallel_internal::forEachIndex(sums.size(), 0, [&](size_t i) {
         uint64_t h = 0, n = 0;
         if (i < leaves.size()) {
+            // finishHash with its first mix (of the value's prefix and x) once per run of one value along
+            // y and z: a leaf's voxels mostly hold few values.
             const Leaf& leaf = *leaves[i];
             const int32_t* d = leaf.buffer().data();
-            for (openvdb::Index k = 0; k < Leaf::SIZE; ++k) {
-                if (d[k] == 0) continue;
-                const Coord c = leaf.offsetToGlobalCoord(k);
-                h += voxelHash(rules_internal::stepPrefix(uint64_t(uint32_t(d[k])), 0), c.x(), c.y(), c.z());
-                ++n;
+            const Coord& o = leaf.origin();
+            for (int x = 0; x < 8; ++x) {
+                int32_t last = 0;
+                uint64_t hx = 0;
+                for (int b = 0; b < 64; ++b) {
+                    const int32_t m = d[x * 64 + b];
+                    if (m == 0) continue;
+                    if (m != last) {
+                        last = m;
+                        hx = rules_internal::mix64(rules_internal::stepPrefix(uint64_t(uint32_t(m)), 0) ^
+                                                   uint64_t(uint32_t(o.x() + x)));
+                    }
+                    const uint64_t y = uint32_t(o.y() + (b >> 3)), z = uint32_t(o.z() + (b & 7));
+                    h += rules_internal::mix64(hx ^ ((y << 32) | z));
+                    ++n;
+                }
             }
         } else {
             const Part& p = parts[i - leaves.size()];
@@ -289,6 +299,49 @@ double spread(uint64_t n, int64_t s1, unsigned __int128 s2)
 
 } // namespace
 
+namespace {
+
+/// A leaf's voxels holding clay (a value other than 0) as bits: a word per x, bit y * 8 + z.
+std::array<uint64_t, 8> clayBits(const int32_t* d)
+{
+    std::array<uint64_t, 8> w{};
+    for (int x = 0; x < 8; ++x)
+        for (int b = 0; b < 64; ++b)
+            w[x] |= uint64_t(d[x * 64 + b] != 0) << b;
+    return w;
+}
+
+/// Every bit, or none.
+std::array<uint64_t, 8> uniformBits(bool on)
+{
+    std::array<uint64_t, 8> w;
+    w.fill(on ? ~uint64_t(0) : 0);
+    return w;
+}
+
+/// For each voxel of a leaf whose clay bits are @a self, whether its neighbour across face @a f
+/// (kFaces' order: +x, -x, +y, -y, +z, -z) holds clay: from @a self inside the leaf, from the bits
+/// of the leaf beyond that face, @a beyond, on the face.
+std::array<uint64_t, 8> faceNeighbourBits(const std::array<uint64_t, 8>& self,
+                                          const std::array<uint64_t, 8>& beyond, int f)
+{
+    constexpr uint64_t kZ0 = 0x0101010101010101ull; // bit z = 0 of every row
+    std::array<uint64_t, 8> out;
+    for (int x = 0; x < 8; ++x) {
+        switch (f) {
+        case 0: out[x] = x < 7 ? self[x + 1] : beyond[0]; break;
+        case 1: out[x] = x > 0 ? self[x - 1] : beyond[7]; break;
+        case 2: out[x] = (self[x] >> 8) | (beyond[x] << 56); break;
+        case 3: out[x] = (self[x] << 8) | (beyond[x] >> 56); break;
+        case 4: out[x] = ((self[x] >> 1) & ~(kZ0 << 7)) | ((beyond[x] & kZ0) << 7); break;
+        default: out[x] = ((self[x] << 1) & ~kZ0) | ((beyond[x] >> 7) & kZ0); break;
+        }
+    }
+    return out;
+}
+
+} // namespace
+
 ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleGrid* obstacles, int dims,
                         int threads)
 {
@@ -323,10 +376,46 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
     const int faces = faceCount(dims);
     parallel_internal::forEachIndex(sums.size(), threads, [&](size_t i) {
         Sums& out = sums[i];
-        auto acc = mass.getConstAccessor();
-        std::unique_ptr<openvdb::MaskGrid::ConstAccessor> oacc;
+        // Accessors not registered with their trees (registering one a leaf would cost more than
+        // the leaf's sums): the trees do not change while they are read.
+        auto acc = mass.getConstUnsafeAccessor();
+        std::unique_ptr<openvdb::MaskGrid::ConstUnsafeAccessor> oacc;
         if (obstacles)
-            oacc = std::make_unique<openvdb::MaskGrid::ConstAccessor>(obstacles->getConstAccessor());
+            oacc =
+                std::make_unique<openvdb::MaskGrid::ConstUnsafeAccessor>(obstacles->getConstUnsafeAccessor());
+        // The voxels of the 8^3 block at @a o whose neighbours across every face hold clay, given the
+        // block's own clay bits: inside it from its bits, across its faces from the facing layer of
+        // the neighbouring leaf (or the tile or background there, one value); none on obstacles
+        // (the block's: a leaf, an active tile or none, in @a obstacle), and in 2D none off z = 0.
+        auto interiorBits = [&](const std::array<uint64_t, 8>& clay, const Coord& o,
+                                std::array<uint64_t, 8>& obstacle) {
+            std::array<uint64_t, 8> interior = clay;
+            for (int f = 0; f < faces; ++f) {
+                const Coord across(o.x() + 8 * kFaces[f].x(), o.y() + 8 * kFaces[f].y(),
+                                   o.z() + 8 * kFaces[f].z());
+                const MassLeaf* nl = acc.probeConstLeaf(across);
+                const std::array<uint64_t, 8> beyond =
+                    nl ? clayBits(nl->buffer().data()) : uniformBits(acc.getValue(across) != 0);
+                const std::array<uint64_t, 8> next = faceNeighbourBits(clay, beyond, f);
+                for (int x = 0; x < 8; ++x)
+                    interior[x] &= next[x];
+            }
+            obstacle = uniformBits(false);
+            if (obstacles) {
+                if (const openvdb::MaskTree::LeafNodeType* ol = obstacles->tree().probeConstLeaf(o)) {
+                    for (int x = 0; x < 8; ++x)
+                        obstacle[x] = ol->getValueMask().template getWord<uint64_t>(openvdb::Index(x));
+                } else if (oacc->isValueOn(o)) {
+                    obstacle = uniformBits(true);
+                }
+            }
+            uint64_t plane = ~uint64_t(0);
+            if (dims == 2)
+                plane = o.z() <= 0 && 0 < o.z() + 8 ? uint64_t(0x0101010101010101ull) << (-o.z()) : 0;
+            for (int x = 0; x < 8; ++x)
+                interior[x] &= ~obstacle[x] & plane;
+            return interior;
+        };
         auto interiorAt = [&](const Coord& c) {
             for (int f = 0; f < faces; ++f)
                 if (acc.getValue(c + kFaces[f]) == 0) return false;
@@ -337,6 +426,19 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
             // interior unless obstacles; those on its faces by their neighbours.
             const ClayTile& t = tiles[i - leaves.size()];
             const openvdb::CoordBBox& b = t.box;
+            if (b.dim() == Coord(8)) { // a leaf's size (most tiles next to leaves): as a leaf of one value
+                std::array<uint64_t, 8> obstacle;
+                const std::array<uint64_t, 8> interior = interiorBits(uniformBits(true), b.min(), obstacle);
+                uint64_t onObstacles = 0, inside = 0;
+                for (int x = 0; x < 8; ++x) {
+                    onObstacles += uint64_t(__builtin_popcountll(obstacle[x]));
+                    inside += uint64_t(__builtin_popcountll(interior[x]));
+                }
+                out.add(t.value, threshold, true, false, onObstacles);
+                out.add(t.value, threshold, false, true, inside);
+                out.add(t.value, threshold, false, false, 512 - onObstacles - inside);
+                return;
+            }
             const bool anyObstacle = obstacles && obstacleBounds.hasOverlap(b);
             if (anyObstacle || dims == 2 || b.dim().x() < 3) {
                 for (auto c = b.begin(); c; ++c) {
@@ -401,35 +503,40 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
             return;
         }
         const MassLeaf& leaf = *leaves[i];
-        // The leaf's obstacles once (a leaf, an active tile or none), and face neighbours inside the
-        // leaf read from its buffer: only the voxels on the leaf's faces read through the accessor.
-        const openvdb::MaskTree::LeafNodeType* ol = nullptr;
-        bool obstacleTile = false;
-        if (obstacles) {
-            ol = obstacles->tree().probeConstLeaf(leaf.origin());
-            obstacleTile = !ol && obstacles->tree().isValueOn(leaf.origin());
-        }
+        // The voxels holding clay as bits, their interior as bits (interiorBits), then one pass over
+        // the values adds them up.
         const int32_t* d = leaf.buffer().data();
-        constexpr int kDim = int(MassLeaf::DIM);
-        // offset steps of the faces in kFaces' order: +-x (DIM^2), +-y (DIM), +-z (1)
-        const int step[6] = {kDim * kDim, -kDim * kDim, kDim, -kDim, 1, -1};
-        for (openvdb::Index k = 0; k < MassLeaf::SIZE; ++k) {
-            const int32_t m = d[k];
-            if (m == 0) continue;
-            const Coord c = leaf.offsetToGlobalCoord(k);
-            const bool obstacle = ol ? ol->isValueOn(k) : obstacleTile;
-            bool interior = !obstacle && !(dims == 2 && c.z() != 0);
-            const int local[3] = {int(k >> (2 * MassLeaf::LOG2DIM)), int(k >> MassLeaf::LOG2DIM) & (kDim - 1),
-                                  int(k) & (kDim - 1)};
-            for (int f = 0; f < faces && interior; ++f) {
-                const int axis = f >> 1, to = local[axis] + ((f & 1) ? -1 : 1);
-                if (to >= 0 && to < kDim)
-                    interior = d[int(k) + step[f]] != 0;
-                else
-                    interior = acc.getValue(c + kFaces[f]) != 0;
+        const std::array<uint64_t, 8> clay = clayBits(d);
+        std::array<uint64_t, 8> obstacle;
+        const std::array<uint64_t, 8> interior = interiorBits(clay, leaf.origin(), obstacle);
+        // Every value, without a branch: a 0 adds nothing to the sums (not clay, not occupied, not
+        // over Tc, never interior; the largest cell starts at 0).
+        int64_t massSum = 0, overload = 0, interiorSum = 0;
+        uint64_t occupiedCount = 0, clayCount = 0, interiorCount = 0;
+        unsigned __int128 interiorSquares = 0;
+        int32_t largest = 0;
+        for (int x = 0; x < 8; ++x) {
+            clayCount += uint64_t(__builtin_popcountll(clay[x]));
+            interiorCount += uint64_t(__builtin_popcountll(interior[x]));
+            for (int bit = 0; bit < 64; ++bit) {
+                const int64_t m = d[x * 64 + bit];
+                const int64_t in = int64_t((interior[x] >> bit) & 1);
+                massSum += m;
+                largest = std::max(largest, int32_t(m));
+                occupiedCount += uint64_t(2 * m >= threshold);
+                overload += int64_t(((obstacle[x] >> bit) & 1) == 0 && m > threshold) * (m - threshold);
+                interiorSum += in * m;
+                interiorSquares += (unsigned __int128)(uint64_t(in * m * m));
             }
-            out.add(m, threshold, obstacle, interior);
         }
+        out.mass += massSum;
+        out.maxCell = std::max(out.maxCell, largest);
+        out.clayVoxels += clayCount;
+        out.occupiedVoxels += occupiedCount;
+        out.residualOverload += overload;
+        out.interiorCells += interiorCount;
+        out.interiorSum += interiorSum;
+        out.interiorSquares += interiorSquares;
     });
     ClayMetrics r;
     int64_t interiorSum = 0;
