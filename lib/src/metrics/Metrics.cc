@@ -301,6 +301,9 @@ double spread(uint64_t n, int64_t s1, unsigned __int128 s2)
 
 namespace {
 
+/// Bit z = 0 of every row of a leaf's mask word (a word per x, bit y * 8 + z).
+constexpr uint64_t kZ0 = 0x0101010101010101ull;
+
 /// A leaf's voxels holding clay (a value other than 0) as bits: a word per x, bit y * 8 + z.
 std::array<uint64_t, 8> clayBits(const int32_t* d)
 {
@@ -325,7 +328,6 @@ std::array<uint64_t, 8> uniformBits(bool on)
 std::array<uint64_t, 8> faceNeighbourBits(const std::array<uint64_t, 8>& self,
                                           const std::array<uint64_t, 8>& beyond, int f)
 {
-    constexpr uint64_t kZ0 = 0x0101010101010101ull; // bit z = 0 of every row
     std::array<uint64_t, 8> out;
     for (int x = 0; x < 8; ++x) {
         switch (f) {
@@ -410,8 +412,7 @@ ClayMetrics measureClay(const MassGrid& mass, int32_t threshold, const ObstacleG
                 }
             }
             uint64_t plane = ~uint64_t(0);
-            if (dims == 2)
-                plane = o.z() <= 0 && 0 < o.z() + 8 ? uint64_t(0x0101010101010101ull) << (-o.z()) : 0;
+            if (dims == 2) plane = o.z() <= 0 && 0 < o.z() + 8 ? kZ0 << (-o.z()) : 0;
             for (int x = 0; x < 8; ++x)
                 interior[x] &= ~obstacle[x] & plane;
             return interior;
