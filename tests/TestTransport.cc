@@ -8,6 +8,7 @@
 #include <vdbclay/Shapes.h>
 #include <vdbclay/Transport.h>
 
+#include "transport/Domain.h"       // the flood, one by one and in batches
 #include "transport/RadixSort.h"    // the routing's order, sorted on any thread count
 #include "transport/SolverTuning.h" // the solver's tuning, varied here
 
@@ -1276,4 +1277,151 @@ TEST_F(TransportTest, TheLayersWorkFollowsTheToolNotTheBody)
             }
     EXPECT_EQ(differ, 0u);
     EXPECT_EQ(totalMass(*small.mass()), int64_t(96) * 64 * 96 * 1000);
+}
+
+// ---- the flood in batches ------------------------------------------------------------------------
+
+namespace {
+
+/// The domain's arrays as one comparable record (Domain.h: the cells, their links, distances and the
+/// faces the flood found).
+struct BuiltDomain {
+    bool allRoom = false, cut = false;
+    std::vector<int32_t> at; // x, y, z per cell
+    std::vector<int64_t> m0, dist;
+    std::vector<uint8_t> kind, hasNb, face;
+    std::vector<int32_t> nb;
+};
+
+BuiltDomain buildDomain(const Automaton& a, int64_t reach, uint64_t batchMin, bool serial)
+{
+    using namespace transport_internal;
+    BuiltDomain b;
+    DomainArrays arrays;
+    Domain domain(a, arrays, true, batchMin, serial);
+    std::vector<CellCoord> seeds;
+    domain.seeds(Box(), seeds);
+    b.allRoom = domain.build(seeds, reach, kInnerMargin, b.cut);
+    for (const CellCoord& c : arrays.cells.at)
+        b.at.insert(b.at.end(), {c.x, c.y, c.z});
+    b.m0 = arrays.cells.m0;
+    b.dist = arrays.dist;
+    b.kind = arrays.cells.kind;
+    b.hasNb = arrays.cells.hasNb;
+    b.face = arrays.face;
+    b.nb = arrays.cells.nb;
+    return b;
+}
+
+/// The first index where @a a and @a b differ (the shorter one's size if one is a prefix), or -1.
+template <typename T> int64_t firstDifference(const std::vector<T>& a, const std::vector<T>& b)
+{
+    const auto d = std::mismatch(a.begin(), a.end(), b.begin(), b.end());
+    return d.first == a.end() && d.second == b.end() ? -1 : int64_t(d.first - a.begin());
+}
+
+} // namespace
+
+TEST_F(TransportTest, TheFloodInBatchesBuildsTheOneByOneFloodsDomainOnAnyThreadCount)
+{
+    // The flood takes a whole layer at a time once it holds floodBatchMin cells, probing its faces in
+    // parallel and adding what they found in the one-by-one flood's order (Domain.h). Its domain must
+    // be that flood's exactly: the same cells in the same order, links, distances, faces found, the
+    // same answer on room and cut. Batches of every layer (1), of layers of 7 or more, and of none
+    // (8192, larger than every layer here), on 1, 2, 3 and 8 threads, over: a plate on a block (layers
+    // of 6,144 cells, two chunks), a chain and a lone cell beyond the reach (floods of their own), one
+    // over cell inside, a row of them, a 2D slab, random over cells in a block (parts that meet),
+    // chambers walled in (no room); each with no reach (the index's tree alone) and with short ones
+    // (its dense box, faces cut).
+    struct Case {
+        const char* name;
+        MassGridPtr g;
+        openvdb::MaskGrid::Ptr obs;
+        int dims;
+    };
+    std::vector<Case> cases;
+    {
+        MassGridPtr g = block(box(0, 0, 0, 95, 5, 63), 1000);
+        for (int x = 0; x < 96; ++x)
+            for (int z = 0; z < 64; ++z)
+                g->tree().setValue(openvdb::Coord(x, 5, z), 1000 + (x * 7 + z * 3) % 50);
+        openvdb::MaskGrid::Ptr plate = openvdb::MaskGrid::create(false);
+        plate->tree().fill(openvdb::CoordBBox(openvdb::Coord(-1, 6, -1), openvdb::Coord(96, 7, 64)), true,
+                           true);
+        cases.push_back({"plate on a block", g, plate, 3});
+    }
+    cases.push_back({"chain and lone cell", chainAndLoneCell(), nullptr, 3});
+    {
+        // One over cell inside: its own flood's layers (1, 6, 18, ... cells) start below 7 and
+        // pass it part way through a layer, where a batch must wait for the layer's end.
+        MassGridPtr g = block(box(0, 0, 0, 14, 14, 14), 1000);
+        g->tree().setValue(openvdb::Coord(7, 7, 7), 1500);
+        cases.push_back({"one cell inside", g, nullptr, 3});
+    }
+    {
+        // A row of five over cells inside: its first layers, 5 and then 20 cells, meet along the row,
+        // and a batch that took two layers at once would find the second's neighbours too late.
+        MassGridPtr g = block(box(0, 0, 0, 14, 14, 14), 1000);
+        for (int x = 5; x <= 9; ++x)
+            g->tree().setValue(openvdb::Coord(x, 7, 7), 1200);
+        cases.push_back({"a row inside", g, nullptr, 3});
+    }
+    {
+        MassGridPtr g = block(box(0, 0, 0, 127, 31, 0), 1000);
+        for (int x = 0; x < 128; ++x)
+            g->tree().setValue(openvdb::Coord(x, 31, 0), 1000 + x % 13);
+        openvdb::MaskGrid::Ptr line = openvdb::MaskGrid::create(false);
+        line->tree().fill(openvdb::CoordBBox(openvdb::Coord(-1, 32, 0), openvdb::Coord(128, 32, 0)), true,
+                          true);
+        cases.push_back({"2D slab", g, line, 2});
+    }
+    {
+        MassGridPtr g = block(box(0, 0, 0, 31, 31, 31), 1000);
+        std::mt19937 rng(7);
+        for (int k = 0; k < 300; ++k)
+            g->tree().setValue(openvdb::Coord(int(rng() % 32), int(rng() % 32), int(rng() % 32)),
+                               1000 + 1 + int(rng() % 90));
+        cases.push_back({"random over cells", g, nullptr, 3});
+    }
+    {
+        MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
+        g->tree().setValue(openvdb::Coord(1, 1, 1), 3000);
+        openvdb::MaskGrid::Ptr obs = openvdb::MaskGrid::create(false);
+        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(-1, -1, -1), openvdb::Coord(9, 4, 4)), true, true);
+        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(0, 0, 0), openvdb::Coord(3, 3, 3)), false, true);
+        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(5, 0, 0), openvdb::Coord(8, 3, 3)), false, true);
+        obs->tree().voxelizeActiveTiles();
+        cases.push_back({"walled in", g, obs, 3});
+    }
+    for (const Case& c : cases) {
+        Automaton a(c.g, opts(c.dims, 1), c.obs);
+        for (int64_t reach : {int64_t(0), int64_t(1), int64_t(2)}) {
+            const BuiltDomain ref = buildDomain(a, reach, 1, true);
+            ASSERT_FALSE(ref.at.empty()) << c.name;
+            if (std::string(c.name) == "walled in") {
+                EXPECT_FALSE(ref.allRoom);
+            }
+            if (std::string(c.name) == "plate on a block" && reach == 0) {
+                EXPECT_GT(ref.dist.size(), size_t(5 * 6144)); // six layers of 6,144 cells
+            }
+            for (uint64_t batchMin : {uint64_t(1), uint64_t(7), uint64_t(8192)})
+                for (int threads : {1, 2, 3, 8}) {
+                    BuiltDomain got;
+                    tbb::task_arena arena(threads);
+                    arena.execute([&] { got = buildDomain(a, reach, batchMin, false); });
+                    const std::string what = std::string(c.name) + ", reach " + std::to_string(reach) +
+                                             ", batches of " + std::to_string(batchMin) + ", " +
+                                             std::to_string(threads) + " threads";
+                    EXPECT_EQ(got.allRoom, ref.allRoom) << what;
+                    EXPECT_EQ(got.cut, ref.cut) << what;
+                    EXPECT_EQ(firstDifference(got.at, ref.at), -1) << "at, " << what;
+                    EXPECT_EQ(firstDifference(got.m0, ref.m0), -1) << "m0, " << what;
+                    EXPECT_EQ(firstDifference(got.dist, ref.dist), -1) << "dist, " << what;
+                    EXPECT_EQ(firstDifference(got.kind, ref.kind), -1) << "kind, " << what;
+                    EXPECT_EQ(firstDifference(got.hasNb, ref.hasNb), -1) << "hasNb, " << what;
+                    EXPECT_EQ(firstDifference(got.face, ref.face), -1) << "face, " << what;
+                    EXPECT_EQ(firstDifference(got.nb, ref.nb), -1) << "nb, " << what;
+                }
+        }
+    }
 }

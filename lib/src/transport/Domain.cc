@@ -2,6 +2,7 @@
 // with no room.
 
 #include "transport/Domain.h"
+#include "transport/Chunks.h"
 #include "transport/SolverTuning.h"
 
 #include "vdbclay/Automaton.h"
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <climits>
 #include <cstdlib>
+#include <optional>
 
 namespace vdbclay {
 namespace transport_internal {
@@ -54,10 +56,11 @@ struct Domain::Grids {
     std::unique_ptr<openvdb::tree::ValueAccessor<openvdb::Int32Tree>> indexAcc;
 };
 
-Domain::Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact)
+Domain::Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact,
+               uint64_t floodBatchMin, bool serial)
     : mTc(automaton.options().rule.threshold), mDirs(automaton.options().dimensions == 2 ? 4 : 6),
-      mFromContact(reachFromContact), mB(arrays), mC(arrays.cells),
-      mGrids(std::make_unique<Grids>(automaton)), mIndex(arrays.index)
+      mFromContact(reachFromContact), mFloodBatchMin(std::max<uint64_t>(floodBatchMin, 1)), mSerial(serial),
+      mB(arrays), mC(arrays.cells), mGrids(std::make_unique<Grids>(automaton)), mIndex(arrays.index)
 {
 }
 
@@ -221,6 +224,89 @@ bool Domain::link(int32_t i, const uint8_t* face)
     return cut;
 }
 
+template <typename Find> void Domain::floodBatch(size_t head, size_t end, int64_t reach, const Find& find)
+{
+    std::vector<int32_t>& comp = mB.comp;
+    std::vector<int32_t>& parent = mB.compParent;
+    mB.face.resize(end * 6, kFaceDone);
+    const size_t n = end - head, chunks = (n + kChunk - 1) / kChunk;
+    if (mB.finds.size() < chunks) {
+        mB.finds.resize(chunks);
+        mB.meets.resize(chunks);
+    }
+    // Probes, in parallel: reads only, and each cell writes its own faces. The face back from a cell
+    // already in the domain is that cell's to link: when the flood took it (this cell was there, or
+    // it added this cell), or in the link pass (it found full clay beyond the reach here).
+    const Grids& g = *mGrids;
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        std::vector<int32_t>& finds = mB.finds[lo / kChunk];
+        std::vector<int32_t>& meets = mB.meets[lo / kChunk];
+        finds.clear();
+        meets.clear();
+        openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false> mass(g.mass);
+        std::optional<openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>> obs;
+        if (g.obsAcc) obs.emplace(*g.obs);
+        std::optional<openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false>> beyond;
+        if (g.index) beyond.emplace(*g.index);
+        for (size_t i = head + lo; i < head + hi; ++i) {
+            const CellCoord c = mC.at[i];
+            const int64_t di = mB.dist[i];
+            const int32_t part = comp[i];
+            for (int d = 0; d < mDirs; ++d) {
+                const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+                bool inside;
+                int32_t k = mIndex.get(q, inside);
+                if (!inside) k = beyond ? beyond->getValue(toCoord(q)) : -1;
+                if (k >= 0) {
+                    mC.nb[i * 6 + size_t(d)] = k;
+                    if (comp[size_t(k)] != part) {
+                        meets.push_back(int32_t(i));
+                        meets.push_back(k);
+                    }
+                    continue;
+                }
+                const Coord qc = toCoord(q);
+                if (obs && obs->isValueOn(qc)) continue;
+                const int32_t m = mass.getValue(qc);
+                if (m < mTc || (reach > 0 && di >= reach)) {
+                    mB.face[i * 6 + size_t(d)] = m < mTc ? kFaceRoom : kFaceFull;
+                    continue;
+                }
+                finds.push_back(int32_t(i));
+                finds.push_back(d);
+                finds.push_back(m);
+            }
+        }
+    });
+    // The finds added, serially in cell-then-face order: a cell found twice is added by its first
+    // finder and linked to the others, as the one-by-one flood does.
+    auto unite = [&](int32_t a, int32_t b) {
+        a = find(comp[size_t(a)]);
+        b = find(comp[size_t(b)]);
+        if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+    };
+    for (size_t ch = 0; ch < chunks; ++ch) {
+        const std::vector<int32_t>& meets = mB.meets[ch];
+        for (size_t e = 0; e < meets.size(); e += 2)
+            unite(meets[e], meets[e + 1]);
+        const std::vector<int32_t>& finds = mB.finds[ch];
+        for (size_t e = 0; e < finds.size(); e += 3) {
+            const int32_t i = finds[e];
+            const int d = finds[e + 1];
+            const CellCoord q = mC.at[size_t(i)].offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
+            const int32_t k = indexOf(q);
+            if (k >= 0) {
+                linkPair(i, d, k);
+                unite(i, k);
+                continue;
+            }
+            linkPair(i, d, addCell(q, kUnknown, finds[e + 2]));
+            mB.dist.push_back(mB.dist[size_t(i)] + 1);
+            comp.push_back(find(comp[size_t(i)]));
+        }
+    }
+}
+
 bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t margin, bool& cut)
 {
     std::vector<int32_t>& comp = mB.comp;
@@ -264,15 +350,28 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
     if (fromContact) {
         std::vector<int32_t>& inner = mB.innerSeeds;
         inner.clear();
+        // Which seeds lie on the boundary: probed over fixed chunks (in parallel for many seeds),
+        // then started in their order.
+        std::vector<uint8_t>& boundary = mB.seedOnBoundary;
+        boundary.resize(seeds.size());
+        const Grids& g = *mGrids;
+        forChunks(seeds.size(), mSerial || seeds.size() < mFloodBatchMin, [&](size_t lo, size_t hi) {
+            openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false> mass(g.mass);
+            std::optional<openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>> obs;
+            if (g.obsAcc) obs.emplace(*g.obs);
+            for (size_t si = lo; si < hi; ++si) {
+                bool on = false;
+                for (int d = 0; d < mDirs && !on; ++d) {
+                    const Coord q = toCoord(seeds[si].offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]));
+                    on = (obs && obs->isValueOn(q)) || mass.getValue(q) < mTc;
+                }
+                boundary[si] = on;
+            }
+        });
         for (size_t si = 0; si < seeds.size(); ++si) {
             const CellCoord& s = seeds[si];
             if (indexOf(s) >= 0) continue;
-            bool boundary = false;
-            for (int d = 0; d < mDirs && !boundary; ++d) {
-                const CellCoord q = s.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                boundary = isObstacle(q) || massAt(q) < mTc;
-            }
-            if (boundary)
+            if (boundary[si])
                 start(s, 0);
             else
                 inner.push_back(int32_t(si));
@@ -288,6 +387,13 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
             innerStarted = true;
             for (const int32_t si : mB.innerSeeds)
                 if (indexOf(seeds[size_t(si)]) < 0) start(seeds[size_t(si)], innerDist);
+            continue;
+        }
+        // A whole layer of the flood queued (one distance) and large enough: looked at together.
+        const size_t end = mC.size();
+        if (!mSerial && end - head >= mFloodBatchMin && mB.dist[head] == mB.dist[end - 1]) {
+            floodBatch(head, end, reach, find);
+            head = end;
             continue;
         }
         const int32_t i = int32_t(head++);
@@ -326,11 +432,21 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
         comp[size_t(i)] = root;
     }
     // Link every unknown cell (Dirichlet cells appear here, after the unknowns), and mark
-    // the parts that touch a Dirichlet cell.
+    // the parts that touch a Dirichlet cell. Only a cell the flood left a face to (room, or full clay
+    // beyond the reach) has anything to link, or can touch a Dirichlet cell: those are listed over
+    // fixed chunks, and linked in their order.
     std::vector<uint8_t>& room = mB.compRoom;
     room.assign(parent.size(), 0);
     const size_t unknowns = mC.size();
-    for (size_t i = 0; i < unknowns; ++i) {
+    std::vector<int32_t>& open = mB.openCells;
+    std::fill(mC.hasNb.begin(), mC.hasNb.end(), uint8_t(1)); // link()'s mark: every face looked at
+    selectIndices(unknowns, mSerial, mB.counts, open, [&](size_t i) {
+        for (int d = 0; d < mDirs; ++d)
+            if (face[i * 6 + size_t(d)] != kFaceDone) return true;
+        return false;
+    });
+    for (const int32_t o : open) {
+        const size_t i = size_t(o);
         cut |= link(int32_t(i), &face[i * 6]);
         for (int d = 0; d < mDirs; ++d) {
             const int32_t j = mC.nb[i * 6 + size_t(d)];

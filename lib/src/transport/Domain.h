@@ -21,8 +21,12 @@
 // Only a map: results do not depend on it. The flood's lookups (the index, the masses, the
 // obstacles) are inline: no calls through the shared library's symbol table.
 //
-// Serial and ordered: the same cells, numbers and links on any thread count. OpenVDB stays in
-// Domain.cc.
+// Ordered: the same cells, numbers and links on any thread count. The flood takes its queue a batch
+// at a time (the cells queued when the batch begins, at least SolverTuning::floodBatchMin of them;
+// else one cell at a time): the batch's faces are probed in parallel over fixed chunks (Chunks.h),
+// reading the index, the masses and the obstacles only, and what they found is then added serially
+// in the order the one-by-one flood finds it (cell, then face), so the cells' numbers are the serial
+// flood's. OpenVDB stays in Domain.cc.
 #pragma once
 
 #include "transport/CellCoord.h"
@@ -70,7 +74,13 @@ struct DomainArrays {
     std::vector<int32_t> comp, compParent; ///< the flood's parts: each unknown cell's, union-find
     std::vector<uint8_t> compRoom;         ///< a part touches a Dirichlet cell
     std::vector<int32_t> innerSeeds;       ///< seeds inside the full clay (indices into the seeds)
+    std::vector<uint8_t> seedOnBoundary;   ///< per seed: a face on an obstacle or room
+    std::vector<int32_t> openCells;        ///< the unknown cells the flood left a face to link
+    std::vector<size_t> counts;            ///< scratch of selectIndices
     std::vector<uint8_t> seen;             ///< freezeSingular()'s search
+    /// The layered flood's finds per chunk of a batch (Domain::build): new full cells as (cell, face,
+    /// mass) in cell-then-face order, and pairs of linked cells whose parts may differ.
+    std::vector<std::vector<int32_t>> finds, meets;
     std::vector<int32_t> part;
     CellIndexArrays index; ///< the cell index over the flood's box
 };
@@ -78,8 +88,10 @@ struct DomainArrays {
 class Domain {
 public:
     /// The domain of @a automaton's clay, its arrays in @a arrays (cleared by build()).
-    /// @a reachFromContact: SolverTuning::reachFromContact.
-    Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact);
+    /// @a reachFromContact, @a floodBatchMin: SolverTuning's. @a serial: the flood's batches on the
+    /// calling thread alone.
+    Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact, uint64_t floodBatchMin,
+           bool serial);
     ~Domain();
     Domain(const Domain&) = delete;
     Domain& operator=(const Domain&) = delete;
@@ -146,6 +158,10 @@ private:
     /// What lies beyond a face at @a q that is not a cell of the domain (FaceFound): an obstacle (a
     /// wall), room (m < Tc), or full clay (its mass in @a m).
     inline uint8_t faceAt(const CellCoord& q, int32_t& m) const;
+    /// The flood's cells [@a head, @a end) (all of them in the domain) looked at together, as the
+    /// serial flood would one by one: their faces probed in parallel over fixed chunks, then what
+    /// they found added in cell-then-face order (build()). @a find: the union-find's root.
+    template <typename Find> void floodBatch(size_t head, size_t end, int64_t reach, const Find& find);
     /// Links cell @a i's face @a d to cell @a j, and back: a Dirichlet cell then knows its unknown
     /// neighbours, and its inflow is gathered in parallel.
     void linkPair(int32_t i, int d, int32_t j)
@@ -157,6 +173,8 @@ private:
     int32_t mTc;
     int mDirs;
     bool mFromContact;
+    uint64_t mFloodBatchMin;
+    bool mSerial;
     DomainArrays& mB;
     Cells& mC;
     std::unique_ptr<Grids> mGrids;

@@ -34,6 +34,11 @@ struct SolverTuning {
     /// multigrid (13 iterations a frame, against 36-49 with MIC(0)) and the surface strokes'
     /// (11,800-14,400) MIC(0).
     uint64_t multigridMin = 16000;
+    /// The flood looks at its queued cells together, their faces probed in parallel (Domain.h), when
+    /// at least this many are queued and the call has more than one thread; else one by one. The
+    /// same domain either way. 8192: two of Chunks.h's chunks (the 128^3 press's layers hold 16,384
+    /// cells; a stroke's domain, ~20,000 cells in all, stays one by one).
+    uint64_t floodBatchMin = 8192;
 };
 
 /// The cell index over the flood's box (CellIndex.h) has at most this many slots of 4 bytes (32 MiB),

@@ -106,7 +106,7 @@ GlobalTransportReport run(Automaton& automaton, const GlobalTransportOptions& op
     // room where it was, a compressible clay).
     if (automaton.residualOverload() == 0) return rep;
     const bool serial = options.threads == 1;
-    Domain domain(automaton, ws.domain, tuning.reachFromContact);
+    Domain domain(automaton, ws.domain, tuning.reachFromContact, tuning.floodBatchMin, serial);
     std::vector<CellCoord>& seeds = ws.seeds;
     seeds.clear();
     rep.overloadBefore = domain.seeds(options.seedRegion, seeds);
