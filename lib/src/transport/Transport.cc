@@ -31,12 +31,13 @@
 //    every D cell with excess ends at exactly Tc, mass is exact by construction, walls are never
 //    crossed. The changed cells are written through Automaton::setMasses().
 //
-// Determinism. The flood, the cell numbering and the routing's integer split are serial and ordered;
-// the routing's sort is on a strict total order. The solver's set-up and vector operations run over
-// fixed chunks of rows (Chunks.h); dot products add per-chunk partial sums in chunk order. Every
-// floating-point operation is therefore the same on any thread count, and so is the potential, the
-// routing and the result. Every array lives in a GlobalTransportWorkspace when the caller keeps one
-// (the Sculptor does: no fresh pages each frame); none is read before written.
+// Determinism. The cell numbering is the one-by-one flood's (a large layer's faces are probed in
+// parallel, and what they found is added in that order: Domain.h); the routing's integer split is
+// serial and ordered, and its sort is on a strict total order. The solver's set-up and vector
+// operations run over fixed chunks of rows (Chunks.h); dot products add per-chunk partial sums in
+// chunk order. Every floating-point operation is therefore the same on any thread count, and so is
+// the potential, the routing and the result. Every array lives in a GlobalTransportWorkspace when
+// the caller keeps one (the Sculptor does: no fresh pages each frame); none is read before written.
 //
 // Cost. The flood and the solve touch the full cells within the reach and their faces, never the
 // bounding box: work follows the clay body (or the plastic zone), times the CG iterations.
