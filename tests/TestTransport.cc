@@ -682,17 +682,29 @@ TEST_F(TransportTest, TheRoutingsOrderIsOneSequenceOnAnyThreadCount)
     }
 }
 
-TEST_F(TransportTest, WalledInClayIsReportedAsNoRoomAndLeftAsItIs)
+namespace {
+
+/// Chamber A (x 0..3) full at Tc with 2,000 extra at (1, 1, 1), in @a g; chamber B (x 5..8) empty;
+/// the obstacles @a obs: a wall at x = 4 and a closed shell around both.
+void walledInChambers(MassGridPtr& g, openvdb::MaskGrid::Ptr& obs)
 {
-    // Chamber A (x 0..3) is full and overloaded; chamber B (x 5..8) is empty; an obstacle wall
-    // at x = 4 and a closed shell around both. A's clay cannot reach B: NoRoom, nothing moves.
-    MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
+    g = block(box(0, 0, 0, 3, 3, 3), 1000);
     g->tree().setValue(openvdb::Coord(1, 1, 1), 3000);
-    openvdb::MaskGrid::Ptr obs = openvdb::MaskGrid::create(false);
+    obs = openvdb::MaskGrid::create(false);
     obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(-1, -1, -1), openvdb::Coord(9, 4, 4)), true, true);
     obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(0, 0, 0), openvdb::Coord(3, 3, 3)), false, true);
     obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(5, 0, 0), openvdb::Coord(8, 3, 3)), false, true);
     obs->tree().voxelizeActiveTiles();
+}
+
+} // namespace
+
+TEST_F(TransportTest, WalledInClayIsReportedAsNoRoomAndLeftAsItIs)
+{
+    // A's clay cannot reach B (walledInChambers): NoRoom, nothing moves.
+    MassGridPtr g;
+    openvdb::MaskGrid::Ptr obs;
+    walledInChambers(g, obs);
     Automaton a(g, opts(), obs);
     const uint64_t h = contentHash(*g);
     const GlobalTransportReport r = transportGlobally(a);
@@ -1384,13 +1396,9 @@ TEST_F(TransportTest, TheFloodInBatchesBuildsTheOneByOneFloodsDomainOnAnyThreadC
         cases.push_back({"random over cells", g, nullptr, 3});
     }
     {
-        MassGridPtr g = block(box(0, 0, 0, 3, 3, 3), 1000);
-        g->tree().setValue(openvdb::Coord(1, 1, 1), 3000);
-        openvdb::MaskGrid::Ptr obs = openvdb::MaskGrid::create(false);
-        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(-1, -1, -1), openvdb::Coord(9, 4, 4)), true, true);
-        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(0, 0, 0), openvdb::Coord(3, 3, 3)), false, true);
-        obs->tree().fill(openvdb::CoordBBox(openvdb::Coord(5, 0, 0), openvdb::Coord(8, 3, 3)), false, true);
-        obs->tree().voxelizeActiveTiles();
+        MassGridPtr g;
+        openvdb::MaskGrid::Ptr obs;
+        walledInChambers(g, obs);
         cases.push_back({"walled in", g, obs, 3});
     }
     for (const Case& c : cases) {
