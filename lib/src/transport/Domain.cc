@@ -36,6 +36,15 @@ CellCoord toCell(const Coord& c)
     return CellCoord{c.x(), c.y(), c.z()};
 }
 
+/// What the flood finds at @a q, not a cell of the domain (FaceFound), through @a at's lookups
+/// (isObstacle, massAt): an obstacle, room (m < @a tc), or full clay; its mass in @a m.
+template <typename Lookups> uint8_t faceFound(const Lookups& at, const Coord& q, int32_t tc, int32_t& m)
+{
+    if (at.isObstacle(q)) return kFaceDone;
+    m = at.massAt(q);
+    return m < tc ? kFaceRoom : kFaceFull;
+}
+
 } // namespace
 
 struct Domain::Grids {
@@ -46,6 +55,25 @@ struct Domain::Grids {
         if (obs) obsAcc = std::make_unique<openvdb::tree::ValueAccessor<const openvdb::MaskTree>>(*obs);
     }
     bool isObstacle(const Coord& c) const { return obsAcc && obsAcc->isValueOn(c); }
+    int32_t massAt(const Coord& c) const { return massAcc.getValue(c); }
+
+    /// The lookups of one chunk of a parallel pass (the flood's batches, the seeds' test): accessors of
+    /// its own, unregistered (the trees do not change while the pass reads them).
+    struct Readers {
+        explicit Readers(const Grids& g) : mass(g.mass)
+        {
+            if (g.obs) obs.emplace(*g.obs);
+            if (g.index) beyond.emplace(*g.index);
+        }
+        bool isObstacle(const Coord& c) const { return obs && obs->isValueOn(c); }
+        int32_t massAt(const Coord& c) const { return mass.getValue(c); }
+        /// The cell index beyond the dense box (Domain::indexBeyond).
+        int32_t indexBeyond(const Coord& c) const { return beyond ? beyond->getValue(c) : -1; }
+
+        openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false> mass;
+        std::optional<openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>> obs;
+        std::optional<openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false>> beyond;
+    };
 
     const openvdb::Int32Tree& mass;
     /// Cached lookups for the serial flood and linking (the tree's own getValue starts at the root).
@@ -59,8 +87,8 @@ struct Domain::Grids {
 Domain::Domain(const Automaton& automaton, DomainArrays& arrays, bool reachFromContact,
                uint64_t floodBatchMin, bool serial)
     : mTc(automaton.options().rule.threshold), mDirs(automaton.options().dimensions == 2 ? 4 : 6),
-      mFromContact(reachFromContact), mFloodBatchMin(std::max<uint64_t>(floodBatchMin, 1)), mSerial(serial),
-      mB(arrays), mC(arrays.cells), mGrids(std::make_unique<Grids>(automaton)), mIndex(arrays.index)
+      mFromContact(reachFromContact), mFloodBatchMin(floodBatchMin), mSerial(serial), mB(arrays),
+      mC(arrays.cells), mGrids(std::make_unique<Grids>(automaton)), mIndex(arrays.index)
 {
 }
 
@@ -73,7 +101,7 @@ inline bool Domain::isObstacle(const CellCoord& c) const
 
 inline int32_t Domain::massAt(const CellCoord& c) const
 {
-    return mGrids->massAcc.getValue(toCoord(c));
+    return mGrids->massAt(toCoord(c));
 }
 
 int64_t Domain::seeds(const Box& region, std::vector<CellCoord>& seeds) const
@@ -195,9 +223,7 @@ inline int32_t Domain::addCell(const CellCoord& c, uint8_t kind)
 
 inline uint8_t Domain::faceAt(const CellCoord& q, int32_t& m) const
 {
-    if (isObstacle(q)) return kFaceDone;
-    m = massAt(q);
-    return m < mTc ? kFaceRoom : kFaceFull;
+    return faceFound(*mGrids, toCoord(q), mTc, m);
 }
 
 bool Domain::link(int32_t i, const uint8_t* face)
@@ -243,11 +269,7 @@ template <typename Find> void Domain::floodBatch(size_t head, size_t end, int64_
         std::vector<int32_t>& meets = mB.meets[lo / kChunk];
         finds.clear();
         meets.clear();
-        openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false> mass(g.mass);
-        std::optional<openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>> obs;
-        if (g.obsAcc) obs.emplace(*g.obs);
-        std::optional<openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false>> beyond;
-        if (g.index) beyond.emplace(*g.index);
+        const Grids::Readers at(g);
         for (size_t i = head + lo; i < head + hi; ++i) {
             const CellCoord c = mC.at[i];
             const int64_t di = mB.dist[i];
@@ -256,7 +278,7 @@ template <typename Find> void Domain::floodBatch(size_t head, size_t end, int64_
                 const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
                 bool inside;
                 int32_t k = mIndex.get(q, inside);
-                if (!inside) k = beyond ? beyond->getValue(toCoord(q)) : -1;
+                if (!inside) k = at.indexBeyond(toCoord(q));
                 if (k >= 0) {
                     mC.nb[i * 6 + size_t(d)] = k;
                     if (comp[size_t(k)] != part) {
@@ -265,11 +287,11 @@ template <typename Find> void Domain::floodBatch(size_t head, size_t end, int64_
                     }
                     continue;
                 }
-                const Coord qc = toCoord(q);
-                if (obs && obs->isValueOn(qc)) continue;
-                const int32_t m = mass.getValue(qc);
-                if (m < mTc || (reach > 0 && di >= reach)) {
-                    mB.face[i * 6 + size_t(d)] = m < mTc ? kFaceRoom : kFaceFull;
+                int32_t m = 0;
+                const uint8_t found = faceFound(at, toCoord(q), mTc, m);
+                if (found == kFaceDone) continue;
+                if (found == kFaceRoom || (reach > 0 && di >= reach)) {
+                    mB.face[i * 6 + size_t(d)] = found;
                     continue;
                 }
                 finds.push_back(int32_t(i));
@@ -356,14 +378,13 @@ bool Domain::build(const std::vector<CellCoord>& seeds, int64_t reach, int64_t m
         boundary.resize(seeds.size());
         const Grids& g = *mGrids;
         forChunks(seeds.size(), mSerial || seeds.size() < mFloodBatchMin, [&](size_t lo, size_t hi) {
-            openvdb::tree::ValueAccessor<const openvdb::Int32Tree, false> mass(g.mass);
-            std::optional<openvdb::tree::ValueAccessor<const openvdb::MaskTree, false>> obs;
-            if (g.obsAcc) obs.emplace(*g.obs);
+            const Grids::Readers at(g);
             for (size_t si = lo; si < hi; ++si) {
-                bool on = false;
+                bool on = false; // a face on an obstacle or room
                 for (int d = 0; d < mDirs && !on; ++d) {
+                    int32_t m = 0;
                     const Coord q = toCoord(seeds[si].offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]));
-                    on = (obs && obs->isValueOn(q)) || mass.getValue(q) < mTc;
+                    on = faceFound(at, q, mTc, m) != kFaceFull;
                 }
                 boundary[si] = on;
             }
