@@ -9,6 +9,7 @@
 #include <vdbclay/Transport.h>
 
 #include "transport/Domain.h"       // the flood, one by one and in batches
+#include "transport/Multigrid.h"    // the V-cycle, applied alone
 #include "transport/RadixSort.h"    // the routing's order, sorted on any thread count
 #include "transport/SolverTuning.h" // the solver's tuning, varied here
 
@@ -21,12 +22,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <numeric>
 #include <random>
 #include <string>
 #include <unistd.h>
 
 using namespace vdbclay;
+using transport_internal::CellCoord;
 using transport_internal::SolverTuning;
 
 namespace {
@@ -516,6 +519,155 @@ TEST_F(TransportTest, MultigridSolvesAreExactIdenticalOnAnyThreadCountAndNeedFew
             EXPECT_EQ(h, first) << dims << "D, " << threads << " threads";
         }
         EXPECT_LT(mgIterations, micIterations) << dims << "D";
+    }
+}
+
+namespace {
+/// Rows for the multigrid alone: a graph Laplacian (off-diagonals -1) with 6 neighbour rows a row (-1:
+/// none), its diagonal as face counts and each row's cell.
+struct MultigridRows {
+    size_t n = 0;
+    std::vector<int32_t> nb;
+    std::vector<uint8_t> faces;
+    std::vector<CellCoord> coord;
+};
+
+/// The cells of an nx x ny x nz box in x-fastest order; every row has 6 faces on the diagonal (the
+/// box's own faces are Dirichlet faces: no neighbour row).
+MultigridRows boxRows(int nx, int ny, int nz)
+{
+    MultigridRows m;
+    m.n = size_t(nx) * size_t(ny) * size_t(nz);
+    const auto row = [&](int x, int y, int z) {
+        if (x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) return int32_t(-1);
+        return int32_t((z * ny + y) * nx + x);
+    };
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y)
+            for (int x = 0; x < nx; ++x) {
+                for (int32_t j : {row(x - 1, y, z), row(x + 1, y, z), row(x, y - 1, z), row(x, y + 1, z),
+                                  row(x, y, z - 1), row(x, y, z + 1)})
+                    m.nb.push_back(j);
+                m.faces.push_back(6);
+                m.coord.push_back(CellCoord{x, y, z});
+            }
+    return m;
+}
+
+/// A x for @a m's matrix.
+std::vector<double> timesMatrix(const MultigridRows& m, const std::vector<double>& x)
+{
+    std::vector<double> ax(m.n);
+    for (size_t k = 0; k < m.n; ++k) {
+        ax[k] = double(m.faces[k]) * x[k];
+        for (int d = 0; d < 6; ++d)
+            if (m.nb[k * 6 + size_t(d)] >= 0) ax[k] -= x[size_t(m.nb[k * 6 + size_t(d)])];
+    }
+    return ax;
+}
+
+double dot(const std::vector<double>& a, const std::vector<double>& b)
+{
+    return std::inner_product(a.begin(), a.end(), b.begin(), 0.0);
+}
+
+/// One V-cycle of @a m's hierarchy applied to @a in, built and applied on @a threads (0: serially).
+std::vector<double> vCycle(const MultigridRows& m, const std::vector<double>& in, int threads)
+{
+    transport_internal::Multigrid mg;
+    std::vector<double> out;
+    const auto run = [&]() {
+        mg.build(m.n, m.nb, m.faces, m.coord, threads == 0);
+        mg.apply(in, out);
+    };
+    if (threads == 0)
+        run();
+    else
+        tbb::task_arena(threads).execute(run);
+    return out;
+}
+
+std::vector<double> randomVector(size_t n, unsigned seed)
+{
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    std::vector<double> v(n);
+    for (double& x : v)
+        x = u(rng);
+    return v;
+}
+} // namespace
+
+TEST_F(TransportTest, TheMultigridsVCycleIsSymmetricPositiveAndTheSameOnAnyThreadCount)
+{
+    // Over several levels (the finest by colour, the coarser by row): M is symmetric and positive, as
+    // conjugate gradients need, and applying it gives the same bits serially and on 1, 2, 3, 8 threads.
+    const MultigridRows m = boxRows(40, 36, 24);
+    const std::vector<double> u = randomVector(m.n, 1), v = randomVector(m.n, 2);
+    const std::vector<double> mu = vCycle(m, u, 0), mv = vCycle(m, v, 0);
+    transport_internal::Multigrid mg;
+    mg.build(m.n, m.nb, m.faces, m.coord, true);
+    EXPECT_GE(mg.levels(), 3u);
+    EXPECT_NEAR(dot(u, mv), dot(v, mu), 1e-12 * std::abs(dot(u, mv)));
+    EXPECT_GT(dot(u, mu), 0.0);
+    EXPECT_GT(dot(v, mv), 0.0);
+    // A V-cycle is a preconditioner: M A u is nearer u than A u is.
+    const std::vector<double> au = timesMatrix(m, u), mau = vCycle(m, au, 0);
+    double err = 0, norm = 0;
+    for (size_t k = 0; k < m.n; ++k) {
+        err += (mau[k] - u[k]) * (mau[k] - u[k]);
+        norm += u[k] * u[k];
+    }
+    EXPECT_LT(err, 0.5 * norm);
+    for (int threads : {1, 2, 3, 8}) {
+        const std::vector<double> t = vCycle(m, u, threads);
+        ASSERT_EQ(t.size(), mu.size());
+        EXPECT_EQ(0, std::memcmp(t.data(), mu.data(), mu.size() * sizeof(double))) << threads << " threads";
+    }
+}
+
+TEST_F(TransportTest, TheMultigridOfOneLevelSolvesByCholeskyOrJacobiSweeps)
+{
+    // At most kDense rows: no coarser level; the V-cycle is the dense Cholesky solve, exact.
+    {
+        const MultigridRows m = boxRows(8, 8, 8);
+        const std::vector<double> b = randomVector(m.n, 3);
+        const std::vector<double> x = vCycle(m, b, 0);
+        const std::vector<double> ax = timesMatrix(m, x);
+        double err = 0;
+        for (size_t k = 0; k < m.n; ++k)
+            err = std::max(err, std::abs(ax[k] - b[k]));
+        EXPECT_LT(err, 1e-12);
+        EXPECT_EQ(0, std::memcmp(vCycle(m, b, 2).data(), x.data(), x.size() * sizeof(double)));
+    }
+    // Rows that no 2x2x2 block joins (a chain whose cells lie two apart): coarsening stalls at once and
+    // the V-cycle is kCoarseSweeps damped Jacobi sweeps from omega D^-1 b, exactly these operations.
+    MultigridRows m;
+    m.n = 2000;
+    for (size_t k = 0; k < m.n; ++k) {
+        for (int32_t j : {k ? int32_t(k) - 1 : -1, k + 1 < m.n ? int32_t(k) + 1 : -1, -1, -1, -1, -1})
+            m.nb.push_back(j);
+        m.faces.push_back(2);
+        m.coord.push_back(CellCoord{int32_t(2 * k), 0, 0});
+    }
+    const std::vector<double> b = randomVector(m.n, 4);
+    const double omega = transport_internal::Multigrid::kOmega;
+    std::vector<double> x(m.n), t(m.n);
+    for (size_t k = 0; k < m.n; ++k)
+        x[k] = omega * (1.0 / 2.0) * b[k];
+    for (int s = 1; s < transport_internal::Multigrid::kCoarseSweeps; ++s) {
+        for (size_t k = 0; k < m.n; ++k) {
+            double r = b[k] - 2.0 * x[k];
+            for (int d = 0; d < 6; ++d)
+                if (m.nb[k * 6 + size_t(d)] >= 0) r += x[size_t(m.nb[k * 6 + size_t(d)])];
+            t[k] = x[k] + omega * (1.0 / 2.0) * r;
+        }
+        x.swap(t);
+    }
+    for (int threads : {0, 2}) {
+        const std::vector<double> got = vCycle(m, b, threads);
+        ASSERT_EQ(got.size(), x.size());
+        EXPECT_EQ(0, std::memcmp(got.data(), x.data(), x.size() * sizeof(double))) << threads << " threads";
     }
 }
 

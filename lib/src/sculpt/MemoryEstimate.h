@@ -77,9 +77,11 @@ constexpr uint64_t kOutputScratchPerLeaf = 12 + 16 + 224 + 8 + 12 + 48 + 2;
 /// and inverse (32) and the diagonal (a face count, 1), six work vectors (48), the routing's lists and
 /// sort (~60), MIC(0)'s rows (24), and the flood's open-cell list and per-seed boundary flag (5; its
 /// batches' finds, 12 bytes each, a few per cell of one layer): ~334 bytes at their size, held at the
-/// capacity the largest frame grew them to; the multigrid preconditioner of large solves (~89 bytes over
-/// every level); and its index (4 bytes). Measured beside the dense index: ~290 bytes a cell (the squeezed
-/// cylinder), ~510 bytes per unknown (the 512-wide compress stroke's first frame).
+/// capacity the largest frame grew them to; the multigrid preconditioner of large solves (~110 bytes over
+/// every level: the finest level's rows twice, by row for conjugate gradients and by colour for its
+/// smoothing, ~30 bytes more than by row alone); and its index (4 bytes). Measured beside the dense index:
+/// ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown (the 512-wide compress stroke's first
+/// frame).
 constexpr uint64_t kTransportBytesPerCell = 512;
 
 /// Rows (x, y) voxelsWithinFaceSteps counts before it gives up: ~10 ms.

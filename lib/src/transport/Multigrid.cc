@@ -18,9 +18,8 @@ void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vecto
     mSerial = serial;
     mUsed = 1;
     if (mLevels.empty()) mLevels.emplace_back();
-    Level& f = mLevels.front();
-    setMatrix(f, n, nb, faces, true);
-    f.block.assign(coord.begin(), coord.end());
+    setMatrix(mLevels.front(), n, nb, faces, true);
+    mLevels.front().block.assign(coord.begin(), coord.end());
     while (mLevels[mUsed - 1].n > kDense && mUsed < 24 && coarsen()) {
     }
     Level& c = mLevels[mUsed - 1];
@@ -29,6 +28,10 @@ void Multigrid::build(size_t n, const std::vector<int32_t>& nb, const std::vecto
     if (c.n <= kDense) factor(c);
     for (size_t li = 0; li < mUsed; ++li)
         colour(mLevels[li], mLevels[li].block);
+    if (mUsed == 1)
+        finish(c); // the only level: solved as the coarsest, by row
+    else
+        layOutByColour(faces);
 }
 
 void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vector<uint8_t>& faces,
@@ -55,17 +58,20 @@ void Multigrid::rebind(size_t n, const std::vector<int32_t>& nb, const std::vect
     std::vector<uint32_t> fill(c.memberStart.begin(), c.memberStart.end() - 1);
     for (size_t k = 0; k < n; ++k)
         if (f.agg[k] >= 0) c.members[fill[size_t(f.agg[k])]++] = int32_t(k);
+    layOutByColour(faces);
 }
 
 void Multigrid::apply(const std::vector<double>& in, std::vector<double>& out)
 {
     Level& f = mLevels.front();
-    f.rhs = in.data(); // read in place (a copy into f.r would be 1.8 % of a stroke frame)
-    cycle(0);
-    out.swap(f.x);
+    if (mUsed == 1) {
+        f.rhs = in.data();
+        cycle(0);
+        out.assign(f.x.begin(), f.x.begin() + std::ptrdiff_t(f.n));
+        return;
+    }
     out.resize(f.n);
-    f.x.resize(f.n + 1);
-    f.x[f.n] = -0.0; // the sentinel of the finest level's missing faces
+    cycleFinest(in.data(), out.data());
 }
 
 void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb,
@@ -74,14 +80,12 @@ void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb,
     f.n = n;
     f.nb6.resize(n * 6);
     f.diag.resize(n);
-    f.faces.resize(n);
     forChunks(n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k) {
             for (int d = 0; d < 6; ++d) {
                 const int32_t j = nb[k * 6 + size_t(d)];
                 f.nb6[k * 6 + size_t(d)] = j >= 0 ? j : int32_t(n);
             }
-            f.faces[k] = faces[k];
             f.diag[k] = double(faces[k]);
         }
     });
@@ -91,9 +95,6 @@ void Multigrid::setMatrix(Level& f, size_t n, const std::vector<int32_t>& nb,
     } else {
         setCsr(f, n, nb);
     }
-    finish(f);
-    f.x.resize(n + 1);
-    f.x[n] = -0.0;
 }
 
 void Multigrid::setCsr(Level& f, size_t n, const std::vector<int32_t>& nb)
@@ -140,13 +141,49 @@ void Multigrid::colour(Level& l, const std::vector<CellCoord>& block)
     });
     for (size_t c = 0; c < chunks; ++c)
         red[c + 1] += red[c];
-    l.colour[0].resize(red[chunks]);
-    l.colour[1].resize(n - red[chunks]);
+    l.red = red[chunks];
+    l.byColour.resize(n);
     forChunks(n, mSerial, [&](size_t lo, size_t hi) {
-        size_t o[2] = {red[lo / kChunk], lo - red[lo / kChunk]}; // black rows before lo: lo - red ones
+        // Before lo: red[lo / kChunk] red rows, and lo minus those black ones (after all the red).
+        size_t o[2] = {red[lo / kChunk], l.red + lo - red[lo / kChunk]};
         for (size_t k = lo; k < hi; ++k)
-            l.colour[mParity[k]][o[mParity[k]]++] = int32_t(k);
+            l.byColour[o[mParity[k]]++] = int32_t(k);
     });
+}
+
+void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
+{
+    const Level& f = mLevels.front();
+    const Level& c = mLevels[1];
+    ColourOrder& o = mFine;
+    const size_t n = f.n;
+    o.place.resize(n + 1);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i)
+            o.place[size_t(f.byColour[i])] = int32_t(i);
+    });
+    o.place[n] = int32_t(n); // a missing face stays the sentinel
+    o.nb6.resize(n * 6);
+    o.faces.resize(n);
+    o.agg.resize(n);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            const size_t k = size_t(f.byColour[i]);
+            for (size_t d = 0; d < 6; ++d)
+                o.nb6[i * 6 + d] = o.place[size_t(f.nb6[k * 6 + d])];
+            o.faces[i] = faces[k];
+            o.agg[i] = f.agg[k];
+        }
+    });
+    o.members.resize(c.members.size());
+    forChunks(c.members.size(), mSerial, [&](size_t lo, size_t hi) {
+        for (size_t m = lo; m < hi; ++m)
+            o.members[m] = o.place[size_t(c.members[m])];
+    });
+    o.rhs.resize(n);
+    o.t.resize(n);
+    o.x.resize(n + 1);
+    o.x[n] = -0.0;
 }
 
 void Multigrid::finish(Level& l)
@@ -297,11 +334,12 @@ inline double Multigrid::residual(const Level& l, size_t k, double own)
     return s;
 }
 
-inline double Multigrid::residual0(const Level& l, size_t k, double own)
+inline double Multigrid::residualByPlace(size_t i, double own) const
 {
-    const int32_t* nb = &l.nb6[k * 6];
-    const double* x = l.x.data();
-    double s = l.rhs[k] - double(l.faces[k]) * own;
+    const ColourOrder& o = mFine;
+    const int32_t* nb = &o.nb6[i * 6];
+    const double* x = o.x.data();
+    double s = o.rhs[i] - double(o.faces[i]) * own;
     s += x[nb[0]];
     s += x[nb[1]];
     s += x[nb[2]];
@@ -323,31 +361,76 @@ void Multigrid::sweep(Level& l)
 
 void Multigrid::halfSweep(Level& l, int c, bool fromZero)
 {
-    const std::vector<int32_t>& rows = l.colour[c];
-    const bool finest = &l == &mLevels.front();
-    forChunks(rows.size(), mSerial, [&](size_t lo, size_t hi) {
+    const int32_t* rows = l.byColour.data() + (c ? l.red : 0);
+    forChunks(c ? l.n - l.red : l.red, mSerial, [&](size_t lo, size_t hi) {
         if (fromZero) {
             // x_k was 0 (not yet written): x_k = +0 + D^-1 (r - A x)_k with x_k = 0 in the residual,
             // the very operations of the update from a zero-filled x; and t_k = 0 (this colour's
             // residual after the half-sweep) for the restriction.
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(rows[q]);
-                l.x[k] = 0.0 + (finest ? kInverseFaces[l.faces[k]] * residual0(l, k, 0.0)
-                                       : l.invDiag[k] * residual(l, k, 0.0));
+                l.x[k] = 0.0 + l.invDiag[k] * residual(l, k, 0.0);
                 l.t[k] = 0.0;
-            }
-            return;
-        }
-        if (finest) {
-            for (size_t q = lo; q < hi; ++q) {
-                const size_t k = size_t(rows[q]);
-                l.x[k] += kInverseFaces[l.faces[k]] * residual0(l, k, l.x[k]);
             }
             return;
         }
         for (size_t q = lo; q < hi; ++q) {
             const size_t k = size_t(rows[q]);
             l.x[k] += l.invDiag[k] * residual(l, k, l.x[k]);
+        }
+    });
+}
+
+void Multigrid::cycleFinest(const double* in, double* out)
+{
+    const Level& f = mLevels.front();
+    Level& c = mLevels[1];
+    ColourOrder& o = mFine;
+    const size_t n = f.n, red = f.red;
+    const int32_t* row = f.byColour.data();
+    // Pre-smoothing from x = 0, as cycle() does (the right-hand side copied in by place on the way):
+    // red x = D^-1 r, then a black half-sweep from x = 0 (t = 0), then the red residual in t.
+    forChunks(red, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            o.rhs[i] = in[row[i]];
+            o.x[i] = kInverseFaces[o.faces[i]] * o.rhs[i];
+        }
+    });
+    forChunks(n - red, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = red + lo; i < red + hi; ++i) {
+            o.rhs[i] = in[row[i]];
+            o.x[i] = 0.0 + kInverseFaces[o.faces[i]] * residualByPlace(i, 0.0);
+            o.t[i] = 0.0;
+        }
+    });
+    forChunks(red, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i)
+            o.t[i] = residualByPlace(i, o.x[i]);
+    });
+    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            double s = 0;
+            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
+                s += o.t[size_t(o.members[m])];
+            c.r[i] = s;
+        }
+    });
+    cycle(1);
+    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i)
+            if (o.agg[i] >= 0) o.x[i] += kAlpha * c.x[size_t(o.agg[i])];
+    });
+    // Post-smoothing, black then red, each row's last value written out by row on the way.
+    forChunks(n - red, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = red + lo; i < red + hi; ++i) {
+            o.x[i] += kInverseFaces[o.faces[i]] * residualByPlace(i, o.x[i]);
+            out[row[i]] = o.x[i];
+        }
+    });
+    forChunks(red, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            o.x[i] += kInverseFaces[o.faces[i]] * residualByPlace(i, o.x[i]);
+            out[row[i]] = o.x[i];
         }
     });
 }
@@ -386,19 +469,18 @@ void Multigrid::cycle(size_t li)
     // half-sweep. The black rows' residual is then 0; the red rows' residual goes in t. (Every
     // row's x and t is written here before it is read: no zero fill.)
     {
-        const std::vector<int32_t>& red = l.colour[0];
-        const bool finest = li == 0;
-        forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+        const int32_t* red = l.byColour.data();
+        forChunks(l.red, mSerial, [&](size_t lo, size_t hi) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(red[q]);
-                l.x[k] = (finest ? kInverseFaces[l.faces[k]] : l.invDiag[k]) * l.rhs[k];
+                l.x[k] = l.invDiag[k] * l.rhs[k];
             }
         });
         halfSweep(l, 1, true);
-        forChunks(red.size(), mSerial, [&](size_t lo, size_t hi) {
+        forChunks(l.red, mSerial, [&](size_t lo, size_t hi) {
             for (size_t q = lo; q < hi; ++q) {
                 const size_t k = size_t(red[q]);
-                l.t[k] = finest ? residual0(l, k, l.x[k]) : residual(l, k, l.x[k]);
+                l.t[k] = residual(l, k, l.x[k]);
             }
         });
     }

@@ -15,10 +15,12 @@
 // count. The coarsening and the dense factor are serial.
 //
 // Data. It works on row arrays alone (6 neighbour rows per row, the diagonal, each row's cell), no
-// grids: the caller (PoissonSolver) numbers the cells. The finest level's smoothing reads its diagonal
-// as face counts (Laplacian.h), a byte a row: the values of its double diagonal and inverse. The levels'
-// arrays are kept from one build to the next (no fresh pages each frame); nothing of an earlier build is
-// read.
+// grids: the caller (PoissonSolver) numbers the cells. The finest level's smoothing and transfers run
+// on its rows laid out by colour (ColourOrder: the red rows, then the black), so each half-sweep streams
+// its own colour's rows alone, with the same operations in the same order as by row; its diagonal is
+// read as face counts (Laplacian.h), a byte a row: the values of its double diagonal and inverse. The
+// levels' arrays are kept from one build to the next (no fresh pages each frame); nothing of an earlier
+// build is read.
 #pragma once
 
 #include "transport/CellCoord.h"
@@ -77,13 +79,30 @@ private:
         std::vector<int32_t> members;      ///<   in row order
         std::vector<double> x, r, t, chol; ///< work vectors; the dense Cholesky factor
         const double* rhs = nullptr;       ///< the right-hand side a V-cycle reads: r, or apply()'s input
-        std::vector<int32_t> colour[2];    ///< the rows of each colour (red-black Gauss-Seidel)
-        /// The finest level's rows at a fixed width (its residual, the V-cycle's hottest loop, without
-        /// the CSR's row bounds): 6 per row, the neighbour row or n for a missing face, x[n] = -0.
+        /// The rows by colour (red-black Gauss-Seidel): the red ones [0, red), then the black, each in
+        /// row order.
+        std::vector<int32_t> byColour;
+        size_t red = 0;
+        /// The finest level's rows at a fixed width (conjugate gradients' A p, and the colour order's
+        /// source): 6 per row, the neighbour row or n for a missing face.
         std::vector<int32_t> nb6;
-        /// The finest level's diagonal as face counts (the smoothing's compact copy of diag, invDiag).
-        std::vector<uint8_t> faces;
         bool dense = false;
+    };
+
+    /// The finest level laid out by colour, for its smoothing and transfers (the V-cycle's hottest
+    /// loops): place i holds row byColour[i], so a half-sweep streams its own colour's places alone
+    /// (in row order its rows interleave with the other colour's, and each pass reads both). The
+    /// values and the operations are those of row order, in the same order: a row's residual adds
+    /// the same neighbours' x in the same face order, an aggregate's restriction its members in row
+    /// order; only where the values lie changes. apply() copies its input in by place and its
+    /// output back by row.
+    struct ColourOrder {
+        std::vector<int32_t> place;   ///< row -> place
+        std::vector<int32_t> nb6;     ///< 6 per place: the neighbour's place, or n (x[n] = -0)
+        std::vector<uint8_t> faces;   ///< the diagonal as face counts (Laplacian.h), by place
+        std::vector<int32_t> agg;     ///< place -> its aggregate (a row of level 1)
+        std::vector<int32_t> members; ///< level 1's members (its memberStart) as places
+        std::vector<double> rhs, x, t;
     };
 
     /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
@@ -96,6 +115,9 @@ private:
     /// block are one aggregate), so a colour's Gauss-Seidel half-sweep runs in parallel, in place.
     /// Both colours in one count and one write pass (per fixed chunk: the lists of two selectIndices).
     void colour(Level& l, const std::vector<CellCoord>& block);
+    /// Lays the finest level out by colour (mFine), from its rows, faces, aggregates and level 1's
+    /// members.
+    void layOutByColour(const std::vector<uint8_t>& faces);
     void finish(Level& l);
     static int32_t find(std::vector<int32_t>& parent, int32_t a);
     /// Builds the next level; false if it would not shrink the problem enough.
@@ -104,20 +126,25 @@ private:
     /// (r - A x) at row @a k (A's off-diagonal entries are -1, or -w on coarse levels), with @a own
     /// as x_k.
     static double residual(const Level& l, size_t k, double own);
-    /// residual() on the finest level, through its fixed-width rows and face counts: the same
-    /// operations in the same order (a missing face adds x[n] = -0, which leaves every sum unchanged,
-    /// a zero's sign too).
-    static double residual0(const Level& l, size_t k, double own);
+    /// residual() on the finest level at place @a i, through its fixed-width rows and face counts: the
+    /// same operations in the same order (a missing face adds x[n] = -0, which leaves every sum
+    /// unchanged, a zero's sign too).
+    double residualByPlace(size_t i, double own) const;
     /// x = x + omega D^-1 (r - A x), one Jacobi sweep.
     void sweep(Level& l);
     /// x_k = x_k + D^-1 (r - A x)_k for the rows of colour @a c: a Gauss-Seidel half-sweep (rows of
     /// one colour do not read each other). @a fromZero: the first sweep of a V-cycle's level, whose
     /// rows of colour @a c hold no x yet (as if 0); their t is set to 0.
     void halfSweep(Level& l, int c, bool fromZero);
+    /// The V-cycle from level @a li (> 0, or the finest when it is the only level).
     void cycle(size_t li);
+    /// The V-cycle from the finest level, by place (mFine), over at least two levels: out = M^-1 in,
+    /// both by row.
+    void cycleFinest(const double* in, double* out);
 
     bool mSerial = true;
     std::vector<Level> mLevels; ///< the first mUsed are this build's; the rest keep their arrays for reuse
+    ColourOrder mFine;          ///< the finest level by colour, when mUsed >= 2
     size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
     std::vector<int32_t> mScratch;
