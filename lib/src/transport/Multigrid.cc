@@ -416,13 +416,16 @@ void Multigrid::cycleFinest(const double* in, double* out)
         }
     });
     cycle(1);
-    forChunks(n, mSerial, [&](size_t lo, size_t hi) {
+    // The coarse correction, red rows first; a black row's just before its post-smoothing (which reads
+    // only red neighbours), in the same pass. Post-smoothing black then red, each row's last value
+    // written out by row on the way.
+    forChunks(red, mSerial, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i < hi; ++i)
             if (o.agg[i] >= 0) o.x[i] += kAlpha * c.x[size_t(o.agg[i])];
     });
-    // Post-smoothing, black then red, each row's last value written out by row on the way.
     forChunks(n - red, mSerial, [&](size_t lo, size_t hi) {
         for (size_t i = red + lo; i < red + hi; ++i) {
+            if (o.agg[i] >= 0) o.x[i] += kAlpha * c.x[size_t(o.agg[i])];
             o.x[i] += kInverseFaces[o.faces[i]] * residualByPlace(i, o.x[i]);
             out[row[i]] = o.x[i];
         }

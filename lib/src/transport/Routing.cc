@@ -162,11 +162,13 @@ void route(Automaton& automaton, const Cells& cells, const std::vector<double>& 
     // of the region, without its scans of the region.
     std::vector<Automaton::CellMass>& write = arrays.write;
     write.resize(changed.size());
-    for (size_t k = 0; k < changed.size(); ++k) {
-        const size_t i = size_t(changed[k]);
-        write[k].at = {{cells.at[i].x, cells.at[i].y, cells.at[i].z}};
-        write[k].mass = cur[i] > 0 ? int32_t(cur[i]) : 0;
-    }
+    forChunks(changed.size(), serial, [&](size_t lo, size_t hi) {
+        for (size_t k = lo; k < hi; ++k) {
+            const size_t i = size_t(changed[k]);
+            write[k].at = {{cells.at[i].x, cells.at[i].y, cells.at[i].z}};
+            write[k].mass = cur[i] > 0 ? int32_t(cur[i]) : 0;
+        }
+    });
     automaton.setMasses(region, write);
     rep.overloadAfter = automaton.residualOverload();
 }
