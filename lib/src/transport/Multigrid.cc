@@ -175,13 +175,30 @@ void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
             o.agg[i] = f.agg[k];
         }
     });
-    o.members.resize(c.members.size());
-    forChunks(c.members.size(), mSerial, [&](size_t lo, size_t hi) {
-        for (size_t m = lo; m < hi; ++m)
-            o.members[m] = o.place[size_t(c.members[m])];
+    o.redStart.resize(c.n + 1);
+    o.redStart[0] = 0;
+    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            uint32_t count = 0;
+            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
+                count += size_t(o.place[size_t(c.members[m])]) < f.red ? 1 : 0;
+            o.redStart[i + 1] = count;
+        }
+    });
+    for (size_t i = 0; i < c.n; ++i)
+        o.redStart[i + 1] += o.redStart[i];
+    o.redMembers.resize(o.redStart[c.n]);
+    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            uint32_t e = o.redStart[i];
+            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m) {
+                const int32_t at = o.place[size_t(c.members[m])];
+                if (size_t(at) < f.red) o.redMembers[e++] = at;
+            }
+        }
     });
     o.rhs.resize(n);
-    o.t.resize(n);
+    o.t.resize(f.red);
     o.x.resize(n + 1);
     o.x[n] = -0.0;
 }
@@ -389,7 +406,8 @@ void Multigrid::cycleFinest(const double* in, double* out)
     const size_t n = f.n, red = f.red;
     const int32_t* row = f.byColour.data();
     // Pre-smoothing from x = 0, as cycle() does (the right-hand side copied in by place on the way):
-    // red x = D^-1 r, then a black half-sweep from x = 0 (t = 0), then the red residual in t.
+    // red x = D^-1 r, then a black half-sweep from x = 0 (its residual is then 0), then the red
+    // residual in t.
     forChunks(red, mSerial, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i < hi; ++i) {
             o.rhs[i] = in[row[i]];
@@ -400,7 +418,6 @@ void Multigrid::cycleFinest(const double* in, double* out)
         for (size_t i = red + lo; i < red + hi; ++i) {
             o.rhs[i] = in[row[i]];
             o.x[i] = 0.0 + kInverseFaces[o.faces[i]] * residualByPlace(i, 0.0);
-            o.t[i] = 0.0;
         }
     });
     forChunks(red, mSerial, [&](size_t lo, size_t hi) {
@@ -410,8 +427,8 @@ void Multigrid::cycleFinest(const double* in, double* out)
     forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i < hi; ++i) {
             double s = 0;
-            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
-                s += o.t[size_t(o.members[m])];
+            for (uint32_t m = o.redStart[i]; m < o.redStart[i + 1]; ++m)
+                s += o.t[size_t(o.redMembers[m])];
             c.r[i] = s;
         }
     });

@@ -100,9 +100,13 @@ private:
         std::vector<int32_t> place;   ///< row -> place
         std::vector<int32_t> nb6;     ///< 6 per place: the neighbour's place, or n (x[n] = -0)
         std::vector<uint8_t> faces;   ///< the diagonal as face counts (Laplacian.h), by place
-        std::vector<int32_t> agg;     ///< place -> its aggregate (a row of level 1)
-        std::vector<int32_t> members; ///< level 1's members (its memberStart) as places
-        std::vector<double> rhs, x, t;
+        std::vector<int32_t> agg; ///< place -> its aggregate (a row of level 1)
+        /// Level 1's red members as places, in row order (CSR): the restriction's terms. A black
+        /// row's residual after the pre-smoothing is 0, and adding +0 to a sum that starts at +0
+        /// leaves it as it is, so the black members are left out.
+        std::vector<uint32_t> redStart;
+        std::vector<int32_t> redMembers;
+        std::vector<double> rhs, x, t; ///< t: the red rows' residual
     };
 
     /// The finest level @a f holds the matrix given by @a nb (6 per row, -1: none; off-diagonals -1),
