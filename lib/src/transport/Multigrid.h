@@ -94,13 +94,13 @@ private:
     /// (in row order its rows interleave with the other colour's, and each pass reads both). The
     /// values and the operations are those of row order, in the same order: a row's residual adds
     /// the same neighbours' x in the same face order, an aggregate's restriction its members in row
-    /// order; only where the values lie changes. apply() copies its input in by place and its
-    /// output back by row.
+    /// order; only where the values lie changes. The V-cycle's first passes copy its input in by
+    /// place, its last passes write its output back by row.
     struct ColourOrder {
-        std::vector<int32_t> place;   ///< row -> place
-        std::vector<int32_t> nb6;     ///< 6 per place: the neighbour's place, or n (x[n] = -0)
-        std::vector<uint8_t> faces;   ///< the diagonal as face counts (Laplacian.h), by place
-        std::vector<int32_t> agg; ///< place -> its aggregate (a row of level 1)
+        std::vector<int32_t> place; ///< row -> place
+        std::vector<int32_t> nb6;   ///< 6 per place: the neighbour's place, or n (x[n] = -0)
+        std::vector<uint8_t> faces; ///< the diagonal as face counts (Laplacian.h), by place
+        std::vector<int32_t> agg;   ///< place -> its aggregate (a row of level 1)
         /// Level 1's red members as places, in row order (CSR): the restriction's terms. A black
         /// row's residual after the pre-smoothing is 0, and adding +0 to a sum that starts at +0
         /// leaves it as it is, so the black members are left out.
