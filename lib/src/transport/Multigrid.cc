@@ -398,6 +398,18 @@ void Multigrid::halfSweep(Level& l, int c, bool fromZero)
     });
 }
 
+void Multigrid::restrictTo(Level& c, const uint32_t* start, const int32_t* members, const double* t)
+{
+    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            double s = 0;
+            for (uint32_t m = start[i]; m < start[i + 1]; ++m)
+                s += t[size_t(members[m])];
+            c.r[i] = s;
+        }
+    });
+}
+
 void Multigrid::cycleFinest(const double* in, double* out)
 {
     const Level& f = mLevels.front();
@@ -424,14 +436,7 @@ void Multigrid::cycleFinest(const double* in, double* out)
         for (size_t i = lo; i < hi; ++i)
             o.t[i] = residualByPlace(i, o.x[i]);
     });
-    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
-        for (size_t i = lo; i < hi; ++i) {
-            double s = 0;
-            for (uint32_t m = o.redStart[i]; m < o.redStart[i + 1]; ++m)
-                s += o.t[size_t(o.redMembers[m])];
-            c.r[i] = s;
-        }
-    });
+    restrictTo(c, o.redStart.data(), o.redMembers.data(), o.t.data());
     cycle(1);
     // The coarse correction, red rows first; a black row's just before its post-smoothing (which reads
     // only red neighbours), in the same pass. Post-smoothing black then red, each row's last value
@@ -505,15 +510,7 @@ void Multigrid::cycle(size_t li)
         });
     }
     Level& c = mLevels[li + 1];
-    // The residual restricted: c.r[i] = sum over i's members of t.
-    forChunks(c.n, mSerial, [&](size_t lo, size_t hi) {
-        for (size_t i = lo; i < hi; ++i) {
-            double s = 0;
-            for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
-                s += l.t[size_t(c.members[m])];
-            c.r[i] = s;
-        }
-    });
+    restrictTo(c, c.memberStart.data(), c.members.data(), l.t.data());
     cycle(li + 1);
     forChunks(l.n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t k = lo; k < hi; ++k)

@@ -140,6 +140,9 @@ private:
     /// one colour do not read each other). @a fromZero: the first sweep of a V-cycle's level, whose
     /// rows of colour @a c hold no x yet (as if 0); their t is set to 0.
     void halfSweep(Level& l, int c, bool fromZero);
+    /// The residual restricted to @a c: c.r[i] = the sum of @a t over row i's terms (@a members
+    /// [start[i], start[i + 1])), in their order.
+    void restrictTo(Level& c, const uint32_t* start, const int32_t* members, const double* t);
     /// The V-cycle from level @a li (> 0, or the finest when it is the only level).
     void cycle(size_t li);
     /// The V-cycle from the finest level, by place (mFine), over at least two levels: out = M^-1 in,
