@@ -79,9 +79,9 @@ constexpr uint64_t kOutputScratchPerLeaf = 12 + 16 + 224 + 8 + 12 + 48 + 2;
 /// batches' finds, 12 bytes each, a few per cell of one layer): ~334 bytes at their size, held at the
 /// capacity the largest frame grew them to; the multigrid preconditioner of large solves (~110 bytes over
 /// every level: the finest level's rows twice, by row for conjugate gradients and by colour for its
-/// smoothing, ~30 bytes more than by row alone); and its index (4 bytes). Measured beside the dense index:
-/// ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown (the 512-wide compress stroke's first
-/// frame).
+/// smoothing, ~30 bytes more than by row alone); and its index (4 bytes). Measured beside the dense index,
+/// with the finest level by row alone: ~290 bytes a cell (the squeezed cylinder), ~510 bytes per unknown
+/// (the 512-wide compress stroke's first frame, 20,077 unknowns: the colour copy adds ~0.6 MB there).
 constexpr uint64_t kTransportBytesPerCell = 512;
 
 /// Rows (x, y) voxelsWithinFaceSteps counts before it gives up: ~10 ms.
