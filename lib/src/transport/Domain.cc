@@ -276,9 +276,8 @@ template <typename Find> void Domain::floodBatch(size_t head, size_t end, int64_
             const int32_t part = comp[i];
             for (int d = 0; d < mDirs; ++d) {
                 const CellCoord q = c.offsetBy(kDir[d][0], kDir[d][1], kDir[d][2]);
-                bool inside;
-                int32_t k = mIndex.get(q, inside);
-                if (!inside) k = at.indexBeyond(toCoord(q));
+                const int32_t k =
+                    indexOf(q, [&at](const CellCoord& b) { return at.indexBeyond(toCoord(b)); });
                 if (k >= 0) {
                     mC.nb[i * 6 + size_t(d)] = k;
                     if (comp[size_t(k)] != part) {

@@ -21,9 +21,10 @@
 // Only a map: results do not depend on it. The flood's lookups (the index, the masses, the
 // obstacles) are inline: no calls through the shared library's symbol table.
 //
-// Ordered: the same cells, numbers and links on any thread count. The flood takes its queue a batch
-// at a time (the cells queued when the batch begins, at least SolverTuning::floodBatchMin of them;
-// else one cell at a time): the batch's faces are probed in parallel over fixed chunks (Chunks.h),
+// Ordered: the same cells, numbers and links on any thread count. When its queue holds one whole
+// layer of the flood (one distance) of at least SolverTuning::floodBatchMin cells, the flood takes
+// that layer together, else one cell at a time: the layer's faces are probed in parallel over fixed
+// chunks (Chunks.h),
 // reading the index, the masses and the obstacles only, and what they found is then added serially
 // in the order the one-by-one flood finds it (cell, then face), so the cells' numbers are the serial
 // flood's. OpenVDB stays in Domain.cc.
@@ -139,9 +140,14 @@ private:
     inline int32_t massAt(const CellCoord& c) const;
     int32_t indexOf(const CellCoord& c) const
     {
+        return indexOf(c, [this](const CellCoord& b) { return indexBeyond(b); });
+    }
+    /// indexOf() with @a beyond (a parallel chunk's own lookup) for the cells beyond the box.
+    template <typename Beyond> int32_t indexOf(const CellCoord& c, const Beyond& beyond) const
+    {
         bool inside;
         const int32_t i = mIndex.get(c, inside);
-        return inside ? i : indexBeyond(c);
+        return inside ? i : beyond(c);
     }
     void setIndex(const CellCoord& c, int32_t i)
     {

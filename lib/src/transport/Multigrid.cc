@@ -157,12 +157,13 @@ void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
     const Level& c = mLevels[1];
     ColourOrder& o = mFine;
     const size_t n = f.n;
-    o.place.resize(n + 1);
+    std::vector<int32_t>& place = mScratch; // row -> place (free here: coarsen() and rebind() are done)
+    place.resize(n + 1);
     forChunks(n, mSerial, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i < hi; ++i)
-            o.place[size_t(f.byColour[i])] = int32_t(i);
+            place[size_t(f.byColour[i])] = int32_t(i);
     });
-    o.place[n] = int32_t(n); // a missing face stays the sentinel
+    place[n] = int32_t(n); // a missing face stays the sentinel
     o.nb6.resize(n * 6);
     o.faces.resize(n);
     o.agg.resize(n);
@@ -170,7 +171,7 @@ void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
         for (size_t i = lo; i < hi; ++i) {
             const size_t k = size_t(f.byColour[i]);
             for (size_t d = 0; d < 6; ++d)
-                o.nb6[i * 6 + d] = o.place[size_t(f.nb6[k * 6 + d])];
+                o.nb6[i * 6 + d] = place[size_t(f.nb6[k * 6 + d])];
             o.faces[i] = faces[k];
             o.agg[i] = f.agg[k];
         }
@@ -181,7 +182,7 @@ void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
         for (size_t i = lo; i < hi; ++i) {
             uint32_t count = 0;
             for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m)
-                count += size_t(o.place[size_t(c.members[m])]) < f.red ? 1 : 0;
+                count += size_t(place[size_t(c.members[m])]) < f.red ? 1 : 0;
             o.redStart[i + 1] = count;
         }
     });
@@ -192,7 +193,7 @@ void Multigrid::layOutByColour(const std::vector<uint8_t>& faces)
         for (size_t i = lo; i < hi; ++i) {
             uint32_t e = o.redStart[i];
             for (uint32_t m = c.memberStart[i]; m < c.memberStart[i + 1]; ++m) {
-                const int32_t at = o.place[size_t(c.members[m])];
+                const int32_t at = place[size_t(c.members[m])];
                 if (size_t(at) < f.red) o.redMembers[e++] = at;
             }
         }

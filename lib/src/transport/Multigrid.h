@@ -97,7 +97,6 @@ private:
     /// order; only where the values lie changes. The V-cycle's first passes copy its input in by
     /// place, its last passes write its output back by row.
     struct ColourOrder {
-        std::vector<int32_t> place; ///< row -> place
         std::vector<int32_t> nb6;   ///< 6 per place: the neighbour's place, or n (x[n] = -0)
         std::vector<uint8_t> faces; ///< the diagonal as face counts (Laplacian.h), by place
         std::vector<int32_t> agg;   ///< place -> its aggregate (a row of level 1)
@@ -154,6 +153,7 @@ private:
     ColourOrder mFine;          ///< the finest level by colour, when mUsed >= 2
     size_t mUsed = 0;
     std::vector<size_t> mCounts; ///< scratch: per-chunk counts
+    /// Scratch: coarsen()'s union-find, rebind()'s aggregates, layOutByColour()'s places.
     std::vector<int32_t> mScratch;
     std::vector<int32_t> mWhere;  ///< scratch of coarsen(): a coarse row's place in the row being built
     std::vector<uint8_t> mParity; ///< scratch of colour(): each row's colour

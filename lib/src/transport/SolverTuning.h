@@ -34,10 +34,11 @@ struct SolverTuning {
     /// multigrid (13 iterations a frame, against 36-49 with MIC(0)) and the surface strokes'
     /// (11,800-14,400) MIC(0).
     uint64_t multigridMin = 16000;
-    /// The flood looks at its queued cells together, their faces probed in parallel (Domain.h), when
-    /// at least this many are queued and the call has more than one thread; else one by one. The
-    /// same domain either way. 8192: two of Chunks.h's chunks (the 128^3 press's layers hold 16,384
-    /// cells; a stroke's domain, ~20,000 cells in all, stays one by one).
+    /// The flood looks at a whole layer of its queue (one distance) together, its faces probed in
+    /// parallel (Domain.h), when the queue holds just that layer, at least this many cells, and the
+    /// call has more than one thread; else one by one. The same domain either way. 8192: two of Chunks.h's
+    /// chunks (the 128^3 press's layers hold 16,384 cells; a stroke's domain, ~20,000 cells in all, stays one
+    /// by one).
     uint64_t floodBatchMin = 8192;
 };
 
